@@ -1,0 +1,72 @@
+"""Strain and energy measures: the one definition used by tests, the viewer's heat maps, the
+per-frame metrics and the benchmarks.
+
+All functions take numpy arrays (host side): positions ``x`` (V, 3), the model's ``faces``,
+``Dm_inv`` (F, 2, 2) and ``grain`` (F, 2, 2, columns warp and weft in material space).
+
+Strains are stretches minus one: ``warp = ||F e_warp|| - 1``, ``weft = ||F e_weft|| - 1``,
+``bias = ||F (e_warp + e_weft) / sqrt 2|| - 1`` (the 45-degree direction), and the principal
+strains ``eta_j - 1`` from the singular values of F.
+"""
+import numpy as np
+
+
+def deformation_gradients(x, faces, Dm_inv):
+    """F = Ds Dm^-1 per face, (F, 3, 2)."""
+    x = np.asarray(x, dtype=np.float64)
+    Ds = np.stack([x[faces[:, 1]] - x[faces[:, 0]], x[faces[:, 2]] - x[faces[:, 0]]], axis=2)
+    return Ds @ Dm_inv
+
+
+def material_Dm_inv(uv, faces):
+    Dm = np.stack([uv[faces[:, 1]] - uv[faces[:, 0]], uv[faces[:, 2]] - uv[faces[:, 0]]], axis=2)
+    return np.linalg.inv(Dm)
+
+
+def face_strains(x, uv, faces, grain):
+    """Per-face strains as a dict of (F,) arrays: warp, weft, bias, principal_max,
+    principal_min."""
+    F = deformation_gradients(x, faces, material_Dm_inv(uv, faces))
+    Fg = F @ grain                              # columns: F e_warp, F e_weft
+    wu, wv = Fg[:, :, 0], Fg[:, :, 1]
+    eta = np.linalg.svd(F, compute_uv=False)    # (F, 2), descending
+    return {
+        "warp": np.linalg.norm(wu, axis=1) - 1.0,
+        "weft": np.linalg.norm(wv, axis=1) - 1.0,
+        "bias": np.linalg.norm(wu + wv, axis=1) / np.sqrt(2.0) - 1.0,
+        "principal_max": eta[:, 0] - 1.0,
+        "principal_min": eta[:, 1] - 1.0,
+    }
+
+
+def band_violation(strain, band):
+    """How far each value lies outside ``band = (lo, hi)``; 0 inside."""
+    lo, hi = band
+    return np.maximum(0.0, np.maximum(strain - hi, lo - strain))
+
+
+def weighted_rms(values, area):
+    area = np.asarray(area, dtype=np.float64)
+    return float(np.sqrt(np.sum(area * np.asarray(values) ** 2) / max(area.sum(), 1e-300)))
+
+
+def summarize(values, area):
+    """max |value| and area-weighted RMS, as floats."""
+    values = np.asarray(values)
+    if values.size == 0:
+        return 0.0, 0.0
+    return float(np.max(np.abs(values))), weighted_rms(values, area)
+
+
+def kinetic_energy(v, mass):
+    v = np.asarray(v, dtype=np.float64)
+    return 0.5 * float(np.sum(mass * np.einsum("ij,ij->i", v, v)))
+
+
+def default_bias_band(warp_band, weft_band):
+    """The bias band (in bias-strain units) that keeps every unsheared state inside the warp
+    and weft bands feasible (METHOD.md 3.2 [fix]): ||w_u + w_v|| between
+    sqrt((1+warp_min)^2 + (1+weft_min)^2) and the same with the maxima, divided by sqrt 2."""
+    lo = np.hypot(1.0 + warp_band[0], 1.0 + weft_band[0]) / np.sqrt(2.0) - 1.0
+    hi = np.hypot(1.0 + warp_band[1], 1.0 + weft_band[1]) / np.sqrt(2.0) - 1.0
+    return float(lo), float(hi)

@@ -1,0 +1,331 @@
+"""The cloth model (what changes only when the mesh changes) and its state (x, v).
+
+Every array lives in a Taichi field allocated with spare capacity; ``n_verts``, ``n_faces`` and
+``n_edges`` say how much of each is active, so a remesh refills the fields instead of
+reallocating them every frame (``ClothModel.load`` grows them only when capacity runs out).
+
+Units are SI throughout: metres, kilograms, seconds, newtons.
+
+Triangle kinematics (METHOD.md section 2): for face (i, j, k) with material coordinates u_n and
+world positions x_n, ``Dm = [u_j - u_i, u_k - u_i]`` and ``F = Ds Dm^-1``. We store
+``face_Dm_inv`` and the grain frame ``face_grain`` (columns: warp and weft unit directions in
+material space), so the strain along the warp is ``||F e_warp|| - 1``.
+"""
+from dataclasses import dataclass, field as dc_field
+
+import numpy as np
+import taichi as ti
+from taichi.lang.util import to_numpy_type
+
+
+class ModelError(ValueError):
+    """Bad mesh or material input; the message names the fix."""
+
+
+@dataclass
+class Material:
+    """Fabric parameters (SI). Stiffnesses are per unit width (N/m): the 2-D membrane moduli
+    of the cloth, i.e. Young's modulus times thickness, along warp and weft and in shear."""
+    density: float = 0.15          # kg/m^2 (areal density)
+    k_warp: float = 3000.0         # N/m, stretch stiffness along the warp
+    k_weft: float = 2000.0         # N/m, stretch stiffness along the weft
+    k_shear: float = 50.0          # N/m, in-plane shear stiffness
+    k_bend: float = 5e-6           # N m, bending stiffness (dihedral-angle energy)
+    damp_mass: float = 0.1         # 1/s, mass-proportional (air) damping
+    damp_stiff: float = 0.002      # s, stiffness-proportional damping
+
+    def validate(self):
+        for name in ("density", "k_warp", "k_weft"):
+            if not getattr(self, name) > 0:
+                raise ModelError(f"material.{name} must be > 0 (got {getattr(self, name)})")
+        for name in ("k_shear", "k_bend", "damp_mass", "damp_stiff"):
+            if not getattr(self, name) >= 0:
+                raise ModelError(f"material.{name} must be >= 0 (got {getattr(self, name)})")
+
+
+@dataclass
+class MeshArrays:
+    """A cloth mesh as numpy arrays, the exchange format between builders, remeshing and
+    the Taichi fields. ``grain`` is (F, 2, 2): columns warp and weft in material space."""
+    uv: np.ndarray                 # (V, 2) material coordinates, m
+    x: np.ndarray                  # (V, 3) world positions, m
+    faces: np.ndarray              # (F, 3) int, counter-clockwise in material space
+    v: np.ndarray = None           # (V, 3) velocities, m/s
+    pinned: np.ndarray = None      # (V,) bool
+    pin_target: np.ndarray = None  # (V, 3) rest target of pinned vertices
+    grain: np.ndarray = None       # (F, 2, 2)
+    extras: dict = dc_field(default_factory=dict)
+
+    def __post_init__(self):
+        self.uv = np.ascontiguousarray(self.uv, dtype=np.float64)
+        self.x = np.ascontiguousarray(self.x, dtype=np.float64)
+        self.faces = np.ascontiguousarray(self.faces, dtype=np.int32)
+        nv = len(self.uv)
+        if self.v is None:
+            self.v = np.zeros((nv, 3))
+        if self.pinned is None:
+            self.pinned = np.zeros(nv, dtype=bool)
+        if self.pin_target is None:
+            self.pin_target = self.x.copy()
+        if self.grain is None:
+            self.grain = np.tile(np.eye(2), (len(self.faces), 1, 1))
+        self.v = np.asarray(self.v, dtype=np.float64)
+        self.pinned = np.asarray(self.pinned, dtype=bool)
+        self.pin_target = np.asarray(self.pin_target, dtype=np.float64)
+        self.grain = np.asarray(self.grain, dtype=np.float64)
+
+
+def grain_from_angle(angle, n_faces):
+    """Grain frames for ``n_faces`` faces with the warp rotated by ``angle`` (radians) from the
+    material u axis; weft perpendicular (counter-clockwise)."""
+    c, s = np.cos(angle), np.sin(angle)
+    g = np.array([[c, -s], [s, c]])
+    return np.tile(g, (n_faces, 1, 1))
+
+
+def signed_material_areas(uv, faces):
+    a, b, c = uv[faces[:, 0]], uv[faces[:, 1]], uv[faces[:, 2]]
+    e1, e2 = b - a, c - a
+    return 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+
+
+def build_edges(faces):
+    """Unique edges with their adjacent faces and opposite vertices.
+
+    Returns (edge_verts (E,2), edge_faces (E,2), edge_opp (E,2)); for a boundary edge the
+    second face and opposite vertex are -1. For an interior edge (a, b), face 0 holds a->b in
+    its counter-clockwise order, face 1 holds b->a. Raises ModelError if an edge has more than
+    two faces or two faces traverse it in the same direction (inconsistent orientation)."""
+    faces = np.asarray(faces, dtype=np.int64)
+    nf = len(faces)
+    # Half-edges: (a, b) directed as in the face, with the opposite vertex.
+    a = faces[:, [0, 1, 2]].reshape(-1)
+    b = faces[:, [1, 2, 0]].reshape(-1)
+    opp = faces[:, [2, 0, 1]].reshape(-1)
+    fid = np.repeat(np.arange(nf), 3)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    key = lo * (faces.max() + 1 if nf else 1) + hi
+    order = np.argsort(key, kind="stable")
+    key_s = key[order]
+    starts = np.flatnonzero(np.r_[True, key_s[1:] != key_s[:-1]])
+    counts = np.diff(np.r_[starts, len(key_s)])
+    if np.any(counts > 2):
+        raise ModelError("mesh is not edge-manifold: an edge has more than two faces; "
+                         "split the mesh along that edge")
+    ne = len(starts)
+    edge_verts = np.zeros((ne, 2), dtype=np.int32)
+    edge_faces = -np.ones((ne, 2), dtype=np.int32)
+    edge_opp = -np.ones((ne, 2), dtype=np.int32)
+    h0 = order[starts]
+    edge_verts[:, 0], edge_verts[:, 1] = a[h0], b[h0]
+    edge_faces[:, 0], edge_opp[:, 0] = fid[h0], opp[h0]
+    two = counts == 2
+    h1 = order[starts[two] + 1]
+    if np.any(a[h1] == a[h0[two]]):
+        raise ModelError("inconsistent face orientation: two faces traverse an edge in the "
+                         "same direction; orient all faces counter-clockwise in material space")
+    edge_faces[two, 1], edge_opp[two, 1] = fid[h1], opp[h1]
+    return edge_verts, edge_faces, edge_opp
+
+
+def dihedral_angles(x, edge_verts, edge_opp):
+    """Signed dihedral angle per interior edge (0 where flat, 0 for boundary edges), with the
+    same convention as the bending kernel in dynamics.py."""
+    theta = np.zeros(len(edge_verts))
+    inner = edge_opp[:, 1] >= 0
+    x0, x1 = x[edge_verts[inner, 0]], x[edge_verts[inner, 1]]
+    x2, x3 = x[edge_opp[inner, 0]], x[edge_opp[inner, 1]]
+    e = x1 - x0
+    n1 = np.cross(e, x2 - x0)
+    n2 = np.cross(x3 - x0, e)
+    el = np.linalg.norm(e, axis=1)
+    sin = np.einsum("ij,ij->i", np.cross(n1, n2), e) / el
+    cos = np.einsum("ij,ij->i", n1, n2)
+    theta[inner] = np.arctan2(sin, cos)
+    return theta
+
+
+@ti.data_oriented
+class ClothModel:
+    """Rest shape, topology and material of one cloth, in Taichi fields.
+
+    Fields (capacity rows; the first ``n_*`` are active):
+      vert_uv (V, vec2, m)            material coordinates
+      vert_mass (V, kg)               lumped mass, density * area / 3 from each face
+      vert_pinned (V, i32)            1 where the vertex follows ``vert_pin_target``
+      vert_pin_target (V, vec3, m)    where a pinned vertex must be (updated by the scene)
+      face_verts (F, ivec3)           counter-clockwise in material space
+      face_Dm_inv (F, mat2, 1/m)      inverse of the material edge matrix
+      face_rest_area (F, m^2)
+      face_grain (F, mat2)            columns: warp and weft unit directions in material space
+      edge_verts, edge_faces, edge_opp (E, ivec2)  see ``build_edges``
+      edge_rest_angle (E, rad), edge_rest_len (E, m), edge_bend_weight (E, 1)
+    """
+
+    def __init__(self, mesh: MeshArrays, material: Material, capacity_factor=1.5,
+                 rest_x=None):
+        material.validate()
+        self.material = material
+        self.capacity_factor = capacity_factor
+        self.grow_count = 0
+        self.v_cap = self.f_cap = self.e_cap = 0
+        self.n_verts = self.n_faces = self.n_edges = 0
+        self.load(mesh, rest_x=rest_x)
+
+    # -- allocation ---------------------------------------------------------------------------
+    def _allocate(self, nv, nf, ne):
+        cf = self.capacity_factor
+        self.v_cap, self.f_cap, self.e_cap = (max(int(n * cf) + 8, 16) for n in (nv, nf, ne))
+        V, F, E = self.v_cap, self.f_cap, self.e_cap
+        self.vert_uv = ti.Vector.field(2, float, V)
+        self.vert_mass = ti.field(float, V)
+        self.vert_pinned = ti.field(ti.i32, V)
+        self.vert_pin_target = ti.Vector.field(3, float, V)
+        self.face_verts = ti.Vector.field(3, ti.i32, F)
+        self.face_Dm_inv = ti.Matrix.field(2, 2, float, F)
+        self.face_rest_area = ti.field(float, F)
+        self.face_grain = ti.Matrix.field(2, 2, float, F)
+        self.edge_verts = ti.Vector.field(2, ti.i32, E)
+        self.edge_faces = ti.Vector.field(2, ti.i32, E)
+        self.edge_opp = ti.Vector.field(2, ti.i32, E)
+        self.edge_rest_angle = ti.field(float, E)
+        self.edge_bend_weight = ti.field(float, E)
+        self.state = ClothState(V)
+
+    def fits(self, nv, nf, ne):
+        return nv <= self.v_cap and nf <= self.f_cap and ne <= self.e_cap
+
+    # -- filling from numpy -------------------------------------------------------------------
+    def load(self, mesh: MeshArrays, rest_x=None):
+        """(Re)fill every field from ``mesh``. Reallocates only when capacity runs out, and
+        returns True in that case so the caller can report it (old field handles die)."""
+        uv, faces = mesh.uv, mesh.faces
+        if uv.ndim != 2 or uv.shape[1] != 2 or mesh.x.shape != (len(uv), 3):
+            raise ModelError("mesh arrays have the wrong shape: uv must be (V,2) and x (V,3)")
+        if len(faces) == 0:
+            raise ModelError("mesh has no faces")
+        if faces.min() < 0 or faces.max() >= len(uv):
+            raise ModelError("a face refers to a vertex that does not exist")
+        area = signed_material_areas(uv, faces)
+        scale = max(np.ptp(uv[:, 0]), np.ptp(uv[:, 1]), 1e-12)
+        bad = np.flatnonzero(area <= 1e-10 * scale * scale)
+        if len(bad):
+            raise ModelError(
+                f"{len(bad)} degenerate or clockwise material triangle(s) (first: face {bad[0]}, "
+                f"area {area[bad[0]]:.3g} m^2): remove zero-area faces and orient every face "
+                "counter-clockwise in material (u, v) space")
+        if np.any(mesh.pinned) and not np.all(np.isfinite(mesh.pin_target[mesh.pinned])):
+            raise ModelError("pin targets must be finite")
+        if not (np.all(np.isfinite(uv)) and np.all(np.isfinite(mesh.x))):
+            raise ModelError("mesh coordinates must be finite")
+        ev, ef, eo = build_edges(faces)
+        nv, nf, ne = len(uv), len(faces), len(ev)
+        grown = False
+        if not self.fits(nv, nf, ne):
+            grown = self.v_cap > 0
+            self.grow_count += int(grown)
+            self._allocate(nv, nf, ne)
+        self.n_verts, self.n_faces, self.n_edges = nv, nf, ne
+
+        # Per-face rest quantities (METHOD.md section 2).
+        a, b, c = uv[faces[:, 0]], uv[faces[:, 1]], uv[faces[:, 2]]
+        Dm = np.stack([b - a, c - a], axis=2)          # (F, 2, 2), columns are edges
+        Dm_inv = np.linalg.inv(Dm)
+        grain = mesh.grain / np.linalg.norm(mesh.grain, axis=1, keepdims=True)
+        mass = np.zeros(nv)
+        np.add.at(mass, faces.reshape(-1), np.repeat(area * self.material.density / 3.0, 3))
+
+        # Bending weight of the discrete-shells energy 3 |e|^2 / (A1 + A2) (Grinspun 2003),
+        # measured in material space so it does not change as the cloth deforms.
+        inner = ef[:, 1] >= 0
+        elen = np.linalg.norm(uv[ev[:, 1]] - uv[ev[:, 0]], axis=1)
+        weight = np.zeros(ne)
+        weight[inner] = 3.0 * elen[inner] ** 2 / (area[ef[inner, 0]] + area[ef[inner, 1]])
+        rx = mesh.x if rest_x is None else np.asarray(rest_x, dtype=np.float64)
+        rest_angle = dihedral_angles(rx, ev, eo) if rest_x is not None else np.zeros(ne)
+
+        self._fill_vec(self.vert_uv, uv, self.v_cap)
+        self._fill_vec(self.vert_mass, mass, self.v_cap)
+        self._fill_vec(self.vert_pinned, mesh.pinned.astype(np.int32), self.v_cap)
+        self._fill_vec(self.vert_pin_target, mesh.pin_target, self.v_cap)
+        self._fill_vec(self.face_verts, faces, self.f_cap)
+        self._fill_vec(self.face_Dm_inv, Dm_inv, self.f_cap)
+        self._fill_vec(self.face_rest_area, area, self.f_cap)
+        self._fill_vec(self.face_grain, grain, self.f_cap)
+        self._fill_vec(self.edge_verts, ev, self.e_cap)
+        self._fill_vec(self.edge_faces, ef, self.e_cap)
+        self._fill_vec(self.edge_opp, eo, self.e_cap)
+        self._fill_vec(self.edge_rest_angle, rest_angle, self.e_cap)
+        self._fill_vec(self.edge_bend_weight, weight, self.e_cap)
+        self._fill_vec(self.state.x, mesh.x, self.v_cap)
+        self._fill_vec(self.state.v, mesh.v, self.v_cap)
+        self.state.n = nv
+        self._np_cache = dict(faces=faces.copy(), uv=uv.copy(), area=area, pinned=mesh.pinned.copy(),
+                              grain=grain, edges=ev, edge_faces=ef, mass=mass)
+        return grown
+
+    @staticmethod
+    def _fill_vec(fld, arr, cap):
+        """Write ``arr`` into the first rows of ``fld`` (the rest zeroed)."""
+        arr = np.asarray(arr)
+        full = np.zeros((cap,) + arr.shape[1:], dtype=to_numpy_type(fld.dtype))
+        full[: len(arr)] = arr
+        fld.from_numpy(full)
+
+    # -- numpy views (for I/O, metrics on the host, remeshing) -------------------------------
+    @property
+    def faces(self):
+        return self._np_cache["faces"]
+
+    @property
+    def uv(self):
+        return self._np_cache["uv"]
+
+    @property
+    def rest_area(self):
+        return self._np_cache["area"]
+
+    @property
+    def pinned(self):
+        return self._np_cache["pinned"]
+
+    @property
+    def grain(self):
+        return self._np_cache["grain"]
+
+    @property
+    def mass(self):
+        return self._np_cache["mass"]
+
+    @property
+    def edges(self):
+        return self._np_cache["edges"]
+
+    def positions(self):
+        return self.state.x.to_numpy()[: self.n_verts].astype(np.float64)
+
+    def velocities(self):
+        return self.state.v.to_numpy()[: self.n_verts].astype(np.float64)
+
+    def mesh_arrays(self):
+        """The current mesh and state as numpy arrays (the input a remesh needs)."""
+        return MeshArrays(uv=self.uv, x=self.positions(), faces=self.faces, v=self.velocities(),
+                          pinned=self.pinned,
+                          pin_target=self.vert_pin_target.to_numpy()[: self.n_verts],
+                          grain=self.grain)
+
+    def set_pin_targets(self, targets):
+        full = self.vert_pin_target.to_numpy()
+        full[: self.n_verts] = targets
+        self.vert_pin_target.from_numpy(full)
+
+
+@ti.data_oriented
+class ClothState:
+    """What changes every substep: positions ``x`` (V, vec3, m) and velocities ``v``
+    (V, vec3, m/s); ``n`` rows are active."""
+
+    def __init__(self, capacity):
+        self.x = ti.Vector.field(3, float, capacity)
+        self.v = ti.Vector.field(3, float, capacity)
+        self.n = 0
