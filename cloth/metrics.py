@@ -70,3 +70,9 @@ def default_bias_band(warp_band, weft_band):
     lo = np.hypot(1.0 + warp_band[0], 1.0 + weft_band[0]) / np.sqrt(2.0) - 1.0
     hi = np.hypot(1.0 + warp_band[1], 1.0 + weft_band[1]) / np.sqrt(2.0) - 1.0
     return float(lo), float(hi)
+
+
+def material_areas(uv, faces):
+    """Rest (material) area per face, m^2."""
+    e1, e2 = uv[faces[:, 1]] - uv[faces[:, 0]], uv[faces[:, 2]] - uv[faces[:, 0]]
+    return 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])

@@ -1,0 +1,19 @@
+"""Scene registry: name -> module with ``DEFAULTS`` (every settable key) and ``build(cfg)``."""
+import importlib
+
+SCENES = {
+    "hanging": "scenes.hanging",
+}
+DESCRIPTIONS = {
+    "hanging": "paper Table 1: a cloth hanging from its two top corners, settling to rest",
+}
+DEFAULT_SCENE = "hanging"
+
+
+def get(name):
+    if name not in SCENES:
+        import difflib
+        hint = difflib.get_close_matches(name, list(SCENES), n=1)
+        raise KeyError(f"unknown scene '{name}'" + (f" (did you mean '{hint[0]}'?)" if hint else "")
+                       + f": choose one of {', '.join(SCENES)} (python main.py --list)")
+    return importlib.import_module(SCENES[name])

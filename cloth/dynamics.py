@@ -1,0 +1,415 @@
+"""Implicit (backward) Euler cloth dynamics: gravity, anisotropic membrane, dihedral bending,
+stitch springs, damping and pins, one Newton step per substep solved by preconditioned CG.
+
+Linearised system (Baraff & Witkin 1998), with K = -df/dx (made positive semi-definite, below),
+mass damping ``alpha`` and stiffness damping ``beta``:
+
+    [(1 + h alpha) M + h (beta + h) K] dv = h (f - alpha M v) - h (beta + h) K v
+
+Pinned vertices get the dv that puts them on their target at the end of the step; CG works on
+the other vertices only (the pinned rows are filtered, Baraff & Witkin's modified PCG).
+
+Membrane: St. Venant-Kirchhoff in the triangle's grain frame. With F_g = F [e_warp e_weft]
+= [f_u f_v] and Green strain E = (F_g^T F_g - I) / 2, the energy of a face of rest area A is
+``A (k_warp E11^2 / 2 + k_weft E22^2 / 2 + 2 k_shear E12^2)``: separate warp, weft and shear
+stiffness, exact for large rotations.
+
+Bending: the discrete-shells energy ``k_bend w_e (theta - theta_0)^2 / 2`` with the weight
+``w_e = 3 |e|^2 / (A1 + A2)`` (Grinspun et al. 2003) and the dihedral-angle gradient of
+Bridson et al. 2003.
+
+Positive semi-definite K: the solver uses the Gauss-Newton part of every Hessian plus the
+curvature terms that are non-negative (the stretch terms in tension). The dropped parts (stretch
+curvature under compression, the indefinite shear curvature, the bending angle's curvature) make
+the one Newton step robust instead of exact; ``force_jacobian_product(exact=True)`` gives the
+exact membrane Jacobian for testing.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+import taichi as ti
+
+from .model import ClothModel
+
+
+@dataclass
+class DynamicsSettings:
+    gravity: tuple = (0.0, -9.81, 0.0)   # m/s^2
+    cg_tol: float = 1e-6                 # relative residual (preconditioned norm) to stop CG
+    cg_max_iters: int = 400
+    stitch_stiffness: float = 0.0        # N/m of the zero-length stitch springs
+
+    def validate(self):
+        if not self.cg_tol > 0:
+            raise ValueError(f"dynamics.cg_tol must be > 0 (got {self.cg_tol})")
+        if not self.cg_max_iters >= 1:
+            raise ValueError(f"dynamics.cg_max_iters must be >= 1 (got {self.cg_max_iters})")
+
+
+@ti.data_oriented
+class ImplicitEuler:
+    """One backward-Euler Newton step per call of ``step(h)``.
+
+    After a step: ``last_cg_iters`` and ``last_cg_residual`` (relative)."""
+
+    def __init__(self, model: ClothModel, settings: DynamicsSettings = None, stitches=None):
+        self.model = model
+        self.settings = settings or DynamicsSettings()
+        self.settings.validate()
+        self.stitches_np = np.zeros((0, 2), np.int32) if stitches is None else \
+            np.asarray(stitches, np.int32).reshape(-1, 2)
+        self.last_cg_iters = 0
+        self.last_cg_residual = 0.0
+        self._allocated_for = None
+        self.on_mesh_changed()
+
+    # -- allocation ---------------------------------------------------------------------------
+    def on_mesh_changed(self):
+        """Call after the model's fields were refilled (remeshing). Work fields follow the
+        model's capacity and are reallocated only when it grew."""
+        m = self.model
+        caps = (m.v_cap, m.f_cap, m.e_cap)
+        if self._allocated_for != caps:
+            V, F, E = caps
+            vec = lambda n: ti.Vector.field(3, float, n)  # noqa: E731
+            self.force, self.dv, self.rhs, self.res = vec(V), vec(V), vec(V), vec(V)
+            self.z, self.p, self.Ap = vec(V), vec(V), vec(V)
+            self.precond = ti.Matrix.field(3, 3, float, V)
+            self.face_fu, self.face_fv, self.face_E = vec(F), vec(F), vec(F)
+            self.face_wa, self.face_wb = vec(F), vec(F)   # warp / weft weights of the 3 verts
+            self.edge_grad = ti.Matrix.field(4, 3, float, E)
+            self.edge_theta = ti.field(float, E)
+            self.scalars = ti.field(float, 4)
+            self._allocated_for = caps
+        ns = max(len(self.stitches_np), 1)
+        self.stitch = ti.Vector.field(2, ti.i32, ns)
+        self.stitch.from_numpy(np.resize(self.stitches_np, (ns, 2)).astype(np.int32))
+        self.n_stitches = len(self.stitches_np)
+
+    def set_stitches(self, pairs):
+        self.stitches_np = np.asarray(pairs, np.int32).reshape(-1, 2)
+        self.on_mesh_changed()
+
+    # -- public API ---------------------------------------------------------------------------
+    def step(self, h):
+        """Advance model.state by one backward-Euler step of ``h`` seconds."""
+        m, mat, s = self.model, self.model.material, self.settings
+        iters = self._step(h, ti.Vector(list(s.gravity)), mat.k_warp, mat.k_weft, mat.k_shear,
+                           mat.k_bend, mat.damp_mass, mat.damp_stiff, s.stitch_stiffness,
+                           m.n_verts, m.n_faces, m.n_edges, self.n_stitches,
+                           s.cg_tol, s.cg_max_iters)
+        self.last_cg_iters = int(iters)
+        self.last_cg_residual = float(self.scalars[0])
+        return self.last_cg_iters
+
+    def energy(self):
+        """Elastic energy (membrane + bending + stitches) of the current positions, J."""
+        mat = self.model.material
+        return float(self._energy(mat.k_warp, mat.k_weft, mat.k_shear, mat.k_bend,
+                                  self.settings.stitch_stiffness, self.model.n_faces,
+                                  self.model.n_edges, self.n_stitches))
+
+    def forces(self):
+        """Elastic forces (no gravity, no damping) at the current positions, (V, 3) numpy."""
+        mat = self.model.material
+        self._elastic_forces(mat.k_warp, mat.k_weft, mat.k_shear, mat.k_bend,
+                             self.settings.stitch_stiffness, self.model.n_verts,
+                             self.model.n_faces, self.model.n_edges, self.n_stitches)
+        return self.force.to_numpy()[: self.model.n_verts].astype(np.float64)
+
+    def force_jacobian_product(self, p, exact=True):
+        """(df/dx) p at the current positions for a (V, 3) direction ``p``: exact membrane
+        Jacobian when ``exact`` (bending: Gauss-Newton part, exact where theta = theta_0),
+        otherwise minus the positive semi-definite K the solver uses."""
+        mat, m = self.model.material, self.model
+        full = np.zeros((m.v_cap, 3))
+        full[: m.n_verts] = p
+        self.p.from_numpy(full.astype(self.p.to_numpy().dtype))
+        self._jacobian_product(mat.k_warp, mat.k_weft, mat.k_shear, mat.k_bend,
+                               self.settings.stitch_stiffness, m.n_verts, m.n_faces, m.n_edges,
+                               self.n_stitches, 1 if exact else 0)
+        return -self.Ap.to_numpy()[: m.n_verts].astype(np.float64)
+
+    # -- element kinematics -------------------------------------------------------------------
+    @ti.func
+    def _face_weights(self, f):
+        """Warp and weft weights a_n, b_n of the face's vertices: F e_warp = sum a_n x_n."""
+        D = self.model.face_Dm_inv[f] @ self.model.face_grain[f]   # rows: M_j, M_k in grain
+        wa = ti.Vector([-D[0, 0] - D[1, 0], D[0, 0], D[1, 0]])
+        wb = ti.Vector([-D[0, 1] - D[1, 1], D[0, 1], D[1, 1]])
+        return wa, wb
+
+    @ti.func
+    def _update_face(self, f):
+        tri = self.model.face_verts[f]
+        wa, wb = self._face_weights(f)
+        fu = ti.Vector([0.0, 0.0, 0.0], dt=float)
+        fv = ti.Vector([0.0, 0.0, 0.0], dt=float)
+        for n in ti.static(range(3)):
+            fu += wa[n] * self.model.state.x[tri[n]]
+            fv += wb[n] * self.model.state.x[tri[n]]
+        self.face_fu[f], self.face_fv[f] = fu, fv
+        self.face_wa[f], self.face_wb[f] = wa, wb
+        self.face_E[f] = ti.Vector([0.5 * (fu.dot(fu) - 1.0), 0.5 * (fv.dot(fv) - 1.0),
+                                    0.5 * fu.dot(fv)])
+
+    @ti.func
+    def _update_edge(self, e):
+        """Dihedral angle and its gradient (Bridson et al. 2003) for edge x0-x1 with opposite
+        vertices x2 (face 0, order x0 x1 x2) and x3 (face 1, order x1 x0 x3)."""
+        theta = 0.0
+        G = ti.Matrix.zero(float, 4, 3)
+        if self.model.edge_faces[e][1] >= 0:
+            ev, eo = self.model.edge_verts[e], self.model.edge_opp[e]
+            x0, x1 = self.model.state.x[ev[0]], self.model.state.x[ev[1]]
+            x2, x3 = self.model.state.x[eo[0]], self.model.state.x[eo[1]]
+            ed = x1 - x0
+            n1 = ed.cross(x2 - x0)
+            n2 = (x3 - x0).cross(ed)
+            el = ed.norm()
+            n1s, n2s = n1.dot(n1), n2.dot(n2)
+            if el > 1e-12 and n1s > 1e-24 and n2s > 1e-24:
+                eh = ed / el
+                theta = ti.atan2(n1.cross(n2).dot(eh), n1.dot(n2))
+                u1, u2 = n1 / n1s, n2 / n2s
+                g2 = -el * u1
+                g3 = -el * u2
+                g0 = -((x2 - x1).dot(eh) * u1 + (x3 - x1).dot(eh) * u2)
+                g1 = (x2 - x0).dot(eh) * u1 + (x3 - x0).dot(eh) * u2
+                for c in ti.static(range(3)):
+                    G[0, c], G[1, c], G[2, c], G[3, c] = g0[c], g1[c], g2[c], g3[c]
+        self.edge_theta[e] = theta
+        self.edge_grad[e] = G
+
+    @ti.func
+    def _edge_vertex(self, e, n):
+        """Vertex n (0..3) of edge e's bending stencil: x0, x1, x2, x3."""
+        ev, eo = self.model.edge_verts[e], self.model.edge_opp[e]
+        vid = eo[1]
+        if n == 0:
+            vid = ev[0]
+        elif n == 1:
+            vid = ev[1]
+        elif n == 2:
+            vid = eo[0]
+        return vid
+
+    @ti.func
+    def _update_kinematics(self, nf: ti.i32, ne: ti.i32):
+        for f in range(nf):
+            self._update_face(f)
+        for e in range(ne):
+            self._update_edge(e)
+
+    # -- forces -------------------------------------------------------------------------------
+    @ti.func
+    def _add_elastic_forces(self, kw, kf, ks, kb, kst, nf: ti.i32, ne: ti.i32, nst: ti.i32):
+        for f in range(nf):
+            tri = self.model.face_verts[f]
+            A = self.model.face_rest_area[f]
+            fu, fv, E = self.face_fu[f], self.face_fv[f], self.face_E[f]
+            wa, wb = self.face_wa[f], self.face_wb[f]
+            for n in ti.static(range(3)):
+                grad = A * (kw * E[0] * wa[n] * fu + kf * E[1] * wb[n] * fv
+                            + 2.0 * ks * E[2] * (wa[n] * fv + wb[n] * fu))
+                self.force[tri[n]] -= grad
+        for e in range(ne):
+            if self.model.edge_faces[e][1] >= 0:
+                coef = kb * self.model.edge_bend_weight[e] * \
+                    (self.edge_theta[e] - self.model.edge_rest_angle[e])
+                G = self.edge_grad[e]
+                for n in ti.static(range(4)):
+                    vid = self._edge_vertex(e, n)
+                    self.force[vid] -= coef * ti.Vector([G[n, 0], G[n, 1], G[n, 2]])
+        for s in range(nst):
+            a, b = self.stitch[s][0], self.stitch[s][1]
+            d = self.model.state.x[a] - self.model.state.x[b]
+            self.force[a] -= kst * d
+            self.force[b] += kst * d
+
+    @ti.func
+    def _add_K_product(self, src: ti.template(), dst: ti.template(), scale, kw, kf, ks, kb, kst,
+                       nf: ti.i32, ne: ti.i32, nst: ti.i32, exact: ti.i32):
+        """dst += scale * K src, with K = -df/dx (PSD-projected unless ``exact``)."""
+        for f in range(nf):
+            tri = self.model.face_verts[f]
+            A = self.model.face_rest_area[f]
+            fu, fv, E = self.face_fu[f], self.face_fv[f], self.face_E[f]
+            wa, wb = self.face_wa[f], self.face_wb[f]
+            dfu = wa[0] * src[tri[0]] + wa[1] * src[tri[1]] + wa[2] * src[tri[2]]
+            dfv = wb[0] * src[tri[0]] + wb[1] * src[tri[1]] + wb[2] * src[tri[2]]
+            dE0, dE1 = fu.dot(dfu), fv.dot(dfv)
+            dE2 = 0.5 * (fu.dot(dfv) + fv.dot(dfu))
+            # Curvature terms: kept where they are non-negative (stretch in tension) unless exact.
+            E0, E1, E2 = E[0], E[1], E[2]
+            if exact == 0:
+                E0, E1, E2 = ti.max(E0, 0.0), ti.max(E1, 0.0), 0.0
+            for n in ti.static(range(3)):
+                out = kw * (dE0 * wa[n] * fu + E0 * wa[n] * dfu) \
+                    + kf * (dE1 * wb[n] * fv + E1 * wb[n] * dfv) \
+                    + 2.0 * ks * (dE2 * (wa[n] * fv + wb[n] * fu) + E2 * (wa[n] * dfv + wb[n] * dfu))
+                dst[tri[n]] += scale * A * out
+        for e in range(ne):
+            if self.model.edge_faces[e][1] >= 0:
+                k = kb * self.model.edge_bend_weight[e]
+                G = self.edge_grad[e]
+                dtheta = 0.0
+                for n in ti.static(range(4)):
+                    dtheta += ti.Vector([G[n, 0], G[n, 1], G[n, 2]]).dot(src[self._edge_vertex(e, n)])
+                for n in ti.static(range(4)):
+                    dst[self._edge_vertex(e, n)] += scale * k * dtheta * \
+                        ti.Vector([G[n, 0], G[n, 1], G[n, 2]])
+        for s in range(nst):
+            a, b = self.stitch[s][0], self.stitch[s][1]
+            d = src[a] - src[b]
+            dst[a] += scale * kst * d
+            dst[b] -= scale * kst * d
+
+    @ti.func
+    def _add_K_diagonal(self, scale, kw, kf, ks, kb, kst, nf: ti.i32, ne: ti.i32, nst: ti.i32):
+        """precond += scale * (3x3 diagonal blocks of the PSD K)."""
+        for f in range(nf):
+            tri = self.model.face_verts[f]
+            A = self.model.face_rest_area[f]
+            fu, fv, E = self.face_fu[f], self.face_fv[f], self.face_E[f]
+            wa, wb = self.face_wa[f], self.face_wb[f]
+            I = ti.Matrix.identity(float, 3)
+            for n in ti.static(range(3)):
+                gs = wa[n] * fv + wb[n] * fu
+                blk = kw * wa[n] ** 2 * fu.outer_product(fu) + kf * wb[n] ** 2 * fv.outer_product(fv) \
+                    + ks * gs.outer_product(gs) \
+                    + (kw * ti.max(E[0], 0.0) * wa[n] ** 2 + kf * ti.max(E[1], 0.0) * wb[n] ** 2) * I
+                self.precond[tri[n]] += scale * A * blk
+        for e in range(ne):
+            if self.model.edge_faces[e][1] >= 0:
+                k = kb * self.model.edge_bend_weight[e]
+                G = self.edge_grad[e]
+                for n in ti.static(range(4)):
+                    g = ti.Vector([G[n, 0], G[n, 1], G[n, 2]])
+                    self.precond[self._edge_vertex(e, n)] += scale * k * g.outer_product(g)
+        for s in range(nst):
+            I = ti.Matrix.identity(float, 3)
+            self.precond[self.stitch[s][0]] += scale * kst * I
+            self.precond[self.stitch[s][1]] += scale * kst * I
+
+    # -- kernels ------------------------------------------------------------------------------
+    @ti.kernel
+    def _elastic_forces(self, kw: float, kf: float, ks: float, kb: float, kst: float,
+                        nv: ti.i32, nf: ti.i32, ne: ti.i32, nst: ti.i32):
+        for i in range(nv):
+            self.force[i] = ti.Vector([0.0, 0.0, 0.0])
+        self._update_kinematics(nf, ne)
+        self._add_elastic_forces(kw, kf, ks, kb, kst, nf, ne, nst)
+
+    @ti.kernel
+    def _jacobian_product(self, kw: float, kf: float, ks: float, kb: float, kst: float,
+                          nv: ti.i32, nf: ti.i32, ne: ti.i32, nst: ti.i32, exact: ti.i32):
+        for i in range(nv):
+            self.Ap[i] = ti.Vector([0.0, 0.0, 0.0])
+        self._update_kinematics(nf, ne)
+        self._add_K_product(self.p, self.Ap, 1.0, kw, kf, ks, kb, kst, nf, ne, nst, exact)
+
+    @ti.kernel
+    def _energy(self, kw: float, kf: float, ks: float, kb: float, kst: float,
+                nf: ti.i32, ne: ti.i32, nst: ti.i32) -> float:
+        self._update_kinematics(nf, ne)
+        total = 0.0
+        for f in range(nf):
+            E = self.face_E[f]
+            total += self.model.face_rest_area[f] * (0.5 * kw * E[0] ** 2 + 0.5 * kf * E[1] ** 2
+                                                     + 2.0 * ks * E[2] ** 2)
+        for e in range(ne):
+            if self.model.edge_faces[e][1] >= 0:
+                d = self.edge_theta[e] - self.model.edge_rest_angle[e]
+                total += 0.5 * kb * self.model.edge_bend_weight[e] * d * d
+        for s in range(nst):
+            d = self.model.state.x[self.stitch[s][0]] - self.model.state.x[self.stitch[s][1]]
+            total += 0.5 * kst * d.dot(d)
+        return total
+
+    @ti.func
+    def _apply_A(self, src: ti.template(), dst: ti.template(), h, alpha, beta, kw, kf, ks, kb,
+                 kst, nv: ti.i32, nf: ti.i32, ne: ti.i32, nst: ti.i32):
+        """dst = A src with A = (1 + h alpha) M + h (beta + h) K, pinned rows filtered."""
+        for i in range(nv):
+            dst[i] = (1.0 + h * alpha) * self.model.vert_mass[i] * src[i]
+        self._add_K_product(src, dst, h * (beta + h), kw, kf, ks, kb, kst, nf, ne, nst, 0)
+        for i in range(nv):
+            if self.model.vert_pinned[i] != 0:
+                dst[i] = ti.Vector([0.0, 0.0, 0.0])
+
+    @ti.kernel
+    def _step(self, h: float, g: ti.types.vector(3, float), kw: float, kf: float, ks: float,
+              kb: float, alpha: float, beta: float, kst: float, nv: ti.i32, nf: ti.i32,
+              ne: ti.i32, nst: ti.i32, tol: float, max_iters: ti.i32) -> ti.i32:
+        # The whole step runs in one serial kernel: on a 2-core CPU, launching a kernel per CG
+        # phase costs more than the work below ~50k triangles (METHOD.md section 4 hints).
+        ti.loop_config(serialize=True)
+        for _ in range(1):
+            x, v, m = ti.static(self.model.state.x, self.model.state.v, self.model.vert_mass)
+            # Forces and element quantities at the start of the step.
+            for i in range(nv):
+                self.force[i] = m[i] * g
+                self.precond[i] = (1.0 + h * alpha) * m[i] * ti.Matrix.identity(float, 3)
+            self._update_kinematics(nf, ne)
+            self._add_elastic_forces(kw, kf, ks, kb, kst, nf, ne, nst)
+            self._add_K_diagonal(h * (beta + h), kw, kf, ks, kb, kst, nf, ne, nst)
+            # Right-hand side: h (f - alpha M v) - h (beta + h) K v.
+            for i in range(nv):
+                self.rhs[i] = h * (self.force[i] - alpha * m[i] * v[i])
+            self._add_K_product(v, self.rhs, -h * (beta + h), kw, kf, ks, kb, kst, nf, ne, nst, 0)
+            # Pinned vertices: the dv that lands them on their target at the end of the step.
+            for i in range(nv):
+                self.dv[i] = ti.Vector([0.0, 0.0, 0.0])
+                if self.model.vert_pinned[i] != 0:
+                    self.dv[i] = (self.model.vert_pin_target[i] - x[i]) / h - v[i]
+                self.precond[i] = self.precond[i].inverse()
+            # r = b - A dv over the free vertices (pinned dv enters through the coupling).
+            self._apply_A(self.dv, self.Ap, h, alpha, beta, kw, kf, ks, kb, kst, nv, nf, ne, nst)
+            for i in range(nv):
+                self.res[i] = self.rhs[i] - self.Ap[i]
+                if self.model.vert_pinned[i] != 0:
+                    self.res[i] = ti.Vector([0.0, 0.0, 0.0])
+            # (Free rows of A dv include the coupling to the prescribed pinned dv.)
+            rz = 0.0
+            bnorm = 0.0
+            for i in range(nv):
+                self.z[i] = self.precond[i] @ self.res[i]
+                self.p[i] = self.z[i]
+                rz += self.res[i].dot(self.z[i])
+                bnorm += self.rhs[i].dot(self.precond[i] @ self.rhs[i])
+            # Preconditioned CG on the free vertices.
+            iters = 0
+            rel = ti.sqrt(ti.abs(rz) / ti.max(bnorm, 1e-300))
+            while iters < max_iters and rel > tol:
+                self._apply_A(self.p, self.Ap, h, alpha, beta, kw, kf, ks, kb, kst, nv, nf, ne,
+                              nst)
+                pAp = 0.0
+                for i in range(nv):
+                    pAp += self.p[i].dot(self.Ap[i])
+                if pAp <= 0.0:
+                    break
+                step = rz / pAp
+                rz_new = 0.0
+                for i in range(nv):
+                    self.dv[i] += step * self.p[i]
+                    self.res[i] -= step * self.Ap[i]
+                    self.z[i] = self.precond[i] @ self.res[i]
+                    rz_new += self.res[i].dot(self.z[i])
+                beta_cg = rz_new / rz
+                for i in range(nv):
+                    self.p[i] = self.z[i] + beta_cg * self.p[i]
+                    if self.model.vert_pinned[i] != 0:
+                        self.p[i] = ti.Vector([0.0, 0.0, 0.0])
+                rz = rz_new
+                rel = ti.sqrt(ti.abs(rz) / ti.max(bnorm, 1e-300))
+                iters += 1
+            self.scalars[0] = rel
+            # Update: v += dv, x += h v; pins exactly on target.
+            for i in range(nv):
+                v[i] += self.dv[i]
+                x[i] += h * v[i]
+                if self.model.vert_pinned[i] != 0:
+                    x[i] = self.model.vert_pin_target[i]
+            self.scalars[1] = iters
+        return ti.cast(self.scalars[1], ti.i32)

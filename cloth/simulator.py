@@ -1,0 +1,262 @@
+"""The frame loop: a flat list of named stages, each switchable and timed (ARCSim style).
+
+    every substep:  pins -> dynamics -> strain_limit -> collision
+    every frame:    remesh -> metrics
+
+A scene enables only the stages it needs. ``Simulator.set_method`` and ``set_bands`` switch strain
+limiting live: they take effect at the next substep.
+"""
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Optional
+
+import numpy as np
+import taichi as ti
+
+from . import metrics
+from .dynamics import DynamicsSettings, ImplicitEuler
+from .model import ClothModel, Material, MeshArrays
+
+STRAIN_METHODS = ("svd", "warp-weft", "mapping", "none")
+
+
+class SimulationDiverged(RuntimeError):
+    """The state became non-finite; ``frame`` and ``stage`` say where."""
+
+    def __init__(self, frame, stage):
+        super().__init__(f"the simulation became non-finite at frame {frame} in stage "
+                         f"'{stage}': reduce the time step (raise sim.substeps) or soften the "
+                         "material")
+        self.frame, self.stage = frame, stage
+
+
+@dataclass
+class SceneSetup:
+    """What a scene builder hands the simulator."""
+    mesh: MeshArrays
+    material: Material
+    # Pinned vertices' targets as a function of time and their material coordinates:
+    # f(t, uv (P, 2), rest (P, 3)) -> (P, 3). None for pins that never move.
+    pin_motion: Optional[Callable] = None
+    obstacles: list = field(default_factory=list)
+    stitches: Optional[np.ndarray] = None
+    self_collision: bool = False
+    camera: dict = field(default_factory=dict)
+    check_final: Optional[Callable] = None   # f(sim) -> (ok: bool, message: str)
+
+
+@dataclass
+class Stage:
+    name: str
+    run: Callable
+    enabled: bool = True
+    per_substep: bool = True
+    ms: float = 0.0            # time spent in the current frame
+
+
+@ti.data_oriented
+class Simulator:
+    def __init__(self, setup: SceneSetup, cfg: dict):
+        self.cfg = cfg
+        self.setup = setup
+        sim = cfg["sim"]
+        if not sim["fps"] > 0 or not sim["substeps"] >= 1:
+            raise ValueError(f"the time step must be positive: sim.fps ({sim['fps']}) must be "
+                             f"> 0 and sim.substeps ({sim['substeps']}) >= 1")
+        self.h = 1.0 / (sim["fps"] * sim["substeps"])
+        self.substeps = int(sim["substeps"])
+        self.frame, self.time = 0, 0.0
+        self.model = ClothModel(setup.mesh, setup.material)
+        self._pin_rest = setup.mesh.pin_target.copy()
+        self.dynamics = ImplicitEuler(
+            self.model, DynamicsSettings(gravity=tuple(sim["gravity"]),
+                                         stitch_stiffness=float(sim.get("stitch_stiffness", 0.0))),
+            stitches=setup.stitches)
+        self.strain = None
+        self.collider = None
+        self.remesher = None
+        self.stages = [
+            Stage("dynamics", lambda: self.dynamics.step(self.h)),
+            Stage("strain_limit", self._strain_limit, enabled=False),
+            Stage("collision", self._collide, enabled=bool(setup.obstacles) or setup.self_collision),
+            Stage("remesh", self._remesh, enabled=False, per_substep=False),
+        ]
+        strain = cfg.get("strain")
+        if strain is not None and strain["method"] != "none":
+            self._make_strain_limiter(strain)
+        if self.stage("collision").enabled:
+            self._make_collider()
+        if cfg.get("remesh", {}).get("enabled", False):
+            self._make_remesher(cfg["remesh"])
+        self.last_good = self.model.mesh_arrays()
+        self.remesh_stats = {}
+
+    # -- stages -------------------------------------------------------------------------------
+    def stage(self, name):
+        for s in self.stages:
+            if s.name == name:
+                return s
+        raise KeyError(name)
+
+    def _make_strain_limiter(self, strain):
+        from .strain.solver import StrainLimiter   # imported here: scenes may not limit strain
+        self.strain = StrainLimiter(
+            self.model, method=strain["method"], warp=tuple(strain["warp"]),
+            weft=tuple(strain["weft"]), bias=tuple(strain["bias"]) if strain["bias"] else None,
+            solver=strain["solver"], tol=strain["tol"], max_iters=strain["iters"])
+        self.stage("strain_limit").enabled = strain["method"] != "none"
+
+    def _strain_limit(self):
+        self.strain.project(self.h)
+
+    def _make_collider(self):
+        from .collision import Collider
+        c = self.cfg.get("collision", {})
+        self.collider = Collider(self.model, self.setup.obstacles,
+                                 thickness=c.get("thickness", 0.005),
+                                 self_collision=self.setup.self_collision)
+
+    def _collide(self):
+        self.collider.resolve(self.h, self.time)
+
+    def _make_remesher(self, rcfg):
+        from . import remesh
+        params = remesh.RemeshParams(**{k: v for k, v in rcfg.items() if k != "enabled"})
+        params.validate()
+        self.remesher = (remesh, params)
+        self.stage("remesh").enabled = True
+
+    def _remesh(self):
+        remesh, params = self.remesher
+        mesh = self.model.mesh_arrays()
+        obstacle_distance = self.collider.distance if self.collider is not None else None
+        face_data = self.strain.face_state() if self.strain is not None and \
+            hasattr(self.strain, "face_state") else None
+        new, new_face_data, stats = remesh.remesh(mesh, params, obstacle_distance=obstacle_distance,
+                                                  face_data=face_data)
+        grown = self.model.load(new)
+        stats["grown"] = bool(grown)
+        self.remesh_stats = stats
+        self.dynamics.on_mesh_changed()
+        if self.strain is not None:
+            self.strain.on_mesh_changed(new_face_data) if new_face_data else \
+                self.strain.on_mesh_changed()
+        if self.collider is not None and hasattr(self.collider, "on_mesh_changed"):
+            self.collider.on_mesh_changed()
+
+    # -- live switches ------------------------------------------------------------------------
+    def set_method(self, name):
+        """Switch strain limiting (``svd``, ``warp-weft``, ``mapping`` or ``none``); it takes
+        effect at the next substep."""
+        if name not in STRAIN_METHODS:
+            raise ValueError(f"unknown strain-limiting method '{name}': use one of "
+                             f"{', '.join(STRAIN_METHODS)}")
+        if self.strain is None and name != "none":
+            self._make_strain_limiter(dict(self.cfg["strain"], method=name))
+        elif self.strain is not None:
+            self.strain.set_method(name)
+        self.cfg["strain"]["method"] = name
+        self.stage("strain_limit").enabled = name != "none"
+
+    def set_bands(self, warp=None, weft=None, bias=None):
+        if self.strain is None:
+            self._make_strain_limiter(self.cfg["strain"])
+        self.strain.set_bands(warp=warp, weft=weft, bias=bias)
+        for key, val in (("warp", warp), ("weft", weft), ("bias", bias)):
+            if val is not None:
+                self.cfg["strain"][key] = list(val)
+
+    @property
+    def method(self):
+        return self.cfg["strain"]["method"] if self.stage("strain_limit").enabled else "none"
+
+    # -- the frame loop -----------------------------------------------------------------------
+    def _update_pins(self, t):
+        if self.setup.pin_motion is None:
+            return
+        pinned = self.model.pinned
+        if not np.any(pinned):
+            return
+        targets = self.model.vert_pin_target.to_numpy()[: self.model.n_verts].astype(np.float64)
+        targets[pinned] = self.setup.pin_motion(t, self.model.uv[pinned], self._pin_rest_of())
+        self.model.set_pin_targets(targets)
+
+    def _pin_rest_of(self):
+        """Rest positions of the pinned vertices (the scene's initial targets), looked up by
+        material point so they survive remeshing."""
+        uv0 = self.setup.mesh.uv[self.setup.mesh.pinned]
+        rest0 = self._pin_rest[self.setup.mesh.pinned]
+        uv = self.model.uv[self.model.pinned]
+        d = np.linalg.norm(uv[:, None, :] - uv0[None, :, :], axis=2)
+        return rest0[np.argmin(d, axis=1)]
+
+    def step_frame(self):
+        """Advance one frame (``substeps`` time steps and the per-frame stages)."""
+        for s in self.stages:
+            s.ms = 0.0
+        for _ in range(self.substeps):
+            self._update_pins(self.time + self.h)
+            for s in self.stages:
+                if s.enabled and s.per_substep:
+                    self._run_stage(s)
+            self.time += self.h
+        for s in self.stages:
+            if s.enabled and not s.per_substep:
+                self._run_stage(s)
+        self.frame += 1
+        self.last_good = self.model.mesh_arrays()
+
+    def _run_stage(self, s):
+        t0 = time.perf_counter()
+        s.run()
+        ti.sync()
+        s.ms += 1000.0 * (time.perf_counter() - t0)
+        if not self._all_finite(self.model.n_verts):
+            raise SimulationDiverged(self.frame + 1, s.name)
+
+    @ti.kernel
+    def _all_finite(self, n: ti.i32) -> ti.i32:
+        ok = 1
+        for i in range(n):
+            x, v = self.model.state.x[i], self.model.state.v[i]
+            for c in ti.static(range(3)):
+                # NaN fails every comparison; inf fails the bound.
+                if not (ti.abs(x[c]) < 1e30 and ti.abs(v[c]) < 1e30):
+                    ok = 0
+        return ok
+
+    # -- metrics ------------------------------------------------------------------------------
+    def face_strains(self):
+        m = self.model
+        return metrics.face_strains(m.positions(), m.uv, m.faces, m.grain)
+
+    def metrics_row(self):
+        """One row of metrics.csv for the current frame (column names fixed; see README)."""
+        m = self.model
+        x, v = m.positions(), m.velocities()
+        st = metrics.face_strains(x, m.uv, m.faces, m.grain)
+        area = m.rest_area
+        cfg_s = self.cfg.get("strain", {})
+        row = {"frame": self.frame, "time": round(self.time, 9), "vertices": m.n_verts,
+               "faces": m.n_faces,
+               "ms_total": sum(s.ms for s in self.stages)}
+        for s in self.stages:
+            row[f"ms_{s.name}"] = s.ms
+        row["kinetic_energy"] = metrics.kinetic_energy(v, m.mass)
+        for name in ("warp", "weft"):
+            row[f"{name}_strain_max"], row[f"{name}_strain_rms"] = metrics.summarize(st[name], area)
+        row["nan"] = int(not (np.all(np.isfinite(x)) and np.all(np.isfinite(v))))
+        row["method"] = self.method
+        row["sl_iterations"] = self.strain.last_iterations if self.strain is not None and \
+            self.stage("strain_limit").enabled else 0
+        own = self.strain.constraint_values() if self.strain is not None and \
+            self.stage("strain_limit").enabled else np.zeros((m.n_faces, 1))
+        own_v = np.max(np.maximum(own, 0.0), axis=1) if own.size else np.zeros(m.n_faces)
+        row["own_violation_max"], row["own_violation_rms"] = metrics.summarize(own_v, area)
+        row["bias_strain_max"] = float(np.max(np.abs(st["bias"])))
+        warp_band = tuple(cfg_s.get("warp", (-np.inf, np.inf)))
+        weft_band = tuple(cfg_s.get("weft", (-np.inf, np.inf)))
+        row["warp_violation_max"] = float(np.max(metrics.band_violation(st["warp"], warp_band)))
+        row["weft_violation_max"] = float(np.max(metrics.band_violation(st["weft"], weft_band)))
+        row["cg_iterations"] = self.dynamics.last_cg_iters
+        return row

@@ -1,0 +1,192 @@
+#!/usr/bin/env python3
+"""Loom: strain-limited cloth simulation (Taichi).
+
+    python main.py                      # the default scene; a window if there is a display
+    python main.py hanging --headless --frames 60 --out out/hanging
+    python main.py --list
+    python main.py hanging --show-config
+"""
+import argparse
+import os
+import sys
+
+EXIT_BAD_INPUT = 2
+EXIT_DIVERGED = 3
+EXIT_NO_RENDER = 4
+
+
+def band(text):
+    try:
+        lo, hi = (float(t) for t in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a band: give MIN,MAX as strains, "
+                                         "e.g. -0.01,0.01") from None
+    return [lo, hi]
+
+
+def parse_args(argv):
+    p = argparse.ArgumentParser(
+        prog="main.py", description="Loom: strain-limited cloth simulation. Without a display "
+        "(or with --headless) it runs the scene and writes frames, meshes and metrics.",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    p.add_argument("scene", nargs="?", default=None, help="scene name (see --list)")
+    p.add_argument("--list", action="store_true", help="list the scenes and exit")
+    p.add_argument("--show-config", action="store_true",
+                   help="print every settable key of the scene with its value and exit")
+    p.add_argument("--headless", action="store_true", help="no window: write files to --out")
+    p.add_argument("--frames", type=int, help="frames to simulate (sim.frames)")
+    p.add_argument("--out", help="output folder (default out/SCENE)")
+    p.add_argument("--resolution", type=int, help="vertices along each side of a sheet "
+                   "(cloth.resolution)")
+    p.add_argument("--arch", default="cpu", help="Taichi backend: cpu, gpu, cuda, vulkan, metal")
+    p.add_argument("--precision", default="f64", choices=["f64", "f32"],
+                   help="floating-point precision of the simulation")
+    p.add_argument("--config", help="TOML file with settings (same keys as --show-config)")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override one setting, e.g. --set material.k_warp=50 (repeatable)")
+    p.add_argument("--no-images", action="store_true", help="headless: skip PNG frames")
+    p.add_argument("--video", action="store_true", help="headless: also write video.mp4")
+    p.add_argument("--color", help="colour mode: shading, warp-strain, weft-strain, "
+                   "bias-strain, principal-strain, violation, size")
+    p.add_argument("--method", help="strain limiting: svd, warp-weft, mapping or none")
+    p.add_argument("--warp", type=band, help="warp strain band MIN,MAX (paper: vertical)")
+    p.add_argument("--weft", type=band, help="weft strain band MIN,MAX (paper: horizontal)")
+    p.add_argument("--bias", type=band, help="bias strain band MIN,MAX (default: automatic)")
+    p.add_argument("--solver", help="strain-limiting solver: al or jacobi")
+    p.add_argument("--sl-iters", type=int, help="strain-limiting iteration budget per substep")
+    p.add_argument("--remesh", dest="remesh", action="store_true", default=None,
+                   help="remesh every frame (overrides the scene)")
+    p.add_argument("--no-remesh", dest="remesh", action="store_false",
+                   help="never remesh (overrides the scene)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    return p.parse_args(argv)
+
+
+def flag_overrides(args, cfg_keys):
+    """Command-line flags as a config override dict (only the flags given)."""
+    ov = {}
+
+    def put(section, key, value):
+        if value is not None:
+            ov.setdefault(section, {})[key] = value
+
+    put("sim", "frames", args.frames)
+    if args.resolution is not None:
+        if "cloth" not in cfg_keys or "resolution" not in cfg_keys["cloth"]:
+            raise ValueError("--resolution applies to sheet scenes only; this scene has no "
+                             "cloth.resolution (see --show-config)")
+        put("cloth", "resolution", args.resolution)
+    put("output", "color", args.color)
+    put("strain", "method", args.method)
+    put("strain", "warp", args.warp)
+    put("strain", "weft", args.weft)
+    put("strain", "bias", args.bias)
+    put("strain", "solver", args.solver)
+    put("strain", "iters", args.sl_iters)
+    if args.remesh is not None:
+        if "remesh" not in cfg_keys:
+            raise ValueError("this scene has no remeshing settings")
+        put("remesh", "enabled", args.remesh)
+    if args.no_images:
+        put("output", "images", False)
+    if args.video:
+        put("output", "video", True)
+    return ov
+
+
+def has_display():
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
+def fail(message, code=EXIT_BAD_INPUT):
+    print(f"loom: error: {message}", file=sys.stderr)
+    return code
+
+
+def main(argv=None):
+    args = parse_args(sys.argv[1:] if argv is None else argv)
+    import scenes
+    from cloth.config import ConfigError, flatten, load_toml, parse_assignment
+
+    if args.list:
+        for name in scenes.SCENES:
+            print(f"{name:12s} {scenes.DESCRIPTIONS.get(name, '')}")
+        return 0
+    name = args.scene or scenes.DEFAULT_SCENE
+    try:
+        module = scenes.get(name)
+        overrides = []
+        if args.config:
+            overrides.append(load_toml(args.config))
+        overrides += [parse_assignment(s) for s in args.set]
+        overrides.append(flag_overrides(args, module.DEFAULTS))
+        from scenes.common import resolve
+        cfg = resolve(module.DEFAULTS, overrides)
+        cfg["scene"] = name
+    except (KeyError, ConfigError, ValueError) as err:
+        return fail(str(err).strip("'\""))
+    if args.show_config:
+        print(f"# settable keys of scene '{name}' (use --set KEY=VALUE or a TOML file)")
+        for key, value in flatten(cfg):
+            if key != "scene":
+                print(f"{key} = {value!r}")
+        return 0
+
+    from cloth import backend
+    from cloth.model import ModelError
+    from cloth.simulator import Simulator
+    try:
+        backend.init(args.arch, args.precision)
+    except backend.BackendError as err:
+        return fail(str(err))
+    except Exception as err:  # Taichi could not start this arch (no driver, no device)
+        return fail(f"Taichi could not start on --arch {args.arch} ({err}); use --arch cpu")
+    try:
+        setup = module.build(cfg)
+        sim = Simulator(setup, cfg)
+    except (ModelError, ConfigError, ValueError) as err:
+        return fail(str(err))
+
+    headless = args.headless or not has_display()
+    if not headless:
+        from ui.render import RenderUnavailable
+        try:
+            from ui.app import run_app
+            return run_app(sim, cfg, module)
+        except RenderUnavailable as err:
+            return fail(f"{err}; or use --headless", EXIT_NO_RENDER)
+    return run_headless(sim, cfg, args, name, announce=not args.headless)
+
+
+def run_headless(sim, cfg, args, name, announce):
+    from ui.headless import HeadlessRun
+    from ui.render import RenderUnavailable
+    out = args.out or os.path.join("out", name)
+    if announce:
+        print(f"loom: no display found, running '{name}' headless "
+              "(use xvfb-run or a desktop for the window)", file=sys.stderr)
+    o = cfg["output"]
+    run = HeadlessRun(sim, cfg, out, images=o["images"], video=o["video"], color=o["color"],
+                      meshes=o["meshes"], every=o["every"], size=(o["width"], o["height"]),
+                      quiet=args.quiet)
+    try:
+        ok = run.run(int(cfg["sim"]["frames"]))
+    except RenderUnavailable as err:
+        return fail(f"{err}", EXIT_NO_RENDER)
+    if not ok:
+        print(f"loom: {run.diverged}. Output up to frame {sim.frame} is in {out}/ "
+              "(last good frame kept).", file=sys.stderr)
+        return EXIT_DIVERGED
+    ok_final, message = (True, "")
+    if sim.setup.check_final is not None:
+        ok_final, message = sim.setup.check_final(sim)
+    print(f"loom: wrote {sim.frame} frames of '{name}' to {out}/ "
+          f"(config.toml, metrics.csv, meshes/"
+          + (", frames/" if o["images"] else "") + (", video.mp4" if o["video"] else "")
+          + f"); final check: {'ok' if ok_final else 'FAILED'}"
+          + (f" ({message})" if message else ""))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

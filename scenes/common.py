@@ -1,0 +1,83 @@
+"""What every scene shares: the settable keys with their defaults, material presets, and
+the resolution of a scene's configuration (defaults < preset < TOML file < --set flags)."""
+import copy
+
+from cloth.config import ConfigError, merge
+from cloth.model import Material
+
+# Fabric presets (SI). Stretch stiffnesses are membrane moduli per unit width (N/m).
+MATERIAL_PRESETS = {
+    # Soft on purpose: under its own weight this cloth stretches well past 5 % near the pins,
+    # so the paper's 1 % / 5 % strain limits bind, as in its experiment (Table 1).
+    "soft": dict(density=0.15, k_warp=20.0, k_weft=20.0, k_shear=4.0, k_bend=2e-6,
+                 damp_mass=0.2, damp_stiff=0.002),
+    # Woven cotton. Areal density 0.15 kg/m^2 (a shirting of about 150 g/m^2). Tensile tests of
+    # woven cotton give roughly 2-8 kN/m initial modulus per unit width, warp stiffer than weft;
+    # in-plane shear is one to two orders of magnitude weaker and bending about 1e-6-1e-5 N m
+    # (KES-style measurements; ARCSim's fitted cotton materials are in the same range).
+    "cotton": dict(density=0.15, k_warp=3000.0, k_weft=2000.0, k_shear=50.0, k_bend=5e-6,
+                   damp_mass=0.1, damp_stiff=0.002),
+}
+
+COMMON_DEFAULTS = {
+    "sim": {
+        "frames": 120,            # frames to run headless
+        "fps": 30.0,              # frames per simulated second
+        "substeps": 1,            # time steps per frame (h = 1 / (fps * substeps))
+        "gravity": [0.0, -9.81, 0.0],
+        "stitch_stiffness": 0.0,  # N/m of seam springs (garments)
+    },
+    "material": dict(preset="soft", **MATERIAL_PRESETS["soft"]),
+    "strain": {
+        "method": "none",         # svd | warp-weft | mapping | none
+        "warp": [-0.01, 0.01],    # strain band along the warp (material u; vertical in hanging)
+        "weft": [-0.05, 0.05],    # strain band along the weft
+        "bias": [],               # bias-strain band; [] = automatic (METHOD.md 3.2)
+        "solver": "al",           # al (augmented Lagrangian) | jacobi (baseline)
+        "iters": 50,              # outer-iteration budget per substep
+        "tol": 1e-4,              # largest violation accepted, in strain
+    },
+    "output": {
+        "images": True,           # frames/frame_NNNN.png
+        "meshes": True,           # meshes/frame_NNNN.obj
+        "video": False,           # video.mp4
+        "every": 1,               # write every N-th frame
+        "width": 640,             # image size in pixels
+        "height": 480,
+        "color": "shading",       # shading | warp-strain | weft-strain | bias-strain | principal-strain
+    },
+}
+
+
+def material_from(cfg):
+    m = cfg["material"]
+    return Material(**{k: float(v) for k, v in m.items() if k != "preset"})
+
+
+def resolve(defaults, overrides_list):
+    """Apply each override dict in order. A ``material.preset`` override first loads that
+    preset's values, then the remaining material keys of the same override apply on top."""
+    cfg = copy.deepcopy(defaults)
+    for ov in overrides_list:
+        ov = copy.deepcopy(ov)
+        preset = ov.get("material", {}).get("preset")
+        if preset is not None:
+            if preset not in MATERIAL_PRESETS:
+                raise ConfigError(f"unknown material preset '{preset}': use one of "
+                                  f"{', '.join(MATERIAL_PRESETS)}")
+            cfg["material"].update(MATERIAL_PRESETS[preset], preset=preset)
+            del ov["material"]["preset"]
+        cfg = merge(cfg, ov)
+    return cfg
+
+
+def scene_defaults(specific):
+    """COMMON_DEFAULTS with a scene's own sections and changed values merged in (a scene may
+    add sections; it changes common keys only through existing names)."""
+    cfg = copy.deepcopy(COMMON_DEFAULTS)
+    for key, value in specific.items():
+        if key in cfg and isinstance(value, dict):
+            cfg[key] = merge(cfg[key], value, key + ".")
+        else:
+            cfg[key] = copy.deepcopy(value)
+    return cfg

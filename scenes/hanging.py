@@ -1,0 +1,64 @@
+"""Paper Table 1: a rectangular cloth hanging under gravity from its two top corners, settling
+to rest. The warp (material u) hangs vertically, so the strain band ``warp`` is the paper's
+"vertical" limit and ``weft`` its "horizontal" one."""
+import numpy as np
+
+from cloth.model import MeshArrays
+from cloth.sheet import make_sheet
+from cloth.simulator import SceneSetup
+
+from .common import material_from, scene_defaults
+
+DEFAULTS = scene_defaults({
+    "cloth": {
+        "width": 1.0,             # m, horizontal (weft, material v)
+        "height": 1.0,            # m, vertical (warp, material u)
+        "resolution": 25,         # vertices along each side
+        "pattern": "alternating", # regular | alternating | random triangulation
+        "top": 2.0,               # m, height of the pins above the ground
+        "bulge": 0.003,           # m, initial out-of-plane bulge that lets the sheet buckle
+    },
+    "sim": {"frames": 150},
+})
+
+
+def build(cfg):
+    c = cfg["cloth"]
+    n = int(c["resolution"])
+    uv, faces = make_sheet(c["height"], c["width"], n, n, c["pattern"])
+    # World: u (warp) points down from the top edge, v (weft) runs along x; the sheet starts
+    # at rest length in the vertical plane z = 0, bulged by a few millimetres so that it can
+    # buckle out of plane (a perfectly flat start keeps every force in the plane). The bulge
+    # is mirror-symmetric about x = 0, like the set-up.
+    s = (uv[:, 1] - 0.5 * c["width"]) / c["width"]
+    bulge = c["bulge"] * np.sin(np.pi * uv[:, 0] / c["height"]) * np.cos(np.pi * s)
+    x = np.stack([uv[:, 1] - 0.5 * c["width"], c["top"] - uv[:, 0], bulge], axis=1)
+    top = np.isclose(uv[:, 0], 0.0)
+    pinned = top & (np.isclose(uv[:, 1], 0.0) | np.isclose(uv[:, 1], c["width"]))
+    mesh = MeshArrays(uv=uv, x=x, faces=faces, pinned=pinned)
+    return SceneSetup(
+        mesh=mesh, material=material_from(cfg),
+        camera={"position": [0.0, c["top"] - 0.5 * c["height"], 2.6 * max(c["width"], c["height"])],
+                "lookat": [0.0, c["top"] - 0.55 * c["height"], 0.0]},
+        check_final=lambda sim: check_final(sim, cfg))
+
+
+def check_final(sim, cfg):
+    """At rest, below the pins, symmetric about the plane between them, finite."""
+    x, v = sim.model.positions(), sim.model.velocities()
+    if not (np.all(np.isfinite(x)) and np.all(np.isfinite(v))):
+        return False, "non-finite state"
+    top = cfg["cloth"]["top"]
+    if not x[:, 1].min() < top - 0.5 * cfg["cloth"]["height"]:
+        return False, f"lowest point {x[:, 1].min():.3f} m is not well below the pins"
+    # Mirror symmetry x -> -x: compare each vertex with its mirror in material space.
+    uv = sim.model.uv
+    mirror = np.stack([uv[:, 0], cfg["cloth"]["width"] - uv[:, 1]], axis=1)
+    d = np.linalg.norm(uv[None, :, :] - mirror[:, None, :], axis=2) if len(uv) < 5000 else None
+    if d is not None:
+        j = np.argmin(d, axis=1)
+        ok = d[np.arange(len(uv)), j] < 1e-9
+        asym = np.max(np.abs(x[ok, 0] + x[j[ok], 0]))
+        if asym > 0.02 * cfg["cloth"]["width"]:
+            return False, f"not symmetric: mirrored x differs by {asym:.4f} m"
+    return True, "hangs at rest"

@@ -1,0 +1,26 @@
+"""Small builders shared by the tests."""
+import numpy as np
+
+from cloth.model import ClothModel, Material, MeshArrays
+from cloth.sheet import make_sheet
+
+
+def sheet_model(n=6, size=0.5, pattern="alternating", material=None, pinned=None, x=None,
+                rest_x=None):
+    uv, faces = make_sheet(size, size, n, n, pattern)
+    if x is None:
+        x = np.c_[uv, np.zeros(len(uv))]
+    mesh = MeshArrays(uv=uv, x=x, faces=faces, pinned=pinned)
+    return ClothModel(mesh, material or Material(), rest_x=rest_x)
+
+
+def set_positions(model, x):
+    full = model.state.x.to_numpy()
+    full[: model.n_verts] = x
+    model.state.x.from_numpy(full)
+
+
+def set_velocities(model, v):
+    full = model.state.v.to_numpy()
+    full[: model.n_verts] = v
+    model.state.v.from_numpy(full)

@@ -1,0 +1,115 @@
+"""Headless runs: simulate N frames and write the output folder.
+
+    DIR/config.toml             the fully resolved configuration
+    DIR/meshes/frame_NNNN.obj   v = positions, vt = material coordinates (frame 0 = initial)
+    DIR/meshes/obstacles_NNNN.obj (or obstacles.obj when static)
+    DIR/frames/frame_NNNN.png   GGUI offscreen, same drawing code as the window
+    DIR/metrics.csv             one row per frame
+    DIR/video.mp4               with --video
+
+Files are written as frames finish, so a crash or a divergence keeps everything before it.
+"""
+import os
+
+import numpy as np
+
+from cloth import io
+from cloth.config import to_toml
+from cloth.simulator import SimulationDiverged
+
+from .progress import Progress
+
+
+class HeadlessRun:
+    def __init__(self, sim, cfg, out_dir, images=True, video=False, color="shading",
+                 meshes=True, every=1, size=(640, 480), quiet=False):
+        self.sim, self.cfg, self.out = sim, cfg, out_dir
+        self.images, self.video, self.meshes = images or video, video, meshes
+        self.color, self.every, self.size, self.quiet = color, max(1, int(every)), size, quiet
+        self.renderer = None
+        self._video_writer = None
+        self.diverged = None
+
+    # -- set-up -------------------------------------------------------------------------------
+    def _prepare(self):
+        os.makedirs(self.out, exist_ok=True)
+        if self.meshes:
+            os.makedirs(os.path.join(self.out, "meshes"), exist_ok=True)
+        with open(os.path.join(self.out, "config.toml"), "w") as fh:
+            fh.write("# Loom: the fully resolved configuration of this run\n")
+            fh.write(to_toml(self.cfg))
+        if self.images:
+            from .render import ClothRenderer, open_window
+            os.makedirs(os.path.join(self.out, "frames"), exist_ok=True)
+            window = open_window("Loom (offscreen)", self.size, show_window=False)
+            self.renderer = ClothRenderer(window, self.sim.setup.camera)
+        if self.video:
+            import imageio.v2 as imageio
+            self._video_writer = imageio.get_writer(
+                os.path.join(self.out, "video.mp4"), fps=self.cfg["sim"]["fps"],
+                macro_block_size=8, quality=7)
+        self.metrics = io.MetricsWriter(os.path.join(self.out, "metrics.csv"))
+
+    # -- per frame ----------------------------------------------------------------------------
+    def _write_frame(self):
+        sim, f = self.sim, self.sim.frame
+        self.metrics.write(sim.metrics_row())
+        if f % self.every:
+            return
+        m = sim.model
+        x = m.positions()
+        if self.meshes:
+            io.write_obj(os.path.join(self.out, "meshes", f"frame_{f:04d}.obj"), x, m.uv, m.faces)
+            self._write_obstacles(f)
+        if self.renderer is not None:
+            from .render import draw_simulation
+            draw_simulation(self.renderer, sim, self.color)
+            img = self.renderer.image()
+            if self.images:
+                import imageio.v2 as imageio
+                imageio.imwrite(os.path.join(self.out, "frames", f"frame_{f:04d}.png"), img)
+            if self._video_writer is not None:
+                self._video_writer.append_data(img)
+
+    def _write_obstacles(self, f):
+        obstacles = self.sim.setup.obstacles
+        if not obstacles:
+            return
+        moving = any(getattr(o, "moving", False) for o in obstacles)
+        name = f"obstacles_{f:04d}.obj" if moving else "obstacles.obj"
+        path = os.path.join(self.out, "meshes", name)
+        if not moving and os.path.exists(path):
+            return
+        verts, faces, off = [], [], 0
+        for o in obstacles:
+            v, fc = o.mesh_at(self.sim.time)
+            verts.append(v)
+            faces.append(np.asarray(fc) + off)
+            off += len(v)
+        io.write_plain_obj(path, np.concatenate(verts), np.concatenate(faces))
+
+    # -- the run ------------------------------------------------------------------------------
+    def run(self, frames):
+        """Simulate ``frames`` frames. Returns True if all ran; on divergence the folder keeps
+        every frame before it and ``self.diverged`` holds the error."""
+        self._prepare()
+        progress = None if self.quiet else Progress(frames)
+        try:
+            self._write_frame()
+            for k in range(frames):
+                try:
+                    self.sim.step_frame()
+                except SimulationDiverged as err:
+                    self.diverged = err
+                    return False
+                self._write_frame()
+                if progress:
+                    ms = sum(s.ms for s in self.sim.stages)
+                    progress.update(k + 1, f"{ms:.0f} ms/frame simulated")
+            return True
+        finally:
+            if progress:
+                progress.close()
+            self.metrics.close()
+            if self._video_writer is not None:
+                self._video_writer.close()
