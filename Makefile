@@ -1,0 +1,28 @@
+# Two commands do all the set-up on a fresh machine:
+#   make demo   run the default scene (a window with a display, else headless to out/)
+#   make test   run the test suite
+# Both create .venv and install the pinned requirements on first use.
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+
+.PHONY: demo test vulkan clean
+
+$(STAMP): requirements.txt
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -r requirements.txt
+	touch $(STAMP)
+
+vulkan:
+	@bash scripts/ensure_vulkan.sh
+
+demo: $(STAMP) vulkan
+	$(PY) main.py $(ARGS)
+
+test: $(STAMP) vulkan
+	$(PY) -m pytest $(ARGS)
+
+clean:
+	rm -rf $(VENV) out

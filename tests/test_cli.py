@@ -1,0 +1,90 @@
+"""The command line: clear one-line errors for bad input, and the headless output folder."""
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def run_main(*args, cwd=None):
+    env = dict(os.environ)
+    env.pop("DISPLAY", None)
+    env.pop("WAYLAND_DISPLAY", None)
+    return subprocess.run([sys.executable, os.path.join(ROOT, "main.py"), *args],
+                          capture_output=True, text=True, cwd=cwd or ROOT, env=env, timeout=600)
+
+
+def assert_clear_error(res, *words):
+    assert res.returncode == 2, res.stderr
+    assert "Traceback" not in res.stderr
+    lines = [ln for ln in res.stderr.splitlines() if ln.startswith("loom: error:")]
+    assert len(lines) == 1, res.stderr
+    for w in words:
+        assert w in lines[0], lines[0]
+
+
+def test_unknown_scene():
+    assert_clear_error(run_main("hangin", "--headless"), "unknown scene", "did you mean 'hanging'")
+
+
+def test_unknown_set_key():
+    assert_clear_error(run_main("hanging", "--set", "material.k_wrap=3", "--headless"),
+                       "unknown setting 'material.k_wrap'", "k_warp")
+
+
+def test_malformed_toml(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[material\nk_warp = 3\n")
+    assert_clear_error(run_main("hanging", "--config", str(bad), "--headless"), "not valid TOML")
+
+
+@pytest.mark.parametrize("setting", ["sim.fps=-30", "sim.fps=0", "sim.substeps=0"])
+def test_non_positive_time_step(setting):
+    assert_clear_error(run_main("hanging", "--set", setting, "--headless", "--frames", "1"),
+                       "time step must be positive")
+
+
+def test_degenerate_material_triangles():
+    assert_clear_error(run_main("hanging", "--set", "cloth.width=0", "--headless", "--frames", "1"),
+                       "degenerate", "counter-clockwise")
+
+
+def test_list_and_show_config():
+    res = run_main("--list")
+    assert res.returncode == 0 and "hanging" in res.stdout
+    res = run_main("hanging", "--show-config", "--set", "material.preset=\"cotton\"")
+    assert res.returncode == 0
+    assert "material.k_warp = 3000.0" in res.stdout and "cloth.resolution = 25" in res.stdout
+
+
+def test_headless_writes_the_documented_folder(tmp_path):
+    import trimesh
+    out = tmp_path / "run"
+    res = run_main("hanging", "--headless", "--frames", "3", "--resolution", "6", "--out", str(out),
+                   "--no-images", "--quiet")
+    assert res.returncode == 0, res.stderr
+    assert str(out) in res.stdout
+    assert (out / "config.toml").exists()
+    import tomllib
+    cfg = tomllib.loads((out / "config.toml").read_text())
+    assert cfg["cloth"]["resolution"] == 6 and cfg["sim"]["frames"] == 3
+    rows = (out / "metrics.csv").read_text().splitlines()
+    header = rows[0].split(",")
+    for col in ["frame", "time", "vertices", "faces", "ms_total", "ms_dynamics", "kinetic_energy",
+                "warp_strain_max", "warp_strain_rms", "weft_strain_max", "weft_strain_rms", "nan"]:
+        assert col in header
+    assert len(rows) == 1 + 4
+    for f in range(4):
+        path = out / "meshes" / f"frame_{f:04d}.obj"
+        mesh = trimesh.load(str(path), process=False, maintain_order=True)
+        assert len(mesh.vertices) == 36 and len(mesh.faces) == 50
+    # vt holds the material coordinates (metres): the hanging sheet is 1 m x 1 m.
+    from cloth.io import read_obj_uv
+    from cloth.sheet import make_sheet
+    x, uv, faces = read_obj_uv(str(out / "meshes" / "frame_0003.obj"))
+    uv_ref, faces_ref = make_sheet(1.0, 1.0, 6, 6, "alternating")
+    assert np.allclose(uv, uv_ref, atol=1e-12) and np.array_equal(faces, faces_ref)
+    assert np.allclose(mesh.visual.uv, uv_ref, atol=1e-9)
