@@ -76,3 +76,23 @@ def material_areas(uv, faces):
     """Rest (material) area per face, m^2."""
     e1, e2 = uv[faces[:, 1]] - uv[faces[:, 0]], uv[faces[:, 2]] - uv[faces[:, 0]]
     return 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+
+
+def wrinkle_measures(x, faces, edges, edge_faces, edge_opp, uv):
+    """Fold measures over interior edges (flat cloth gives 0):
+    ``mean_abs_dihedral``, the mean |dihedral angle| (rad) weighted by material edge length;
+    ``curvature_energy``, the discrete-shells sum 3 |e|^2 theta^2 / (A1 + A2) (the bending
+    energy per unit bending stiffness and per 1/2, dimensionless)."""
+    from .model import dihedral_angles
+    theta = dihedral_angles(np.asarray(x, np.float64), edges, edge_opp)
+    inner = edge_faces[:, 1] >= 0
+    elen = np.linalg.norm(uv[edges[:, 1]] - uv[edges[:, 0]], axis=1)[inner]
+    area = material_areas(uv, faces)
+    a12 = area[edge_faces[inner, 0]] + area[edge_faces[inner, 1]]
+    th = theta[inner]
+    return {"mean_abs_dihedral": float(np.sum(elen * np.abs(th)) / max(elen.sum(), 1e-300)),
+            "curvature_energy": float(np.sum(3.0 * elen ** 2 * th ** 2 / a12))}
+
+
+def percentile(values, q):
+    return float(np.percentile(np.asarray(values), q)) if np.size(values) else 0.0

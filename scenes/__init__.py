@@ -3,9 +3,11 @@ import importlib
 
 SCENES = {
     "hanging": "scenes.hanging",
+    "pull": "scenes.pull",
 }
 DESCRIPTIONS = {
     "hanging": "paper Table 1: a cloth hanging from its two top corners, settling to rest",
+    "pull": "a sheet pinned along its top edge with a corner dragged away (the user stretches it)",
 }
 DEFAULT_SCENE = "hanging"
 
