@@ -27,7 +27,7 @@ def init(arch="cpu", precision="f64", debug=False):
     if _state["arch"] is not None:
         ti.reset()
     fp = ti.f64 if precision == "f64" else ti.f32
-    ti.init(arch=getattr(ti, ARCHES[arch]), default_fp=fp, log_level=ti.WARN,
+    ti.init(arch=getattr(ti, ARCHES[arch]), default_fp=fp, log_level=ti.ERROR,
             debug=debug, offline_cache=True)
     _state.update(arch=arch, precision=precision)
 

@@ -22,6 +22,15 @@ class ModelError(ValueError):
     """Bad mesh or material input; the message names the fix."""
 
 
+class CapacityExceeded(RuntimeError):
+    """A mesh does not fit in a model's fields (remeshing grew it past the spare capacity)."""
+
+    def __init__(self, nv, nf, ne, caps):
+        super().__init__(f"mesh of {nv} vertices, {nf} faces, {ne} edges exceeds the capacity "
+                         f"{caps}")
+        self.needed = (nv, nf, ne)
+
+
 @dataclass
 class Material:
     """Fabric parameters (SI). Stiffnesses are per unit width (N/m): the 2-D membrane moduli
@@ -167,7 +176,6 @@ class ClothModel:
         material.validate()
         self.material = material
         self.capacity_factor = capacity_factor
-        self.grow_count = 0
         self.v_cap = self.f_cap = self.e_cap = 0
         self.n_verts = self.n_faces = self.n_edges = 0
         self.load(mesh, rest_x=rest_x)
@@ -197,8 +205,8 @@ class ClothModel:
 
     # -- filling from numpy -------------------------------------------------------------------
     def load(self, mesh: MeshArrays, rest_x=None):
-        """(Re)fill every field from ``mesh``. Reallocates only when capacity runs out, and
-        returns True in that case so the caller can report it (old field handles die)."""
+        """(Re)fill every field from ``mesh`` within the allocated capacity; raises
+        CapacityExceeded when it does not fit (build a new ClothModel then)."""
         uv, faces = mesh.uv, mesh.faces
         if uv.ndim != 2 or uv.shape[1] != 2 or mesh.x.shape != (len(uv), 3):
             raise ModelError("mesh arrays have the wrong shape: uv must be (V,2) and x (V,3)")
@@ -220,10 +228,11 @@ class ClothModel:
             raise ModelError("mesh coordinates must be finite")
         ev, ef, eo = build_edges(faces)
         nv, nf, ne = len(uv), len(faces), len(ev)
-        grown = False
         if not self.fits(nv, nf, ne):
-            grown = self.v_cap > 0
-            self.grow_count += int(grown)
+            if self.v_cap > 0:
+                # Kernels compiled against these fields would keep pointing at them, so a model
+                # never reallocates itself: the owner builds a new model (Simulator does).
+                raise CapacityExceeded(nv, nf, ne, (self.v_cap, self.f_cap, self.e_cap))
             self._allocate(nv, nf, ne)
         self.n_verts, self.n_faces, self.n_edges = nv, nf, ne
 
@@ -262,7 +271,6 @@ class ClothModel:
         self.state.n = nv
         self._np_cache = dict(faces=faces.copy(), uv=uv.copy(), area=area, pinned=mesh.pinned.copy(),
                               grain=grain, edges=ev, edge_faces=ef, mass=mass)
-        return grown
 
     @staticmethod
     def _fill_vec(fld, arr, cap):
@@ -313,6 +321,18 @@ class ClothModel:
                           pinned=self.pinned,
                           pin_target=self.vert_pin_target.to_numpy()[: self.n_verts],
                           grain=self.grain)
+
+    @ti.kernel
+    def all_finite(self, n: ti.i32) -> ti.i32:
+        """1 if the first ``n`` positions and velocities are finite (and below 1e30)."""
+        ok = 1
+        for i in range(n):
+            x, v = self.state.x[i], self.state.v[i]
+            for c in ti.static(range(3)):
+                # NaN fails every comparison; inf fails the bound.
+                if not (ti.abs(x[c]) < 1e30 and ti.abs(v[c]) < 1e30):
+                    ok = 0
+        return ok
 
     def set_pin_targets(self, targets):
         full = self.vert_pin_target.to_numpy()

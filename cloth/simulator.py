@@ -6,6 +6,7 @@
 A scene enables only the stages it needs. ``Simulator.set_method`` and ``set_bands`` switch strain
 limiting live: they take effect at the next substep.
 """
+import sys
 import time
 from dataclasses import dataclass, field
 from typing import Callable, Optional
@@ -15,7 +16,7 @@ import taichi as ti
 
 from . import metrics
 from .dynamics import DynamicsSettings, ImplicitEuler
-from .model import ClothModel, Material, MeshArrays
+from .model import CapacityExceeded, ClothModel, Material, MeshArrays
 
 STRAIN_METHODS = ("svd", "warp-weft", "mapping", "none")
 
@@ -66,11 +67,16 @@ class Simulator:
         self.h = 1.0 / (sim["fps"] * sim["substeps"])
         self.substeps = int(sim["substeps"])
         self.frame, self.time = 0, 0.0
-        self.model = ClothModel(setup.mesh, setup.material)
+        self.grow_count = 0
+        remeshing = bool(cfg.get("remesh", {}).get("enabled", False))
+        self.model = ClothModel(setup.mesh, setup.material,
+                                capacity_factor=2.0 if remeshing else 1.2)
         self._pin_rest = setup.mesh.pin_target.copy()
         self.dynamics = ImplicitEuler(
             self.model, DynamicsSettings(gravity=tuple(sim["gravity"]),
-                                         stitch_stiffness=float(sim.get("stitch_stiffness", 0.0))),
+                                         stitch_stiffness=float(sim.get("stitch_stiffness", 0.0)),
+                                         cg_tol=float(sim.get("cg_tol", 1e-4)),
+                                         cg_max_iters=int(sim.get("cg_iters", 500))),
             stitches=setup.stitches)
         self.strain = None
         self.collider = None
@@ -132,17 +138,41 @@ class Simulator:
         obstacle_distance = self.collider.distance if self.collider is not None else None
         face_data = self.strain.face_state() if self.strain is not None and \
             hasattr(self.strain, "face_state") else None
+        # Pins and seam vertices are frozen: never removed or moved, seams never split.
+        frozen = mesh.pinned.copy()
+        stitches = self.dynamics.stitches_np
+        if len(stitches):
+            frozen[stitches.ravel()] = True
         new, new_face_data, stats = remesh.remesh(mesh, params, obstacle_distance=obstacle_distance,
-                                                  face_data=face_data)
-        grown = self.model.load(new)
-        stats["grown"] = bool(grown)
+                                                  face_data=face_data, frozen_verts=frozen)
+        if len(stitches):
+            self.dynamics.stitches_np = stats["vertex_map"][stitches].astype(np.int32)
+        try:
+            self.model.load(new)
+            stats["grown"] = False
+        except CapacityExceeded:
+            self._rebuild_for(new)
+            stats["grown"] = True
         self.remesh_stats = stats
         self.dynamics.on_mesh_changed()
         if self.strain is not None:
-            self.strain.on_mesh_changed(new_face_data) if new_face_data else \
-                self.strain.on_mesh_changed()
-        if self.collider is not None and hasattr(self.collider, "on_mesh_changed"):
+            self.strain.on_mesh_changed()
+        if self.collider is not None:
             self.collider.on_mesh_changed()
+
+    def _rebuild_for(self, mesh):
+        """The remeshed cloth outgrew the fields: build a model with twice the room and new
+        solver objects around it (their kernels compile anew against the new fields)."""
+        self.grow_count += 1
+        print(f"loom: remeshing grew the cloth to {len(mesh.faces)} faces; reallocating fields "
+              f"with room for {2 * len(mesh.faces)} (grown {self.grow_count}x)", file=sys.stderr)
+        self.model = ClothModel(mesh, self.setup.material, capacity_factor=2.0)
+        self.dynamics = ImplicitEuler(self.model, self.dynamics.settings,
+                                      stitches=self.dynamics.stitches_np)
+        if self.strain is not None:
+            self._make_strain_limiter(self.cfg["strain"])
+        if self.collider is not None:
+            self._make_collider()
 
     # -- live switches ------------------------------------------------------------------------
     def set_method(self, name):
@@ -211,19 +241,8 @@ class Simulator:
         s.run()
         ti.sync()
         s.ms += 1000.0 * (time.perf_counter() - t0)
-        if not self._all_finite(self.model.n_verts):
+        if not self.model.all_finite(self.model.n_verts):
             raise SimulationDiverged(self.frame + 1, s.name)
-
-    @ti.kernel
-    def _all_finite(self, n: ti.i32) -> ti.i32:
-        ok = 1
-        for i in range(n):
-            x, v = self.model.state.x[i], self.model.state.v[i]
-            for c in ti.static(range(3)):
-                # NaN fails every comparison; inf fails the bound.
-                if not (ti.abs(x[c]) < 1e30 and ti.abs(v[c]) < 1e30):
-                    ok = 0
-        return ok
 
     # -- metrics ------------------------------------------------------------------------------
     def face_strains(self):

@@ -1,9 +1,11 @@
 """What every scene shares: the settable keys with their defaults, material presets, and
 the resolution of a scene's configuration (defaults < preset < TOML file < --set flags)."""
 import copy
+from dataclasses import asdict
 
 from cloth.config import ConfigError, merge
 from cloth.model import Material
+from cloth.remesh import RemeshParams
 
 # Fabric presets (SI). Stretch stiffnesses are membrane moduli per unit width (N/m).
 MATERIAL_PRESETS = {
@@ -26,6 +28,8 @@ COMMON_DEFAULTS = {
         "substeps": 1,            # time steps per frame (h = 1 / (fps * substeps))
         "gravity": [0.0, -9.81, 0.0],
         "stitch_stiffness": 0.0,  # N/m of seam springs (garments)
+        "cg_tol": 1e-4,           # relative residual that ends the implicit solve's CG
+        "cg_iters": 500,          # CG iteration budget per time step
     },
     "material": dict(preset="soft", **MATERIAL_PRESETS["soft"]),
     "strain": {
@@ -37,6 +41,8 @@ COMMON_DEFAULTS = {
         "iters": 50,              # outer-iteration budget per substep
         "tol": 1e-4,              # largest violation accepted, in strain
     },
+    # Adaptive remeshing in material space, once per frame (Narain et al. 2012); lengths in m.
+    "remesh": dict(enabled=False, **asdict(RemeshParams())),
     "output": {
         "images": True,           # frames/frame_NNNN.png
         "meshes": True,           # meshes/frame_NNNN.obj

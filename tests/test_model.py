@@ -43,15 +43,16 @@ def test_dm_inverse_maps_material_edges_to_identity():
     assert np.allclose(Dm @ Dm_inv, np.eye(2), atol=1e-12)
 
 
-def test_reload_within_capacity_keeps_fields_and_grows_when_needed():
+def test_reload_within_capacity_keeps_fields_and_refuses_to_overflow():
+    from cloth.model import CapacityExceeded
     m = sheet_model(n=6)
     handle = m.state.x
     uv, faces = make_sheet(0.5, 0.5, 5, 5)
-    assert m.load(MeshArrays(uv=uv, x=np.c_[uv, np.zeros(len(uv))], faces=faces)) is False
+    m.load(MeshArrays(uv=uv, x=np.c_[uv, np.zeros(len(uv))], faces=faces))
     assert m.state.x is handle and m.n_verts == 25
     uv, faces = make_sheet(0.5, 0.5, 12, 12)
-    assert m.load(MeshArrays(uv=uv, x=np.c_[uv, np.zeros(len(uv))], faces=faces)) is True
-    assert m.grow_count == 1 and m.n_verts == 144 and m.v_cap >= 144
+    with pytest.raises(CapacityExceeded):
+        m.load(MeshArrays(uv=uv, x=np.c_[uv, np.zeros(len(uv))], faces=faces))
 
 
 def test_degenerate_and_clockwise_triangles_are_refused_with_a_fix():

@@ -1,0 +1,785 @@
+"""Adaptive anisotropic remeshing in material space (Narain, Samii, O'Brien 2012), once per frame.
+
+Host-side numpy/Python: ``remesh(mesh, params)`` returns a new ``MeshArrays``. Outline:
+
+1. Sizing field. Per face a symmetric 2x2 metric ``M`` in material space; an edge ``du`` is
+   "too long" when ``du^T M du > 1``. ``M`` sums four criteria, each written so that the
+   quantity it bounds changes by at most its ``refine_*`` limit across one edge:
+   curvature (turning of the normal), velocity gradient, compression (buckling to come) and,
+   when an obstacle is given, proximity. Face metrics are averaged to vertices (weighted by
+   material area) and their eigenvalues clamped by ``size_min``/``size_max`` and ``aspect_min``.
+2. Operations, each one local, checked, and either applied whole or not at all:
+   split edges too long in the metric (longest first), flip to the anisotropic Delaunay
+   triangulation, collapse edges whose removal makes no edge too long and inverts nothing,
+   flip again.
+3. Transfer. A split puts the new vertex at the edge's material midpoint and gives it the
+   midpoint of x, v (exact linear interpolation in material space); flips and collapses never
+   move a vertex, so existing vertices keep uv, x, v, pins exactly. New faces inherit grain and
+   ``face_data`` rows from the face they were cut from.
+
+The mutable mesh during the operations is plain Python lists (faces and a vertex -> faces
+index); numpy does everything that touches the whole mesh at once (sizing, candidate lists).
+"""
+from dataclasses import dataclass
+import heapq
+import math
+import time
+
+import numpy as np
+
+from cloth.model import MeshArrays, ModelError, build_edges, dihedral_angles, \
+    signed_material_areas
+
+# A triangle counts as degenerate when twice its area is below this fraction of its longest
+# edge squared (relative, so it works at any mesh scale).
+_AREA_REL_EPS = 1e-9
+# Boundary vertices may be collapsed away only when the boundary through them is straight to
+# this relative tolerance (sine of the kink angle), so boundary length and area are kept.
+_COLLINEAR_EPS = 1e-10
+# Flip only when the Delaunay test fails by this margin (sine of the angle excess): a regular
+# grid is exactly co-circular everywhere and must not flip back and forth.
+_FLIP_EPS = 1e-6
+
+
+@dataclass
+class RemeshParams:
+    """Remeshing settings. Lengths in metres of material space.
+
+    size_min, size_max: bounds on edge length the sizing field may ask for.
+    aspect_min: smallest allowed ratio of short to long axis of the sizing ellipse (caps the
+        anisotropy) and the lowest triangle quality (1 = equilateral in the metric) a collapse
+        may create.
+    refine_angle: rad, largest turning of the surface normal across one edge (curvature).
+    refine_velocity: m/s, largest velocity difference across one edge.
+    refine_compression: compressive strain at which a region is refined to ``size_min``
+        (finer target length ``size_min * sqrt(refine_compression / compression)``), so
+        regions about to buckle are refined before the wrinkles form.
+    refine_obstacle: largest change of obstacle distance across an edge, as a fraction of the
+        distance (plus ``size_min``): refines where the cloth approaches or leaves an obstacle.
+    collapse_margin: hysteresis; a collapse may create edges up to ``1 - collapse_margin`` in
+        metric length, so a just-split edge is not collapsed again next frame.
+    """
+    size_min: float = 0.015
+    size_max: float = 0.08
+    aspect_min: float = 0.2
+    refine_angle: float = 0.3
+    refine_velocity: float = 1.0
+    refine_compression: float = 0.05
+    refine_obstacle: float = 0.25
+    collapse_margin: float = 0.2
+    collapse_rounds: int = 2
+
+    def validate(self):
+        if not self.size_min > 0:
+            raise ModelError(f"remesh size_min must be > 0 m (got {self.size_min}); "
+                             "e.g. 0.015 for a 1 m cloth")
+        if not self.size_max >= self.size_min:
+            raise ModelError(f"remesh size_max ({self.size_max}) must be >= size_min "
+                             f"({self.size_min}); raise size_max or lower size_min")
+        if not 0 < self.aspect_min <= 1:
+            raise ModelError(f"remesh aspect_min must be in (0, 1] (got {self.aspect_min}); "
+                             "0.2 allows 5:1 anisotropic triangles")
+        for name in ("refine_angle", "refine_velocity", "refine_compression",
+                     "refine_obstacle"):
+            if not getattr(self, name) > 0:
+                raise ModelError(f"remesh {name} must be > 0 (got {getattr(self, name)}); "
+                                 "a larger value refines less")
+        if not 0 <= self.collapse_margin < 1:
+            raise ModelError(f"remesh collapse_margin must be in [0, 1) (got "
+                             f"{self.collapse_margin}); 0.2 is a good hysteresis")
+        if not self.collapse_rounds >= 0:
+            raise ModelError("remesh collapse_rounds must be >= 0")
+
+
+# ---------------------------------------------------------------------------------------------
+# Sizing field (numpy, whole mesh)
+# ---------------------------------------------------------------------------------------------
+def _outer(a, b):
+    return a[:, :, None] * b[:, None, :]
+
+
+def _sym_eig2(M):
+    """Eigen-decomposition of stacked symmetric 2x2 matrices in closed form (several times
+    faster than np.linalg.eigh on small matrices): returns (lam (N, 2) ascending, V (N, 2, 2)
+    with the eigenvectors as columns)."""
+    a, b, c = M[:, 0, 0], 0.5 * (M[:, 0, 1] + M[:, 1, 0]), M[:, 1, 1]
+    mean, r = 0.5 * (a + c), np.hypot(0.5 * (a - c), b)
+    phi = 0.5 * np.arctan2(2.0 * b, a - c)        # direction of the larger eigenvalue
+    cs, sn = np.cos(phi), np.sin(phi)
+    V = np.stack([np.stack([-sn, cs], axis=1), np.stack([cs, sn], axis=1)], axis=2)
+    return np.stack([mean - r, mean + r], axis=1), V
+
+
+def _compose(lam, V):
+    """V diag(lam) V^T for stacks."""
+    return (V * lam[:, None, :]) @ np.transpose(V, (0, 2, 1))
+
+
+def _inv2(A):
+    """Inverse of stacked 2x2 matrices."""
+    det = A[:, 0, 0] * A[:, 1, 1] - A[:, 0, 1] * A[:, 1, 0]
+    inv = np.stack([np.stack([A[:, 1, 1], -A[:, 0, 1]], 1),
+                    np.stack([-A[:, 1, 0], A[:, 0, 0]], 1)], axis=1)
+    return inv / det[:, None, None]
+
+
+def face_sizing(mesh, params, obstacle_distance=None, edges=None):
+    """Per-face sizing metric (F, 2, 2) in material space before clamping, and face areas.
+    ``edges``: ``build_edges(mesh.faces)`` if the caller has it already."""
+    uv, x, faces = mesh.uv, mesh.x, mesh.faces
+    i, j, k = faces[:, 0], faces[:, 1], faces[:, 2]
+    Dm = np.stack([uv[j] - uv[i], uv[k] - uv[i]], axis=2)
+    Dm_inv = _inv2(Dm)
+    area = 0.5 * (Dm[:, 0, 0] * Dm[:, 1, 1] - Dm[:, 0, 1] * Dm[:, 1, 0])
+
+    # Curvature: discrete shape operator in material space. Each edge's dihedral angle theta
+    # is a bend across the edge, spread over the two faces beside it: S = sum theta |e| n n^T
+    # / (2 A) with n the in-plane unit normal of the edge. |S du| is then the turning of the
+    # normal along du, bounded by refine_angle.
+    ev, ef, eo = build_edges(faces) if edges is None else edges
+    theta = dihedral_angles(x, ev, eo)
+    e = uv[ev[:, 1]] - uv[ev[:, 0]]
+    elen = np.linalg.norm(e, axis=1)
+    n = np.stack([-e[:, 1], e[:, 0]], axis=1) / elen[:, None]
+    w = 0.5 * theta * elen
+    inner = ef[:, 1] >= 0
+    side = np.concatenate([ef[:, 0], ef[inner, 1]])
+    S = np.empty((len(faces), 2, 2))
+    for r, c in ((0, 0), (0, 1), (1, 1)):
+        t = w * n[:, r] * n[:, c]
+        S[:, r, c] = np.bincount(side, np.concatenate([t, t[inner]]), minlength=len(faces))
+    S[:, 1, 0] = S[:, 0, 1]
+    S /= area[:, None, None]
+    M = S @ S / params.refine_angle ** 2
+
+    # Velocity gradient (3x2): bounds the velocity difference across an edge.
+    Gv = np.stack([mesh.v[j] - mesh.v[i], mesh.v[k] - mesh.v[i]], axis=2) @ Dm_inv
+    M += np.transpose(Gv, (0, 2, 1)) @ Gv / params.refine_velocity ** 2
+
+    # Compression: principal stretches below 1 (from F^T F) ask for a finer mesh along their
+    # direction, reaching size_min at a compressive strain of refine_compression.
+    F = np.stack([x[j] - x[i], x[k] - x[i]], axis=2) @ Dm_inv
+    lam, V = _sym_eig2(np.transpose(F, (0, 2, 1)) @ F)
+    comp = np.maximum(0.0, 1.0 - np.sqrt(np.maximum(lam, 0.0)))
+    M += _compose(comp / (params.refine_compression * params.size_min ** 2), V)
+
+    # Obstacle proximity: the material gradient g of the obstacle distance d; the change of d
+    # across an edge must stay below refine_obstacle * (|d| + size_min). A sheet lying
+    # parallel to the obstacle (g ~ 0) is not refined by this term, only where it approaches
+    # or leaves it.
+    if obstacle_distance is not None:
+        d = np.asarray(obstacle_distance(x), dtype=np.float64).reshape(-1)
+        if d.shape != (len(x),) or not np.all(np.isfinite(d)):
+            raise ModelError("obstacle_distance must return one finite distance per vertex")
+        g = np.einsum("fji,fj->fi", Dm_inv, np.stack([d[j] - d[i], d[k] - d[i]], axis=1))
+        scale = params.refine_obstacle * (np.abs(d[faces]).mean(axis=1) + params.size_min)
+        M += _outer(g, g) / (scale ** 2)[:, None, None]
+    return M, area
+
+
+def vertex_sizing(face_M, area, faces, n_verts, params):
+    """Area-weighted average of face metrics at vertices, eigenvalues clamped. (V, 2, 2)."""
+    w = np.repeat(area, 3)
+    idx = faces.reshape(-1)
+    Mv = np.zeros((n_verts, 2, 2))
+    for r, c in ((0, 0), (0, 1), (1, 1)):
+        Mv[:, r, c] = np.bincount(idx, w * np.repeat(face_M[:, r, c], 3), minlength=n_verts)
+    wsum = np.bincount(idx, w, minlength=n_verts)
+    Mv /= np.maximum(wsum, 1e-300)[:, None, None]
+    Mv[:, 1, 0] = Mv[:, 0, 1]
+    return clamp_metric(Mv, params)
+
+
+def clamp_metric(M, params):
+    """Clamp metric eigenvalues to [1/size_max^2, 1/size_min^2] and the anisotropy so that the
+    short axis is at least aspect_min times the long one."""
+    lam, V = _sym_eig2(M)
+    lam = np.clip(lam, 1.0 / params.size_max ** 2, 1.0 / params.size_min ** 2)
+    lam = np.maximum(lam, params.aspect_min ** 2 * lam.max(axis=1, keepdims=True))
+    return _compose(lam, V)
+
+
+# ---------------------------------------------------------------------------------------------
+# Mutable mesh and the three local operations (Python, one edge at a time)
+# ---------------------------------------------------------------------------------------------
+def _cross2(ax, ay, bx, by):
+    return ax * by - ay * bx
+
+
+def _normal(p, q, r):
+    """Unnormalised world normal of triangle (p, q, r)."""
+    ax, ay, az = q[0] - p[0], q[1] - p[1], q[2] - p[2]
+    bx, by, bz = r[0] - p[0], r[1] - p[1], r[2] - p[2]
+    return (ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx)
+
+
+def _dot3(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+class _FacesAt:
+    """vertex -> set of its faces. A set is made on first use from the input incidence, since
+    one frame's operations usually touch few vertices; once made, the set is the truth."""
+
+    def __init__(self, faces, n_verts):
+        flat = faces.reshape(-1)
+        self._face_of = (np.argsort(flat, kind="stable") // 3).tolist()
+        counts = np.bincount(flat, minlength=n_verts)
+        self._start = np.concatenate([[0], np.cumsum(counts)]).tolist()
+        self._sets = [None] * n_verts
+
+    def __getitem__(self, a):
+        s = self._sets[a]
+        if s is None:
+            s = self._sets[a] = set(self._face_of[self._start[a]:self._start[a + 1]])
+        return s
+
+    def __setitem__(self, a, faces):
+        self._sets[a] = faces
+
+    def append(self, faces):
+        self._sets.append(faces)
+
+
+class _Work:
+    """The mesh while it is being remeshed: per-vertex Python lists (uv, x, v, metric as
+    (m00, m01, m11), pins), faces as lists (None once removed), ``vf`` the set of faces at
+    each vertex, ``origin`` the input face each face descends from (for grain and face_data),
+    ``bnd`` whether a vertex lies on the material boundary."""
+
+    def __init__(self, mesh, Mv, frozen, params, edges=None):
+        self.p = params
+        self.uv = mesh.uv.tolist()
+        self.x = mesh.x.tolist()
+        self.v = mesh.v.tolist()
+        self.pinned = mesh.pinned.tolist()
+        self.pin_target = mesh.pin_target.tolist()
+        self.frozen = frozen.tolist()
+        self.keep = (mesh.pinned | frozen).tolist()
+        M3 = np.stack([Mv[:, 0, 0], Mv[:, 0, 1], Mv[:, 1, 1]], axis=1)
+        self.M = M3.tolist()
+        self.faces = mesh.faces.tolist()
+        self.origin = list(range(len(self.faces)))
+        # numpy mirror of the faces (with spare rows for new faces) kept in step by
+        # set_face/add_face, so whole-mesh passes need no list -> array conversion.
+        nf = len(self.faces)
+        self._faces_np = np.zeros((2 * nf + 16, 3), dtype=np.int64)
+        self._faces_np[:nf] = mesh.faces
+        self._face_alive = np.zeros(2 * nf + 16, dtype=bool)
+        self._face_alive[:nf] = True
+        self.alive = [True] * len(self.uv)
+        self.vf = _FacesAt(mesh.faces, len(self.uv))
+        self.n_split = self.n_flip = self.n_collapse = 0
+        self.touched = set()        # vertices whose neighbourhood a collapse changed
+        # numpy copies for the whole-mesh passes; per-vertex rows never change once made, so
+        # they are only extended after splits (see snapshot()).
+        self._uv_np, self._M_np = mesh.uv.copy(), M3
+        self._keep_np = np.asarray(self.keep, dtype=bool)
+        ev, ef, eo = build_edges(mesh.faces) if edges is None else edges
+        self._snap = (self._op_count(), mesh.faces.astype(np.int64), ev, ef, eo)
+        bnd = np.zeros(len(self.uv), dtype=bool)
+        be = ev[ef[:, 1] < 0]
+        bnd[be[:, 0]] = bnd[be[:, 1]] = True
+        self.bnd = bnd.tolist()
+
+    def _op_count(self):
+        return self.n_split + self.n_flip + self.n_collapse
+
+    def snapshot(self):
+        """The current mesh as numpy for whole-mesh passes: (faces, edge_verts, edge_faces,
+        edge_opp, uv, metric (V, 3) as (m00, m01, m11), keep mask). Rebuilt only when an
+        operation happened."""
+        n_old, n = len(self._uv_np), len(self.uv)
+        if n > n_old:
+            self._uv_np = np.concatenate([self._uv_np, np.array(self.uv[n_old:])])
+            self._M_np = np.concatenate([self._M_np, np.array(self.M[n_old:])])
+            self._keep_np = np.concatenate([self._keep_np, np.array(self.keep[n_old:], bool)])
+        if self._snap[0] != self._op_count():
+            faces = self.faces_array()
+            self._snap = (self._op_count(), faces) + build_edges(faces)
+        return self._snap[1:] + (self._uv_np, self._M_np, self._keep_np)
+
+    # -- face storage -------------------------------------------------------------------------
+    def set_face(self, f, tri):
+        """Replace face f by ``tri`` (a vertex list), or remove it (None)."""
+        self.faces[f] = tri
+        self._face_alive[f] = tri is not None
+        if tri is not None:
+            self._faces_np[f] = tri
+
+    def add_face(self, tri, origin):
+        g = len(self.faces)
+        if g == len(self._faces_np):             # out of spare rows: double them
+            self._faces_np = np.concatenate([self._faces_np, np.zeros_like(self._faces_np)])
+            self._face_alive = np.concatenate([self._face_alive,
+                                               np.zeros_like(self._face_alive)])
+        self.faces.append(None)
+        self.origin.append(origin)
+        self.set_face(g, tri)
+        return g
+
+    def faces_array(self):
+        """Live faces (F, 3) in face-slot order."""
+        return self._faces_np[:len(self.faces)][self._face_alive[:len(self.faces)]]
+
+    # -- queries ------------------------------------------------------------------------------
+
+    def edge_faces(self, a, b):
+        return self.vf[a] & self.vf[b]
+
+    def neighbours(self, a):
+        out = set()
+        for f in self.vf[a]:
+            out.update(self.faces[f])
+        out.discard(a)
+        return out
+
+    def metric_len2(self, a, b):
+        """Squared edge length in the metric averaged over the two ends."""
+        ma, mb = self.M[a], self.M[b]
+        du = self.uv[b][0] - self.uv[a][0]
+        dv = self.uv[b][1] - self.uv[a][1]
+        return 0.5 * ((ma[0] + mb[0]) * du * du + 2 * (ma[1] + mb[1]) * du * dv
+                      + (ma[2] + mb[2]) * dv * dv)
+
+    def area_ok(self, i, j, k):
+        """Counter-clockwise and not degenerate in material space."""
+        p, q, r = self.uv[i], self.uv[j], self.uv[k]
+        ax, ay, bx, by = q[0] - p[0], q[1] - p[1], r[0] - p[0], r[1] - p[1]
+        cx, cy = r[0] - q[0], r[1] - q[1]
+        longest = max(ax * ax + ay * ay, bx * bx + by * by, cx * cx + cy * cy)
+        return _cross2(ax, ay, bx, by) > _AREA_REL_EPS * longest
+
+    def quality(self, i, j, k):
+        """4 sqrt(3) A / sum |e|^2 measured in the face's average metric: 1 for a triangle that
+        is equilateral in the metric, 0 when degenerate."""
+        m = [sum(self.M[t][c] for t in (i, j, k)) / 3.0 for c in range(3)]
+        det = max(m[0] * m[2] - m[1] * m[1], 0.0)
+        p, q, r = self.uv[i], self.uv[j], self.uv[k]
+        two_area = _cross2(q[0] - p[0], q[1] - p[1], r[0] - p[0], r[1] - p[1])
+        s = 0.0
+        for s0, s1 in ((p, q), (q, r), (r, p)):
+            du, dv = s1[0] - s0[0], s1[1] - s0[1]
+            s += m[0] * du * du + 2 * m[1] * du * dv + m[2] * dv * dv
+        return 2.0 * math.sqrt(3.0) * two_area * math.sqrt(det) / s if s > 0 else 0.0
+
+    @staticmethod
+    def rotate_to(tri, a):
+        """The face's vertices in counter-clockwise order starting at ``a``."""
+        i = tri.index(a)
+        return tri[i], tri[(i + 1) % 3], tri[(i + 2) % 3]
+
+    def split_ok(self, a, b):
+        # An edge between two frozen vertices (a seam) keeps its vertex list unchanged.
+        return not (self.frozen[a] and self.frozen[b])
+
+    # -- split -------------------------------------------------------------------------------
+    def split(self, a, b):
+        """Insert a vertex at the material midpoint of edge (a, b); each face beside the edge
+        becomes two. Always valid: the halves of a valid triangle are valid. Returns the new
+        vertex and the opposite vertices."""
+        fs = self.edge_faces(a, b)
+        m = len(self.uv)
+        mid = lambda arr: [0.5 * (s + t) for s, t in zip(arr[a], arr[b])]
+        self.uv.append(mid(self.uv))
+        self.x.append(mid(self.x))
+        self.v.append(mid(self.v))
+        self.M.append(mid(self.M))
+        self.pinned.append(False)
+        self.pin_target.append(list(self.x[m]))
+        self.frozen.append(False)
+        self.keep.append(False)
+        self.alive.append(True)
+        self.bnd.append(len(fs) == 1)
+        self.vf.append(set())
+        opp = []
+        for f in fs:
+            p, q, r = self.rotate_to(self.faces[f], a)
+            if q != b:                       # the face runs b -> a
+                p, q, r = self.rotate_to(self.faces[f], b)
+            self.set_face(f, [p, m, r])
+            g = self.add_face([m, q, r], self.origin[f])
+            self.vf[q].discard(f)
+            self.vf[q].add(g)
+            self.vf[r].add(g)
+            self.vf[m].update((f, g))
+            opp.append(r)
+        self.n_split += 1
+        return m, opp
+
+    # -- flip --------------------------------------------------------------------------------
+    def flip_wanted(self, a, b, c, d):
+        """Anisotropic Delaunay test for interior edge (a, b) with faces (a, b, c) and
+        (b, a, d): flip when the two angles facing the edge, measured in the metric averaged
+        over the four vertices, sum to more than pi, i.e. sin(alpha_c + alpha_d) < 0."""
+        m = [sum(self.M[t][s] for t in (a, b, c, d)) for s in range(3)]
+        ua, ub, uc, ud = self.uv[a], self.uv[b], self.uv[c], self.uv[d]
+
+        def dot(p, q):
+            return m[0] * p[0] * q[0] + m[1] * (p[0] * q[1] + p[1] * q[0]) + m[2] * p[1] * q[1]
+
+        pc, qc = (ua[0] - uc[0], ua[1] - uc[1]), (ub[0] - uc[0], ub[1] - uc[1])
+        pd, qd = (ub[0] - ud[0], ub[1] - ud[1]), (ua[0] - ud[0], ua[1] - ud[1])
+        sdet = math.sqrt(max(m[0] * m[2] - m[1] * m[1], 0.0))
+        sin_c, cos_c = sdet * _cross2(*pc, *qc), dot(pc, qc)
+        sin_d, cos_d = sdet * _cross2(*pd, *qd), dot(pd, qd)
+        norm = math.sqrt(dot(pc, pc) * dot(qc, qc) * dot(pd, pd) * dot(qd, qd))
+        return sin_c * cos_d + cos_c * sin_d < -_FLIP_EPS * norm
+
+    def flip_quad(self, a, b):
+        """(f0, f1, c, d) for an interior edge with faces f0 = (a, b, c), f1 = (b, a, d)."""
+        fs = self.edge_faces(a, b)
+        if len(fs) != 2:
+            return None
+        f0, f1 = fs
+        if self.rotate_to(self.faces[f0], a)[1] != b:
+            f0, f1 = f1, f0
+        return f0, f1, self.rotate_to(self.faces[f0], a)[2], self.rotate_to(self.faces[f1], b)[2]
+
+    def flip(self, a, b):
+        """Replace edge (a, b) by (c, d) if the result is valid in material and world space."""
+        quad = self.flip_quad(a, b) if a != b else None
+        if quad is None:
+            return False
+        f0, f1, c, d = quad
+        if c == d or self.edge_faces(c, d):          # (c, d) already an edge: non-manifold
+            return False
+        if not (self.area_ok(a, d, c) and self.area_ok(d, b, c)):
+            return False
+        # World space: neither new triangle may face against the old pair.
+        x = self.x
+        n_old = [s + t for s, t in zip(_normal(x[a], x[b], x[c]), _normal(x[b], x[a], x[d]))]
+        if _dot3(_normal(x[a], x[d], x[c]), n_old) <= 0 or \
+                _dot3(_normal(x[d], x[b], x[c]), n_old) <= 0:
+            return False
+        self.set_face(f0, [a, d, c])
+        self.set_face(f1, [d, b, c])
+        self.vf[b].discard(f0)
+        self.vf[a].discard(f1)
+        self.vf[d].add(f0)
+        self.vf[c].add(f1)
+        self.n_flip += 1
+        return True
+
+    # -- collapse ----------------------------------------------------------------------------
+    def boundary_collapse_ok(self, a, b, fs):
+        """A boundary vertex may only slide along a boundary edge onto a neighbour, and only
+        where the boundary is straight through it (not a corner), so the boundary polygon
+        stays the same."""
+        if len(fs) != 1:
+            return False
+        others = [n for n in self.neighbours(a) if n != b and len(self.edge_faces(a, n)) == 1]
+        if len(others) != 1:                 # not a simple boundary vertex
+            return False
+        pa, pb, pc = self.uv[a], self.uv[b], self.uv[others[0]]
+        bx, by, cx, cy = pb[0] - pa[0], pb[1] - pa[1], pc[0] - pa[0], pc[1] - pa[1]
+        lb, lc = math.hypot(bx, by), math.hypot(cx, cy)
+        return abs(_cross2(bx, by, cx, cy)) <= _COLLINEAR_EPS * lb * lc and bx * cx + by * cy < 0
+
+    def collapse(self, a, b):
+        """Remove vertex a by merging it into b, if that keeps the mesh manifold, keeps the
+        boundary, creates no edge longer than 1 - collapse_margin in the metric, no triangle
+        worse than aspect_min, and inverts no triangle in material or world space."""
+        if a == b or self.keep[a] or not self.alive[a]:
+            return False
+        fs = self.edge_faces(a, b)
+        if not fs:
+            return False
+        if self.bnd[a] and not self.boundary_collapse_ok(a, b, fs):
+            return False
+        # Link condition: a and b may share only the vertices opposite their edge.
+        na = self.neighbours(a)
+        opp = {t for f in fs for t in self.faces[f]} - {a, b}
+        if na & self.neighbours(b) != opp:
+            return False
+        limit = (1.0 - self.p.collapse_margin) ** 2
+        for n in na - opp - {b}:
+            if self.metric_len2(b, n) > limit:
+                return False
+        x = self.x
+        changed = []
+        for f in self.vf[a] - fs:
+            _, q, r = self.rotate_to(self.faces[f], a)
+            if not self.area_ok(b, q, r) or self.quality(b, q, r) < self.p.aspect_min:
+                return False
+            if _dot3(_normal(x[a], x[q], x[r]), _normal(x[b], x[q], x[r])) <= 0:
+                return False
+            changed.append((f, q, r))
+        # Apply: drop the faces on the edge, re-point a's other faces to b.
+        for f in fs:
+            for t in self.faces[f]:
+                self.vf[t].discard(f)
+            self.set_face(f, None)
+        for f, q, r in changed:
+            self.set_face(f, [b, q, r])
+            self.vf[b].add(f)
+        self.vf[a] = set()
+        self.alive[a] = False
+        self.n_collapse += 1
+        self.touched.update(na)
+        return True
+
+
+# ---------------------------------------------------------------------------------------------
+# Phases (candidate lists in numpy, operations in a Python loop)
+# ---------------------------------------------------------------------------------------------
+def _quad_form(M, p, q):
+    """p^T M q for stacks of metrics M (N, 3) = (m00, m01, m11) and 2-vectors (N, 2)."""
+    return (M[:, 0] * p[:, 0] * q[:, 0] + M[:, 1] * (p[:, 0] * q[:, 1] + p[:, 1] * q[:, 0])
+            + M[:, 2] * p[:, 1] * q[:, 1])
+
+
+def _edge_len2(uv, M, a, b):
+    """Metric length^2 of edges (a, b) (index arrays), metric averaged over the two ends.
+    Gathers from contiguous columns: several times faster than gathering (N, 2) rows."""
+    u, v, m0, m1, m2 = (np.ascontiguousarray(c) for c in (uv[:, 0], uv[:, 1], M[:, 0],
+                                                          M[:, 1], M[:, 2]))
+    du, dv = u.take(b) - u.take(a), v.take(b) - v.take(a)
+    return 0.5 * ((m0.take(a) + m0.take(b)) * du * du + 2 * (m1.take(a) + m1.take(b)) * du * dv
+                  + (m2.take(a) + m2.take(b)) * dv * dv)
+
+
+def _split_phase(w, max_ops):
+    """Split every edge longer than 1 in the metric, longest first; halves still too long
+    go back on the heap, so one call refines by as many levels as needed."""
+    _, ev, _, _, uv, Mv, _ = w.snapshot()
+    l2 = _edge_len2(uv, Mv, ev[:, 0], ev[:, 1])
+    long = np.flatnonzero(l2 > 1.0)
+    heap = [(-l2[e], int(ev[e, 0]), int(ev[e, 1])) for e in long]
+    heapq.heapify(heap)
+    while heap and w.n_split < max_ops:
+        _, a, b = heapq.heappop(heap)
+        if not w.edge_faces(a, b) or not w.split_ok(a, b):
+            continue
+        m, opp = w.split(a, b)
+        for n in (a, b, *opp):
+            l2n = w.metric_len2(m, n)
+            if l2n > 1.0:
+                heapq.heappush(heap, (-l2n, m, n))
+
+
+def _flip_wanted_np(uv, Mv, a, b, c, d):
+    """Vectorised ``_Work.flip_wanted`` for arrays of quads (same test, same margin)."""
+    m = Mv[a] + Mv[b] + Mv[c] + Mv[d]
+    pc, qc, pd, qd = uv[a] - uv[c], uv[b] - uv[c], uv[b] - uv[d], uv[a] - uv[d]
+    dot = lambda p, q: _quad_form(m, p, q)
+    cross = lambda p, q: p[:, 0] * q[:, 1] - p[:, 1] * q[:, 0]
+    sdet = np.sqrt(np.maximum(m[:, 0] * m[:, 2] - m[:, 1] ** 2, 0.0))
+    val = sdet * (cross(pc, qc) * dot(pd, qd) + dot(pc, qc) * cross(pd, qd))
+    norm = np.sqrt(dot(pc, pc) * dot(qc, qc) * dot(pd, pd) * dot(qd, qd))
+    return val < -_FLIP_EPS * norm
+
+
+def _flip_phase(w, max_rounds=8):
+    """Flip interior edges that fail the anisotropic Delaunay test (found for the whole mesh
+    at once), then recheck the four edges around each flip; the margin in the test makes this
+    terminate on co-circular grids."""
+    faces, ev, ef, eo, uv, Mv, _ = w.snapshot()
+    inner = np.flatnonzero(ef[:, 1] >= 0)
+    a, b, c, d = ev[inner, 0], ev[inner, 1], eo[inner, 0], eo[inner, 1]
+    bad = _flip_wanted_np(uv, Mv, a, b, c, d)
+    queue = list(zip(a[bad].tolist(), b[bad].tolist()))
+    budget = max_rounds * (len(queue) + 1) + len(faces)
+    while queue and budget > 0:
+        a, b = queue.pop()
+        budget -= 1
+        quad = w.flip_quad(a, b)
+        if quad is None:
+            continue
+        c, d = quad[2], quad[3]
+        if w.flip_wanted(a, b, c, d) and w.flip(a, b):
+            queue.extend(((a, c), (c, b), (b, d), (d, a)))
+
+
+def _collapse_candidates(w, only=None):
+    """Directed edges (a -> b) worth trying, shortest first: a removable, the edge itself
+    shorter than the collapse limit (a longer edge would leave longer ones behind) and every
+    new edge (b, n) to a's other neighbours n short enough. Computed for all edges at once;
+    the exact check is redone per collapse since earlier collapses change the neighbourhoods.
+    ``only``: optional vertex mask restricting which vertices a are tried."""
+    _, ev, _, eo, uv, Mv, keep = w.snapshot()
+    limit = (1.0 - w.p.collapse_margin) ** 2
+    own = _edge_len2(uv, Mv, ev[:, 0], ev[:, 1])
+    # Directed edges a -> b, grouped by a (CSR), with the vertices opposite the edge.
+    src = np.concatenate([ev[:, 0], ev[:, 1]])
+    order = np.argsort(src, kind="stable")
+    src = src[order]
+    dst = np.concatenate([ev[:, 1], ev[:, 0]])[order]
+    opp = np.concatenate([eo, eo])[order]
+    own = np.concatenate([own, own])[order]
+    deg = np.bincount(src, minlength=len(uv))
+    start = np.cumsum(deg) - deg
+    try_a = ~keep if only is None else ~keep & only
+    cand = np.flatnonzero(try_a[src] & (own <= limit))
+    if len(cand) == 0:
+        return []
+    # Expand every candidate (a -> b) over the neighbours n of a.
+    a, b = src[cand], dst[cand]
+    reps = deg[a]
+    first = np.cumsum(reps) - reps
+    pair = np.repeat(np.arange(len(cand)), reps)
+    n = dst[start[a[pair]] + np.arange(reps.sum()) - first[pair]]
+    bp, op = b[pair], opp[cand][pair]
+    l2 = _edge_len2(uv, Mv, bp, n)
+    # Edges (b, n) that exist already (n == b, or n opposite the edge) are not new.
+    l2[(n == bp) | (n == op[:, 0]) | (n == op[:, 1])] = 0.0
+    sel = np.flatnonzero(np.maximum.reduceat(l2, first) <= limit)
+    sel = sel[np.argsort(own[cand][sel], kind="stable")]
+    return list(zip(a[sel].tolist(), b[sel].tolist()))
+
+
+def _collapse_phase(w):
+    """Collapse rounds: the first tries every vertex, later ones only the vertices around
+    the collapses of the round before (nothing else changed)."""
+    only = None
+    for _ in range(w.p.collapse_rounds):
+        w.touched = set()
+        for a, b in _collapse_candidates(w, only):
+            w.collapse(a, b)
+        if not w.touched:
+            break
+        only = np.zeros(len(w.uv), dtype=bool)
+        only[list(w.touched)] = True
+
+
+# ---------------------------------------------------------------------------------------------
+# Entry point
+# ---------------------------------------------------------------------------------------------
+def _check_input(mesh, frozen, face_data):
+    nv, nf = len(mesh.uv), len(mesh.faces)
+    if nf == 0 or mesh.faces.min() < 0 or mesh.faces.max() >= nv:
+        raise ModelError("remesh needs faces that index existing vertices")
+    if np.any(signed_material_areas(mesh.uv, mesh.faces) <= 0):
+        raise ModelError("remesh needs every face counter-clockwise in material space with "
+                         "area > 0; fix the input triangulation")
+    if not (np.all(np.isfinite(mesh.uv)) and np.all(np.isfinite(mesh.x))
+            and np.all(np.isfinite(mesh.v))):
+        raise ModelError("remesh input has NaN/inf in uv, x or v: fix the step that made them")
+    if frozen.shape != (nv,):
+        raise ModelError(f"frozen_verts must be a bool mask of length {nv}")
+    for name, arr in (face_data or {}).items():
+        if len(arr) != nf:
+            raise ModelError(f"face_data['{name}'] has {len(arr)} rows, the mesh {nf} faces")
+
+
+def _export(w, mesh, face_data):
+    """Compact the work mesh into MeshArrays (dead vertices and faces dropped)."""
+    faces = w.faces_array()
+    origin = np.array(w.origin)[[t is not None for t in w.faces]]
+    alive_v = np.array(w.alive)
+    new_id = -np.ones(len(alive_v), dtype=np.int64)
+    new_id[alive_v] = np.arange(alive_v.sum())
+    n0 = len(mesh.uv)
+
+    def rows(orig, lst):
+        # Rows of input vertices never change: only the new ones come from the Python lists.
+        new = np.array(lst[n0:], dtype=orig.dtype).reshape((-1,) + orig.shape[1:])
+        return np.concatenate([orig, new])[alive_v]
+
+    out = MeshArrays(uv=w.snapshot()[4][alive_v], x=rows(mesh.x, w.x),
+                     faces=new_id[faces], v=rows(mesh.v, w.v),
+                     pinned=rows(mesh.pinned, w.pinned),
+                     pin_target=rows(mesh.pin_target, w.pin_target),
+                     grain=mesh.grain[origin], extras=dict(mesh.extras))
+    data = {name: np.asarray(arr)[origin] for name, arr in (face_data or {}).items()}
+    return out, data
+
+
+def remesh(mesh: MeshArrays, params: RemeshParams = None, obstacle_distance=None,
+           face_data=None, frozen_verts=None, max_splits=None):
+    """One remeshing pass. Returns (new MeshArrays, new face_data dict, stats dict).
+
+    obstacle_distance: optional callable, (N, 3) world points -> (N,) signed distances.
+    face_data: optional dict name -> (F, k) per-face arrays; each new face copies the row of
+        the input face it was cut from.
+    frozen_verts: optional (V,) bool; these vertices (and pinned ones) are never removed or
+        moved, and an edge between two frozen vertices is never split (keeps seams intact).
+    max_splits: safety cap on splits per call (default 4 x the input vertex count + 1000).
+    ``mesh.extras`` is passed through unchanged (it is not transferred per vertex).
+    stats: counts ``splits``, ``flips``, ``collapses``, ``faces_in/out``, ``verts_in/out``
+    and times ``ms_sizing``, ``ms_ops``, ``ms`` (wall clock) and ``ms_cpu`` (process time)."""
+    t0, c0 = time.perf_counter(), time.process_time()
+    params = params or RemeshParams()
+    params.validate()
+    nv = len(mesh.uv)
+    frozen = np.zeros(nv, dtype=bool) if frozen_verts is None else \
+        np.asarray(frozen_verts, dtype=bool)
+    _check_input(mesh, frozen, face_data)
+
+    edges = build_edges(mesh.faces)
+    face_M, area = face_sizing(mesh, params, obstacle_distance, edges)
+    Mv = vertex_sizing(face_M, area, mesh.faces, nv, params)
+    t1 = time.perf_counter()
+
+    w = _Work(mesh, Mv, frozen, params, edges)
+    _split_phase(w, max_splits if max_splits is not None else 4 * nv + 1000)
+    _flip_phase(w)
+    _collapse_phase(w)
+    if w.n_collapse:              # otherwise the mesh is as the first flip pass left it
+        _flip_phase(w)
+    out, data = _export(w, mesh, face_data)
+    t2 = time.perf_counter()
+    stats = dict(splits=w.n_split, flips=w.n_flip, collapses=w.n_collapse,
+                 faces_in=len(mesh.faces), faces_out=len(out.faces),
+                 verts_in=nv, verts_out=len(out.uv),
+                 ms_sizing=1e3 * (t1 - t0), ms_ops=1e3 * (t2 - t1), ms=1e3 * (t2 - t0),
+                 ms_cpu=1e3 * (time.process_time() - c0))
+    # Where each input vertex went (-1: collapsed away), so callers can remap vertex-indexed
+    # data such as stitch pairs. Frozen and pinned vertices always survive.
+    alive = np.array(w.alive)
+    new_id = -np.ones(len(alive), dtype=np.int64)
+    new_id[alive] = np.arange(alive.sum())
+    stats["vertex_map"] = new_id[:nv]
+    return out, data, stats
+
+
+# ---------------------------------------------------------------------------------------------
+# Timing: python -m cloth.remesh  (steady-state ms per remesh on a moving 1 m sheet)
+# ---------------------------------------------------------------------------------------------
+def _bench_shape(uv, kind, t):
+    """World positions and velocities of a 1 m sheet at time t: 'hanging' (gently curved,
+    slowly swaying) or 'fold' (a sharp fold whose line drifts across the sheet)."""
+    u, v = uv[:, 0], uv[:, 1]
+    if kind == "hanging":
+        # A generalised cylinder (isometric, like hanging drapes): the u-lines follow a plane
+        # curve of curvature 4 sin(4 pi u + t) per metre, the v-lines hang straight down.
+        s = np.linspace(0.0, 1.0, 2001)
+        phi = -np.cos(4 * np.pi * s + t) / np.pi
+        cx = np.concatenate([[0], np.cumsum(np.cos(phi[1:]) + np.cos(phi[:-1])) * 2.5e-4])
+        cy = np.concatenate([[0], np.cumsum(np.sin(phi[1:]) + np.sin(phi[:-1])) * 2.5e-4])
+        x = np.c_[np.interp(u, s, cx), np.interp(u, s, cy), -v]
+        vel = np.c_[np.zeros_like(u), 0.05 * np.sin(np.pi * u) * v, np.zeros_like(u)]
+        return x, vel
+    at = 0.4 + 0.02 * t
+    d = u - at
+    x = np.c_[np.where(d < 0, u, at + d * np.cos(2.0)), v, np.where(d < 0, 0.0, d * np.sin(2.0))]
+    return x, np.zeros_like(x)
+
+
+def _bench(frames=6, verbose=False):
+    """Grids of ~1k, ~5k, ~20k faces with size_max 1.8 x the grid spacing (flat parts then
+    neither split nor coarsen), 4 frames to settle, then the mean over ``frames`` frames."""
+    from cloth.sheet import make_sheet
+    print("kind     faces   ms/remesh  (sizing)  cpu ms   splits/flips/collapses per frame")
+    for kind in ("hanging", "fold"):
+        for n in (23, 51, 101):
+            size_max = 1.8 / (n - 1)
+            params = RemeshParams(size_min=size_max / 5, size_max=size_max)
+            uv, faces = make_sheet(1.0, 1.0, n, n, pattern="alternating")
+            mesh = MeshArrays(uv=uv, x=np.c_[uv, np.zeros(len(uv))], faces=faces)
+            rows = []
+            for frame in range(frames + 4):
+                mesh.x, mesh.v = _bench_shape(mesh.uv, kind, 0.1 * frame)
+                mesh, _, st = remesh(mesh, params)
+                if verbose:
+                    print(frame, st)
+                if frame >= 4:
+                    rows.append([st[k] for k in ("faces_out", "ms", "ms_sizing", "ms_cpu",
+                                                 "splits", "flips", "collapses")])
+            r = np.mean(rows, axis=0)
+            print(f"{kind:8s} {r[0]:6.0f}   {r[1]:8.1f}  ({r[2]:5.1f})  {r[3]:6.1f}    "
+                  f"{r[4]:.0f}/{r[5]:.0f}/{r[6]:.0f}")
+
+
+if __name__ == "__main__":
+    _bench()

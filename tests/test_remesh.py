@@ -1,0 +1,411 @@
+"""Adaptive remeshing (cloth/remesh.py): mesh invariants after every kind of operation and
+after many random rounds, where refinement goes, coarsening, exact transfer of fields linear in
+material space, and the sizing clamps. Pure numpy; small meshes so the file runs in seconds."""
+import numpy as np
+import pytest
+
+from cloth.model import MeshArrays, ModelError, build_edges, signed_material_areas
+from cloth.remesh import RemeshParams, _Work, _compose, _export, _sym_eig2, clamp_metric, \
+    face_sizing, remesh, vertex_sizing
+from cloth.sheet import make_sheet
+
+
+# -- helpers ----------------------------------------------------------------------------------
+def sheet(n=11, size=1.0, x_fn=None, pattern="regular"):
+    uv, faces = make_sheet(size, size, n, n, pattern=pattern)
+    x = np.c_[uv, np.zeros(len(uv))] if x_fn is None else x_fn(uv)
+    return MeshArrays(uv=uv, x=x, faces=faces)
+
+
+def fold_x(uv, angle=np.pi / 2, at=0.5):
+    """A flat sheet folded sharply along the line u = at."""
+    u, d = uv[:, 0], uv[:, 0] - at
+    return np.c_[np.where(u < at, u, at + d * np.cos(angle)), uv[:, 1],
+                 np.where(u < at, 0.0, d * np.sin(angle))]
+
+
+def boundary_length(mesh):
+    ev, ef, _ = build_edges(mesh.faces)
+    be = ev[ef[:, 1] < 0]
+    return np.linalg.norm(mesh.uv[be[:, 1]] - mesh.uv[be[:, 0]], axis=1).sum()
+
+
+def check_valid(mesh, area0=None, blen0=None):
+    """Manifold, consistently counter-clockwise, positive areas, no NaN, no unused vertex,
+    and (if given) material area and boundary length unchanged to round-off."""
+    build_edges(mesh.faces)                      # raises on non-manifold / bad orientation
+    area = signed_material_areas(mesh.uv, mesh.faces)
+    assert area.min() > 0
+    for arr in (mesh.uv, mesh.x, mesh.v, mesh.pin_target, mesh.grain):
+        assert np.all(np.isfinite(arr))
+    assert len(mesh.grain) == len(mesh.faces)
+    assert len(np.unique(mesh.faces)) == len(mesh.uv)
+    if area0 is not None:
+        assert abs(area.sum() - area0) < 1e-12 * max(area0, 1.0)
+    if blen0 is not None:
+        assert abs(boundary_length(mesh) - blen0) < 1e-11 * max(blen0, 1.0)
+
+
+def point_key(uv):
+    return {tuple(p) for p in np.round(uv, 12)}
+
+
+def edge_lengths_near(mesh, dist_fn, near, far):
+    ev, _, _ = build_edges(mesh.faces)
+    mid = 0.5 * (mesh.uv[ev[:, 0]] + mesh.uv[ev[:, 1]])
+    length = np.linalg.norm(mesh.uv[ev[:, 1]] - mesh.uv[ev[:, 0]], axis=1)
+    d = dist_fn(mid)
+    return length[d < near].mean(), length[d > far].mean()
+
+
+# -- parameters and sizing --------------------------------------------------------------------
+def test_params_validate_names_the_fix():
+    RemeshParams().validate()
+    with pytest.raises(ModelError, match="size_max"):
+        RemeshParams(size_min=0.1, size_max=0.05).validate()
+    with pytest.raises(ModelError, match="aspect_min"):
+        RemeshParams(aspect_min=0.0).validate()
+    with pytest.raises(ModelError, match="refine_angle"):
+        RemeshParams(refine_angle=-1).validate()
+
+
+def test_bad_input_is_refused():
+    m = sheet(4)
+    m.faces = m.faces[:, ::-1].copy()            # clockwise
+    with pytest.raises(ModelError, match="counter-clockwise"):
+        remesh(m)
+
+
+def test_sizing_clamps(rng):
+    p = RemeshParams(size_min=0.02, size_max=0.1, aspect_min=0.25)
+    m = sheet(15)
+    m.x = m.x + 0.05 * rng.standard_normal(m.x.shape)     # wild curvature and compression
+    m.v = 3.0 * rng.standard_normal(m.x.shape)
+    fM, area = face_sizing(m, p)
+    Mv = vertex_sizing(fM, area, m.faces, len(m.uv), p)
+    lam = np.linalg.eigvalsh(Mv)
+    tol = 1e-9 * lam.max()
+    assert lam.min() >= 1 / p.size_max ** 2 - tol and lam.max() <= 1 / p.size_min ** 2 + tol
+    assert np.all(lam[:, 0] >= p.aspect_min ** 2 * lam[:, 1] - tol)
+    # Both clamps active on a hand-made metric: tiny and huge eigenvalues.
+    M = clamp_metric(np.array([[[1e-6, 0], [0, 1e9]]]), p)
+    assert np.allclose(np.linalg.eigvalsh(M)[0], [p.aspect_min ** 2 / p.size_min ** 2,
+                                                  1 / p.size_min ** 2])
+
+
+def test_closed_form_eigen_matches_numpy(rng):
+    A = rng.standard_normal((200, 2, 2))
+    M = A @ np.transpose(A, (0, 2, 1))
+    M[:2] = np.eye(2)                             # repeated eigenvalue
+    M[2] = np.diag([3.0, 1.0])
+    lam, V = _sym_eig2(M)
+    assert np.allclose(lam, np.linalg.eigvalsh(M), atol=1e-12)
+    assert np.allclose(_compose(lam, V), M, atol=1e-12)
+
+
+def test_curvature_term_measures_a_cylinder():
+    # A sheet rolled around a cylinder of radius R: the shape operator is 1/R across the axis,
+    # so the curvature metric is 1/(R refine_angle)^2 along u and 0 along v.
+    R = 0.5
+    m = sheet(21, x_fn=lambda uv: np.c_[R * np.sin(uv[:, 0] / R), uv[:, 1],
+                                         R * (1 - np.cos(uv[:, 0] / R))])
+    p = RemeshParams(refine_velocity=1e9, refine_compression=1e9)
+    fM, _ = face_sizing(m, p)
+    inner = np.all((m.uv[m.faces, 0] > 0.01) & (m.uv[m.faces, 0] < 0.99), axis=1)
+    assert np.allclose(fM[inner, 0, 0] * (R * p.refine_angle) ** 2, 1.0, rtol=0.01)
+    assert np.allclose(fM[inner, 1, 1], 0.0, atol=1e-9) and np.allclose(fM[inner, 0, 1], 0.0,
+                                                                         atol=1e-9)
+
+
+def test_flat_sheet_metric_is_coarsest():
+    p = RemeshParams()
+    m = sheet(9)
+    fM, area = face_sizing(m, p)
+    Mv = vertex_sizing(fM, area, m.faces, len(m.uv), p)
+    assert np.allclose(Mv, np.eye(2) / p.size_max ** 2)
+
+
+# -- single operations ------------------------------------------------------------------------
+def work_on(mesh, params=None, size=0.05, frozen=None):
+    params = params or RemeshParams()
+    Mv = np.tile(np.eye(2) / size ** 2, (len(mesh.uv), 1, 1))
+    frozen = np.zeros(len(mesh.uv), bool) if frozen is None else frozen
+    return _Work(mesh, Mv, frozen, params)
+
+
+def exported(w, mesh):
+    return _export(w, mesh, None)[0]
+
+
+def test_split_each_edge_kind_keeps_mesh_valid():
+    m = sheet(5, x_fn=lambda uv: fold_x(uv, 1.0))
+    area0, blen0 = signed_material_areas(m.uv, m.faces).sum(), boundary_length(m)
+    w = work_on(m)
+    ev, ef, _ = build_edges(m.faces)
+    for e in range(len(ev)):                     # every original edge: interior and boundary
+        a, b = map(int, ev[e])
+        new, opp = w.split(a, b)
+        assert len(opp) == (2 if ef[e, 1] >= 0 else 1)
+        assert w.bnd[new] == (ef[e, 1] < 0)
+        check_valid(exported(w, m), area0, blen0)
+    assert w.n_split == len(ev)
+    # Every piece lies inside the input face it inherits grain and face_data from.
+    for tri, f in zip(w.faces, w.origin):
+        centre = np.mean([w.uv[t] for t in tri], axis=0)
+        p0, p1, p2 = m.uv[m.faces[f]]
+        lam = np.linalg.solve(np.c_[p1 - p0, p2 - p0], centre - p0)
+        assert lam.min() > 0 and lam.sum() < 1
+
+
+def test_flip_keeps_mesh_valid_and_refuses_bad_flips(rng):
+    m = sheet(6, pattern="random")
+    m.x[:, 2] = 0.01 * rng.standard_normal(len(m.x))
+    area0 = signed_material_areas(m.uv, m.faces).sum()
+    w = work_on(m)
+    ev, ef, _ = build_edges(m.faces)
+    done = 0
+    for e in rng.permutation(len(ev)):
+        done += w.flip(int(ev[e, 0]), int(ev[e, 1]))
+        check_valid(exported(w, m), area0)
+    assert done > 0
+    # Boundary edges never flip.
+    be = ev[ef[:, 1] < 0]
+    assert not any(w.flip(int(a), int(b)) for a, b in be)
+
+
+def test_flip_refused_when_quad_not_convex():
+    # Quad a, d, b, c is not convex at b: the flipped face (d, b, c) would be clockwise.
+    uv = np.array([[0, 0], [1, 0], [1.5, 0.1], [0.5, -1.0]])
+    faces = np.array([[0, 1, 2], [1, 0, 3]])
+    m = MeshArrays(uv=uv, x=np.c_[uv, np.zeros(4)], faces=faces)
+    w = work_on(m)
+    assert not w.flip(0, 1)
+
+
+def test_collapse_keeps_mesh_valid(rng):
+    m = sheet(9, pattern="alternating")
+    m.x[:, 2] = 0.002 * rng.standard_normal(len(m.x))
+    m.pinned[[0, 5]] = True
+    area0, blen0 = signed_material_areas(m.uv, m.faces).sum(), boundary_length(m)
+    # A metric much coarser than the mesh: every collapse is wanted, the checks decide.
+    w = work_on(m, size=1.0)
+    for _ in range(400):
+        a, b = (int(i) for i in rng.integers(0, len(m.uv), 2))
+        if w.edge_faces(a, b) and w.collapse(a, b):
+            out = exported(w, m)
+            check_valid(out, area0, blen0)
+    assert w.n_collapse > 10
+    assert w.alive[0] and w.alive[5]
+
+
+def test_collapse_respects_boundary_corners_and_pins():
+    m = sheet(5)
+    w = work_on(m, size=1.0)
+    # Vertex (i, j) (u = i/4, v = j/4) has index 5 i + j.
+    corner, edge_mid, inner = 0, 2, 6             # (0,0), (0,2) on the u = 0 side, (1,1)
+    assert not w.collapse(corner, 1)              # a corner never goes
+    assert not w.collapse(edge_mid, 7)            # boundary vertex along an interior edge
+    assert w.collapse(edge_mid, 1)                # along the straight boundary: allowed
+    m2 = sheet(5)
+    m2.pinned[inner] = True
+    w2 = work_on(m2, size=1.0)
+    assert not w2.collapse(inner, 7)              # pinned vertices stay
+    frozen = np.zeros(len(m2.uv), bool)
+    frozen[inner] = True
+    w3 = work_on(sheet(5), size=1.0, frozen=frozen)
+    assert not w3.collapse(inner, 7)
+
+
+def test_collapse_refused_when_it_inverts_a_world_triangle():
+    # Collapsing vertex 12 (u = v = 0.5) onto 7 (0.25, 0.5) is fine in material space; with 7
+    # displaced in the world far past 12's ring, it would turn faces over in the world.
+    ok = work_on(sheet(5), size=1.0)
+    assert ok.collapse(12, 7)
+    m = sheet(5)
+    m.x[7] = [0.9, 0.5, 0.0]
+    w = work_on(m, size=1.0)
+    assert not w.collapse(12, 7)
+
+
+# -- whole remesh ----------------------------------------------------------------------------
+def test_random_rounds_keep_invariants(rng):
+    m = sheet(13, pattern="alternating", x_fn=lambda uv: fold_x(uv, 0.8))
+    m.pinned[[0, 12 * 13]] = True                 # two corners, like a hanging cloth
+    m.pin_target = m.x.copy()
+    frozen = np.zeros(len(m.uv), bool)
+    frozen[[6 * 13 + 6, 3 * 13 + 7]] = True        # two interior "stitch" vertices
+    pins0 = {tuple(np.r_[m.uv[i], m.pin_target[i]]) for i in np.flatnonzero(m.pinned)}
+    frozen_uv = point_key(m.uv[frozen])
+    area0, blen0 = signed_material_areas(m.uv, m.faces).sum(), boundary_length(m)
+    data = {"lam": np.arange(len(m.faces), dtype=float)[:, None] * [1.0, -1.0]}
+    # Grain scaled by (face index + 1), so the parent of a face can be read back from it.
+    m.grain = np.eye(2) * np.arange(1, len(m.faces) + 1)[:, None, None]
+    params = RemeshParams(size_min=0.03, size_max=0.2)
+    totals = np.zeros(3, int)
+    for r in range(12):
+        # Rough rounds (refine) alternate with smooth ones (coarsen).
+        noise = 0.01 if r % 2 == 0 else 0.0
+        m.x = fold_x(m.uv, 0.8) + noise * rng.standard_normal(m.x.shape)
+        m.v = 10 * noise * rng.standard_normal(m.x.shape)
+        m.x[m.pinned] = m.pin_target[m.pinned]
+        frozen = np.array([p in frozen_uv for p in map(tuple, np.round(m.uv, 12))])
+        m, data, st = remesh(m, params, face_data=data, frozen_verts=frozen)
+        totals += [st["splits"], st["flips"], st["collapses"]]
+        check_valid(m, area0, blen0)
+        assert {tuple(np.r_[m.uv[i], m.pin_target[i]]) for i in np.flatnonzero(m.pinned)} == pins0
+        assert frozen_uv <= point_key(m.uv)
+        # face_data and grain came from the same parent face.
+        assert np.allclose(data["lam"][:, 0] + 1, m.grain[:, 0, 0])
+        assert np.allclose(data["lam"][:, 1], -data["lam"][:, 0])
+    assert np.all(totals > 0), totals             # every operation kind was exercised
+
+
+def test_existing_vertices_keep_their_state_exactly(rng):
+    m = sheet(11, x_fn=lambda uv: fold_x(uv, 1.2))
+    m.v = rng.standard_normal(m.x.shape)
+    out, _, _ = remesh(m)
+    old = {tuple(u): (tuple(x), tuple(v)) for u, x, v in zip(m.uv, m.x, m.v)}
+    kept = 0
+    for u, x, v in zip(out.uv, out.x, out.v):
+        if tuple(u) in old:
+            assert old[tuple(u)] == (tuple(x), tuple(v))
+            kept += 1
+    assert kept > 0
+
+
+def test_fold_is_refined_flat_parts_are_not():
+    m = sheet(21, x_fn=fold_x)
+    params = RemeshParams()
+    dist = lambda uv: np.abs(uv[:, 0] - 0.5)
+    for _ in range(4):
+        m, _, _ = remesh(m, params)
+        m.x = fold_x(m.uv)                        # keep the fold sharp, as the solver would
+    near, far = edge_lengths_near(m, dist, 0.04, 0.25)
+    assert near < 0.7 * far, (near, far)
+    # Across the fold (along u) the mesh reaches the finest size.
+    u = np.unique(m.uv[:, 0])
+    assert np.diff(u[(u > 0.45) & (u < 0.55)]).min() <= 1.01 * params.size_min
+    area = signed_material_areas(m.uv, m.faces)
+    c = m.uv[m.faces].mean(axis=1)
+    assert area[dist(c) < 0.03].mean() < 0.5 * area[dist(c) > 0.25].mean()
+
+
+@pytest.mark.parametrize("criterion", ["velocity", "compression"])
+def test_velocity_and_compression_refine_their_band(criterion):
+    # A band around u = 0.5: a velocity jump (shear flow) or 10 % compression along u.
+    m = sheet(21)
+    params = RemeshParams()
+    dist = lambda uv: np.abs(uv[:, 0] - 0.5)
+    for _ in range(3):
+        u = m.uv[:, 0]
+        if criterion == "velocity":
+            m.v = np.c_[0 * u, 0 * u, 2.0 * np.tanh((u - 0.5) / 0.05)]
+        else:
+            xu = u - 0.1 * np.clip(u - 0.4, 0.0, 0.2)       # slope 0.9 inside the band
+            m.x = np.c_[xu, m.uv[:, 1], 0 * u]
+        m, _, _ = remesh(m, params)
+        check_valid(m)
+    # Across the band (u direction) the mesh is finer than outside it.
+    ev, _, _ = build_edges(m.faces)
+    mid = 0.5 * (m.uv[ev[:, 0]] + m.uv[ev[:, 1]])
+    du = np.abs(m.uv[ev[:, 1], 0] - m.uv[ev[:, 0], 0])
+    across = du > 1e-12
+    near, far = dist(mid) < 0.08, dist(mid) > 0.25
+    assert du[across & near].mean() < 0.7 * du[across & far].mean()
+
+
+def test_flat_sheet_coarsens_toward_size_max():
+    m = sheet(41)                                 # edges of 0.025 m, size_max 0.08 m
+    params = RemeshParams()
+    l0 = edge_lengths_near(m, lambda uv: np.zeros(len(uv)), 1, -1)[0]
+    f0 = len(m.faces)
+    for _ in range(4):
+        m, _, st = remesh(m, params)
+        check_valid(m)
+    ev, _, _ = build_edges(m.faces)
+    length = np.linalg.norm(m.uv[ev[:, 1]] - m.uv[ev[:, 0]], axis=1)
+    # Collapse-only coarsening stops once every collapse would make an edge longer than
+    # (1 - collapse_margin) size_max: from a 0.025 m grid that is about a 0.05 m grid.
+    assert len(m.faces) < 0.4 * f0
+    assert length.mean() > 1.5 * l0 and length.mean() > 0.5 * params.size_max
+    assert length.max() <= params.size_max * (1 - params.collapse_margin)
+
+
+def test_affine_fields_are_reproduced_exactly(rng):
+    A = np.array([[1.02, 0.1], [-0.05, 0.97], [0.3, 0.2]])
+    B = rng.standard_normal((3, 2))
+    b0, c0 = np.array([0.1, -0.2, 0.5]), np.array([0.0, 1.0, -1.0])
+    m = sheet(17)
+    m.x = m.uv @ A.T + b0
+    m.v = m.uv @ B.T + c0
+    # A sphere near one corner refines there; the rest coarsens.
+    centre = m.x[0] + np.array([0.0, 0.0, 0.1])
+    obstacle = lambda p: np.linalg.norm(p - centre, axis=1) - 0.05
+    params = RemeshParams(size_min=0.01, size_max=0.15)
+    splits = collapses = 0
+    for _ in range(3):
+        m, _, st = remesh(m, params, obstacle_distance=obstacle)
+        splits += st["splits"]
+        collapses += st["collapses"]
+        assert np.abs(m.x - (m.uv @ A.T + b0)).max() < 1e-13
+        assert np.abs(m.v - (m.uv @ B.T + c0)).max() < 1e-12
+    assert splits > 0 and collapses > 0
+
+
+def test_new_vertices_are_unpinned_and_pin_targets_kept():
+    m = sheet(5)
+    m.pinned[:] = True                            # all pinned: only splits can happen
+    m.pin_target = m.x + 1.0
+    out, _, st = remesh(m, RemeshParams(size_min=0.05, size_max=0.1))
+    assert st["splits"] > 0 and st["collapses"] == 0
+    old = point_key(m.uv)
+    for u, p, t, x in zip(out.uv, out.pinned, out.pin_target, out.x):
+        if tuple(np.round(u, 12)) in old:
+            assert p and np.allclose(t, x + 1.0)
+        else:
+            assert not p
+
+
+def test_obstacle_proximity_refines_near_contact():
+    # A flat sheet resting on top of a sphere: refine where the cloth leaves the sphere
+    # (distance changing fast relative to itself), not far from it.
+    m = sheet(21)
+    centre = np.array([0.5, 0.5, -0.3])
+    obstacle = lambda p: np.linalg.norm(p - centre, axis=1) - 0.3
+    for _ in range(3):
+        m, _, _ = remesh(m, RemeshParams(), obstacle_distance=obstacle)
+    check_valid(m)
+    near, far = edge_lengths_near(m, lambda uv: np.linalg.norm(uv - 0.5, axis=1), 0.15, 0.4)
+    assert near < 0.8 * far, (near, far)
+
+
+def test_edges_between_frozen_vertices_are_not_split():
+    m = sheet(6)
+    seam = np.flatnonzero(m.uv[:, 0] == 0.0)     # the u = 0 side, e.g. stitched to a panel
+    frozen = np.zeros(len(m.uv), bool)
+    frozen[seam] = True
+    out, _, st = remesh(m, RemeshParams(size_min=0.05, size_max=0.06), frozen_verts=frozen)
+    assert st["splits"] > 0
+    side = np.sort(out.uv[out.uv[:, 0] == 0.0, 1])
+    assert np.array_equal(side, np.sort(m.uv[seam, 1]))
+    check_valid(out)
+
+
+def test_rotated_sheet_keeps_its_corners_and_boundary(rng):
+    # Boundaries not aligned with the axes are collinear only to round-off: boundary
+    # vertices must still be collapsed along the sides, never at the four corners.
+    c, s = np.cos(0.3), np.sin(0.3)
+    m = sheet(17, pattern="random")
+    m.uv = m.uv @ np.array([[c, s], [-s, c]]) + [0.2, -0.1]
+    corners = point_key(m.uv[[0, 16, 16 * 17, 17 * 17 - 1]])
+    area0, blen0 = signed_material_areas(m.uv, m.faces).sum(), boundary_length(m)
+    n_boundary = []
+    for r in range(6):
+        rough = 0.005 * rng.standard_normal(m.x.shape) if r < 2 else 0.0   # refine, then coarsen
+        m.x = fold_x(m.uv, 1.0, at=0.3) + rough
+        m, _, _ = remesh(m, RemeshParams(size_min=0.03, size_max=0.12))
+        check_valid(m, area0, blen0)
+        assert corners <= point_key(m.uv)
+        ev, ef, _ = build_edges(m.faces)
+        n_boundary.append(len(np.unique(ev[ef[:, 1] < 0])))
+    assert n_boundary[-1] < max(n_boundary[:2]), n_boundary
