@@ -96,3 +96,58 @@ def wrinkle_measures(x, faces, edges, edge_faces, edge_opp, uv):
 
 def percentile(values, q):
     return float(np.percentile(np.asarray(values), q)) if np.size(values) else 0.0
+
+
+def locate_in_material(uv, faces, points, chunk=256):
+    """For material points (P, 2): the containing face and its barycentric weights, found by
+    brute force in chunks (a point on an edge takes the first face found). Points outside
+    the mesh take the face with the least negative weight. Returns (face (P,), bary (P, 3))."""
+    a, b, c = uv[faces[:, 0]], uv[faces[:, 1]], uv[faces[:, 2]]
+    e1, e2 = b - a, c - a
+    det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+    face = np.zeros(len(points), dtype=np.int64)
+    bary = np.zeros((len(points), 3))
+    for s in range(0, len(points), chunk):
+        p = points[s:s + chunk, None, :] - a[None, :, :]             # (p, F, 2)
+        w1 = (p[..., 0] * e2[:, 1] - p[..., 1] * e2[:, 0]) / det
+        w2 = (e1[:, 0] * p[..., 1] - e1[:, 1] * p[..., 0]) / det
+        w0 = 1.0 - w1 - w2
+        worst = np.minimum(np.minimum(w0, w1), w2)                   # >= 0 inside
+        f = np.argmax(worst, axis=1)
+        r = np.arange(len(f))
+        face[s:s + chunk] = f
+        bary[s:s + chunk] = np.stack([w0[r, f], w1[r, f], w2[r, f]], axis=1)
+    return face, bary
+
+
+def positions_at_material_points(x, uv, faces, points):
+    """World positions of material points, interpolated linearly inside their faces."""
+    face, bary = locate_in_material(uv, faces, points)
+    tri = np.asarray(x)[faces[face]]                                 # (P, 3, 3)
+    return np.einsum("pk,pkd->pd", bary, tri)
+
+
+def material_sample_points(uv, n=21):
+    """A regular n x n grid of material points inside the bounding box of ``uv``, shrunk by
+    1e-9 so every point is strictly inside a rectangular sheet."""
+    lo, hi = uv.min(axis=0), uv.max(axis=0)
+    pad = 1e-9 * (hi - lo)
+    s = np.linspace(lo[0] + pad[0], hi[0] - pad[0], n)
+    t = np.linspace(lo[1] + pad[1], hi[1] - pad[1], n)
+    S, T = np.meshgrid(s, t, indexing="ij")
+    return np.stack([S.ravel(), T.ravel()], axis=1)
+
+
+def solution_error(run, reference, points):
+    """RMS distance between two runs' positions at the same material points, divided by the
+    cloth's size (the diagonal of its material bounding box). ``run`` and ``reference`` are
+    (x, uv, faces) triples; their meshes may differ (remeshing, resolution)."""
+    xa = positions_at_material_points(*run, points)
+    xb = positions_at_material_points(*reference, points)
+    size = float(np.linalg.norm(np.ptp(reference[1], axis=0)))
+    return float(np.sqrt(np.mean(np.sum((xa - xb) ** 2, axis=1))) / size)
+
+
+def gravitational_energy(x, mass, gravity):
+    """-sum m g.x (J): potential energy of the masses in a uniform field ``gravity``."""
+    return -float(np.sum(mass * (np.asarray(x) @ np.asarray(gravity))))

@@ -135,7 +135,7 @@ class Simulator:
     def _remesh(self):
         remesh, params = self.remesher
         mesh = self.model.mesh_arrays()
-        obstacle_distance = self.collider.distance if self.collider is not None else None
+        obstacle_distance = self._obstacle_distance if self.setup.obstacles else None
         face_data = self.strain.face_state() if self.strain is not None and \
             hasattr(self.strain, "face_state") else None
         # Pins and seam vertices are frozen: never removed or moved, seams never split.
@@ -159,6 +159,10 @@ class Simulator:
             self.strain.on_mesh_changed()
         if self.collider is not None:
             self.collider.on_mesh_changed()
+
+    def _obstacle_distance(self, points):
+        """Signed distance of world points to the nearest obstacle now (for remeshing)."""
+        return np.min([o.sdf(points, self.time)[0] for o in self.setup.obstacles], axis=0)
 
     def _rebuild_for(self, mesh):
         """The remeshed cloth outgrew the fields: build a model with twice the room and new

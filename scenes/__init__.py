@@ -4,10 +4,14 @@ import importlib
 SCENES = {
     "hanging": "scenes.hanging",
     "pull": "scenes.pull",
+    "drape": "scenes.drape",
+    "tshirt": "scenes.tshirt",
 }
 DESCRIPTIONS = {
     "hanging": "paper Table 1: a cloth hanging from its two top corners, settling to rest",
     "pull": "a sheet pinned along its top edge with a corner dragged away (the user stretches it)",
+    "drape": "a square sheet falling onto a sphere and the ground",
+    "tshirt": "paper Table 2: a mannequin wearing a T-shirt, settling at rest",
 }
 DEFAULT_SCENE = "hanging"
 
