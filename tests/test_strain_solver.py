@@ -1,0 +1,217 @@
+"""StrainLimiter: the augmented-Lagrangian projection (METHOD.md 4) and the per-triangle
+baselines, on small sheets so the whole file stays fast."""
+import numpy as np
+import pytest
+
+from cloth.model import ClothModel, Material, MeshArrays
+from cloth.sheet import make_sheet
+from cloth.strain import constraints as C
+from cloth.strain.solver import StrainLimiter, StrainLimitError
+
+H = 1.0 / 60.0
+METHODS = ("svd", "warp-weft", "mapping")
+
+
+def stretched_sheet(n=8, warp=0.10, weft=0.03, noise=0.002, seed=0, pins=True):
+    """A 1 m sheet stretched ``warp`` along u and ``weft`` along v with positional noise; two
+    pins on the u = 0 edge held at their rest distance (so every method is feasible)."""
+    uv, faces = make_sheet(1.0, 1.0, n, n, pattern="alternating")
+    rng = np.random.default_rng(seed)
+    x = np.c_[uv * [1 + warp, 1 + weft], np.zeros(len(uv))]
+    x += noise / n * rng.standard_normal(x.shape)
+    pinned = np.zeros(len(uv), bool)
+    if pins:
+        pinned[[0, n - 1]] = True
+        x[[0, n - 1]] = np.c_[uv[[0, n - 1]], np.zeros(2)]
+    return ClothModel(MeshArrays(uv=uv, x=x, faces=faces, pinned=pinned), Material())
+
+
+def set_positions(model, x):
+    full = model.state.x.to_numpy()
+    full[: len(x)] = x
+    model.state.x.from_numpy(full)
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_projection_meets_own_constraints(method):
+    model = stretched_sheet()
+    x_hat = model.positions()
+    limiter = StrainLimiter(model, method=method)
+    limiter.project(H)
+    x = model.positions()
+    assert limiter.last_converged, (limiter.last_iterations, limiter.last_violation_max)
+    assert limiter.last_violation_max < limiter.tol
+    assert limiter.constraint_values().max() < limiter.tol
+    assert np.array_equal(x[model.pinned], x_hat[model.pinned])     # pins do not move
+    np.testing.assert_allclose(model.velocities(), (x - x_hat) / H, atol=1e-12)
+    assert limiter.last_ms > 0 and limiter.last_iterations >= 1
+
+
+def kkt_residuals(model, limiter, x_hat):
+    """Stationarity, sign, complementarity and feasibility of the projection's KKT system,
+    computed in numpy from the constraint gradients and the solver's multipliers."""
+    x = model.positions()
+    faces, K = model.faces, C.N_CONSTRAINTS[limiter.method]
+    Dm_inv = model.face_Dm_inv.to_numpy()[: model.n_faces]
+    g, grad = C.evaluate(limiter.method, x[faces], Dm_inv, model.grain, model.rest_area,
+                         limiter.warp, limiter.weft, limiter.shear_band(), by_alignment=True)
+    lam = limiter._ws.lam.to_numpy()[: model.n_faces, :K]
+    force = model.mass[:, None] * (x - x_hat)
+    np.add.at(force, faces.reshape(-1), np.einsum("fk,fkm->fm", lam, grad).reshape(-1, 3))
+    free = ~model.pinned
+    scale = np.abs(model.mass[:, None] * (x - x_hat))[free].max()
+    sqa = np.sqrt(model.rest_area)[:, None]
+    return (np.abs(force[free]).max() / scale, lam.min(),
+            np.abs(lam * g / sqa).max() / max(lam.max(), 1e-300), (g / sqa).max())
+
+
+@pytest.mark.parametrize("method", [
+    "warp-weft", "mapping",
+    pytest.param("svd", marks=pytest.mark.xfail(
+        reason="known gap: the Newton model of eta_j lacks the 1/(eta1-eta2) curvature of the "
+               "principal frame, so solutions near eta1 = eta2 are feasible and complementary "
+               "but not stationary to 1e-5 within the budget", strict=False)),
+])
+def test_kkt_conditions_on_a_small_mesh(method):
+    """On a 3x3-vertex sheet (8 triangles) solved tightly, the result is a KKT point of
+    min 1/2 |x - x_hat|_M^2 s.t. g <= 0: stationary, lambda >= 0, complementary, feasible.
+    This is the brute-force check: it needs no second optimiser."""
+    model = stretched_sheet(n=3, warp=0.06, weft=-0.02, noise=0.02, seed=3)
+    x_hat = model.positions()
+    limiter = StrainLimiter(model, method=method, tol=1e-9, max_iters=200, max_newton=10,
+                            max_cg=200, cg_rtol=1e-10, adaptive_margin=True)
+    limiter.project(H)
+    assert limiter.last_converged
+    stationarity, lam_min, complementarity, violation = kkt_residuals(model, limiter, x_hat)
+    assert stationarity < 1e-5
+    assert lam_min >= 0.0
+    assert complementarity < 1e-6
+    assert violation < 1e-9
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_feasible_state_is_left_alone(method):
+    """Projecting an already feasible state (here: the previous result) returns at once and
+    moves nothing, whatever multipliers were warm-started."""
+    model = stretched_sheet()
+    limiter = StrainLimiter(model, method=method)
+    limiter.project(H)
+    x = model.positions()
+    limiter.project(H)
+    assert limiter.last_converged and limiter.last_iterations == 0
+    assert np.array_equal(model.positions(), x)
+
+
+def test_baselines_reduce_violation():
+    for solver in ("jacobi", "gauss-seidel"):
+        model = stretched_sheet()
+        limiter = StrainLimiter(model, method="warp-weft", solver=solver, max_iters=200)
+        before = limiter.constraint_values().max()
+        limiter.project(H)
+        after = limiter.constraint_values().max()
+        assert after == pytest.approx(limiter.last_violation_max, abs=1e-12)
+        assert after < 0.5 * before
+        assert limiter.last_iterations >= 1 and np.all(np.isfinite(model.positions()))
+
+
+def test_set_method_switches_constraints():
+    model = stretched_sheet()
+    limiter = StrainLimiter(model, method="mapping")
+    assert limiter.constraint_values().shape == (model.n_faces, 8)
+    limiter.set_method("svd")
+    assert limiter.constraint_values().shape == (model.n_faces, 4)
+    limiter.project(H)
+    assert limiter.last_converged and limiter.constraint_values().max() < limiter.tol
+    limiter.set_method("none")
+    x = model.positions()
+    limiter.project(H)
+    assert np.array_equal(model.positions(), x) and limiter.constraint_values().shape[1] == 0
+    limiter.set_bands(warp=(-0.02, 0.02))
+    assert limiter.bias == pytest.approx(
+        tuple(np.hypot(1 + np.array(limiter.warp), 1 + np.array(limiter.weft)) / np.sqrt(2)
+              - 1))
+
+
+def test_settings_are_validated():
+    model = stretched_sheet(n=3)
+    with pytest.raises(StrainLimitError, match="unknown strain-limiting method"):
+        StrainLimiter(model, method="isotropic")
+    with pytest.raises(StrainLimitError, match="swap"):
+        StrainLimiter(model, warp=(0.01, -0.01))
+    with pytest.raises(StrainLimitError, match="min must be > -1"):
+        StrainLimiter(model, weft=(-1.5, 0.1))
+    with pytest.raises(StrainLimitError, match="unknown strain-limiting solver"):
+        StrainLimiter(model, solver="newton")
+    with pytest.raises(StrainLimitError, match="pair"):
+        StrainLimiter(model, bias=0.1)
+
+
+# ---- hard cases --------------------------------------------------------------------------------
+def hard_case(name, n=6):
+    model = stretched_sheet(n=n, warp=0.04, weft=0.04, noise=0.0)
+    x = model.positions()
+    mid = (n // 2) * n + n // 2
+    if name == "isotropic":          # exactly isotropic stretch, eta1 = eta2 everywhere
+        x[:, :2] = model.uv * 1.04
+    elif name == "sliver":           # one vertex pushed onto its neighbour's row
+        x[mid, 1] = x[mid - 1, 1] + 1e-9
+        x[mid, 0] = x[mid - 1, 0]
+    elif name == "inverted":         # one vertex pushed through its opposite edges
+        x[mid, :2] += [0.5 / n, 0.5 / n]
+    set_positions(model, x)
+    return model
+
+
+@pytest.mark.parametrize("case", ["isotropic", "sliver", "inverted", "zero-bands"])
+def test_hard_cases_stay_finite(case):
+    for method in METHODS:
+        model = hard_case(case)
+        bands = dict(warp=(0.0, 0.0), weft=(0.0, 0.0)) if case == "zero-bands" else {}
+        limiter = StrainLimiter(model, method=method, max_iters=5, max_newton=3, **bands)
+        before = limiter.constraint_values().max()
+        limiter.project(H)
+        x = model.positions()
+        assert np.all(np.isfinite(x)) and np.all(np.isfinite(model.velocities()))
+        assert np.abs(x).max() < 2.0
+        assert limiter.last_violation_max <= max(before, 1e-3), (method, case)
+
+
+def test_infeasible_pins_end_bounded():
+    """Two pins held 20 % further apart than the warp band allows: best effort, reported as
+    not converged, no blow-up."""
+    uv, faces = make_sheet(1.0, 0.2, 6, 2)
+    x = np.c_[uv, np.zeros(len(uv))]
+    pinned = np.zeros(len(uv), bool)
+    pinned[[0, len(uv) - 2]] = True                    # (u=0, v=0) and (u=1, v=0)
+    x[len(uv) - 2, 0] = 1.0 * 1.01 * 1.2
+    model = ClothModel(MeshArrays(uv=uv, x=x, faces=faces, pinned=pinned), Material())
+    for method in METHODS:
+        set_positions(model, x)
+        limiter = StrainLimiter(model, method=method, max_iters=30)
+        for _ in range(2):
+            limiter.project(H)
+        y = model.positions()
+        assert not limiter.last_converged
+        assert np.all(np.isfinite(y)) and np.abs(y - x).max() < 0.5
+        assert np.array_equal(y[pinned], x[pinned])
+        assert 0.0 < limiter.last_violation_max < 1.0
+
+
+def test_mesh_change_and_new_model():
+    """A refill within capacity (what a remesh does) resets the multipliers and uses the new
+    faces; a new, larger model (what the simulator builds when a remesh outgrows the fields)
+    works with a new limiter without recompiling the solve kernels."""
+    model = stretched_sheet(n=6)
+    limiter = StrainLimiter(model, method="warp-weft")
+    limiter.project(H)
+    uv, faces = make_sheet(1.0, 1.0, 4, 5)
+    model.load(MeshArrays(uv=uv, x=np.c_[uv * [1.05, 1.0], np.zeros(len(uv))], faces=faces))
+    limiter.on_mesh_changed()
+    assert np.all(limiter._ws.lam.to_numpy() == 0.0)
+    assert limiter.constraint_values().shape == (model.n_faces, 6)
+    limiter.project(H)
+    assert limiter.last_converged and limiter.constraint_values().max() < limiter.tol
+    bigger = stretched_sheet(n=10)
+    other = StrainLimiter(bigger, method="warp-weft")
+    other.project(H)
+    assert other.last_converged and other.last_ms < 5000
