@@ -34,6 +34,9 @@ def parse_args(argv):
     p.add_argument("--show-config", action="store_true",
                    help="print every settable key of the scene with its value and exit")
     p.add_argument("--headless", action="store_true", help="no window: write files to --out")
+    p.add_argument("--compare", action="store_true",
+                   help="teaching view: the scene with the methods svd, warp-weft and mapping "
+                   "side by side in one window (needs a display)")
     p.add_argument("--frames", type=int, help="frames to simulate (sim.frames)")
     p.add_argument("--out", help="output folder (default out/SCENE)")
     p.add_argument("--resolution", type=int, help="vertices along each side of a sheet "
@@ -148,6 +151,16 @@ def main(argv=None):
         return fail(str(err))
 
     headless = args.headless or not has_display()
+    if args.compare:
+        if headless:
+            return fail("--compare opens a window: run it on a desktop or under xvfb-run "
+                        "(it has no headless mode)")
+        from ui.render import RenderUnavailable
+        try:
+            from ui.app import run_compare
+            return run_compare(cfg, module)
+        except RenderUnavailable as err:
+            return fail(f"{err}", EXIT_NO_RENDER)
     if not headless:
         from ui.render import RenderUnavailable
         try:

@@ -381,7 +381,8 @@ class ImplicitEuler:
                 self.z[i] = self.precond[i] @ self.res[i]
                 self.p[i] = self.z[i]
                 rz += self.res[i].dot(self.z[i])
-                bnorm += self.rhs[i].dot(self.precond[i] @ self.rhs[i])
+                if self.model.vert_pinned[i] == 0:    # CG's scale: the free rows only
+                    bnorm += self.rhs[i].dot(self.precond[i] @ self.rhs[i])
             # Preconditioned CG on the free vertices.
             iters = 0
             rel = ti.sqrt(ti.abs(rz) / ti.max(bnorm, 1e-300))

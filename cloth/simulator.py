@@ -72,12 +72,10 @@ class Simulator:
         self.model = ClothModel(setup.mesh, setup.material,
                                 capacity_factor=2.0 if remeshing else 1.2)
         self._pin_rest = setup.mesh.pin_target.copy()
-        self.dynamics = ImplicitEuler(
-            self.model, DynamicsSettings(gravity=tuple(sim["gravity"]),
-                                         stitch_stiffness=float(sim.get("stitch_stiffness", 0.0)),
-                                         cg_tol=float(sim.get("cg_tol", 1e-4)),
-                                         cg_max_iters=int(sim.get("cg_iters", 500))),
-            stitches=setup.stitches)
+        self.dynamics_settings = DynamicsSettings(
+            gravity=tuple(sim["gravity"]), stitch_stiffness=float(sim.get("stitch_stiffness", 0.0)),
+            cg_tol=float(sim.get("cg_tol", 1e-4)), cg_max_iters=int(sim.get("cg_iters", 500)))
+        self.dynamics = self._make_dynamics(setup.stitches)
         self.strain = None
         self.collider = None
         self.remesher = None
@@ -98,6 +96,19 @@ class Simulator:
         self.remesh_stats = {}
 
     # -- stages -------------------------------------------------------------------------------
+    def _make_dynamics(self, stitches):
+        """Backward Euler with the linear solver the config asks for: ``cg`` (matrix-free
+        PCG, the default: fastest for soft cloth and up to ~10k triangles) or ``direct``
+        (assembled sparse Cholesky: exact, cheaper for stiff cloth from ~10k triangles)."""
+        kind = self.cfg["sim"].get("linear_solver", "cg")
+        if kind == "cg":
+            return ImplicitEuler(self.model, self.dynamics_settings, stitches=stitches)
+        if kind == "direct":
+            from .dynamics_sparse import SparseImplicitEuler
+            return SparseImplicitEuler(self.model, self.dynamics_settings, stitches=stitches,
+                                       linear_solver="llt")
+        raise ValueError(f"unknown sim.linear_solver '{kind}': use cg or direct")
+
     def stage(self, name):
         for s in self.stages:
             if s.name == name:
@@ -171,8 +182,7 @@ class Simulator:
         print(f"loom: remeshing grew the cloth to {len(mesh.faces)} faces; reallocating fields "
               f"with room for {2 * len(mesh.faces)} (grown {self.grow_count}x)", file=sys.stderr)
         self.model = ClothModel(mesh, self.setup.material, capacity_factor=2.0)
-        self.dynamics = ImplicitEuler(self.model, self.dynamics.settings,
-                                      stitches=self.dynamics.stitches_np)
+        self.dynamics = self._make_dynamics(self.dynamics.stitches_np)
         if self.strain is not None:
             self._make_strain_limiter(self.cfg["strain"])
         if self.collider is not None:

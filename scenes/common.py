@@ -30,6 +30,7 @@ COMMON_DEFAULTS = {
         "stitch_stiffness": 0.0,  # N/m of seam springs (garments)
         "cg_tol": 1e-4,           # relative residual that ends the implicit solve's CG
         "cg_iters": 500,          # CG iteration budget per time step
+        "linear_solver": "cg",    # cg (matrix-free PCG) | direct (sparse Cholesky)
     },
     "material": dict(preset="soft", **MATERIAL_PRESETS["soft"]),
     "strain": {

@@ -1,35 +1,96 @@
-"""Drawing the cloth with GGUI: one code path for the window and for headless frames
-(an offscreen window, ``show_window=False``).
+"""Drawing the cloth with GGUI: one code path for the window, the comparison view and headless
+frames (an offscreen window, ``show_window=False``).
 
 The cloth is drawn "exploded" (three render vertices per face) so a face can carry one colour
-(a strain heat map per triangle) and a flat normal; two-sided lighting shows both sides.
+(a strain heat map per triangle). Normals are per vertex (smooth shading, the default) or per
+face (flat). GGUI's two-sided lighting uses |n . l|, so both sides of the cloth are lit.
+
+Heat maps are diverging (blue negative, white zero, red positive) and centred on zero; the
+colour steps from pale to saturated at the band edges, so where a face leaves its strain band
+shows on the cloth as a contour, and the colour bar marks the edges with ticks.
 """
+from dataclasses import dataclass, field
+
 import numpy as np
 import taichi as ti
 
 from cloth import metrics
 
+from .camera import OrbitCamera
+
 COLOR_MODES = ("shading", "warp-strain", "weft-strain", "bias-strain", "principal-strain",
                "violation", "size")
 CLOTH_FRONT = np.array([0.80, 0.45, 0.30])
+OBSTACLE = np.array([0.62, 0.66, 0.72])
 GROUND = np.array([0.55, 0.57, 0.60])
+BACKGROUND = (0.96, 0.96, 0.97)
+WIRE = (0.15, 0.15, 0.18)
+
+# Diverging ramp (value / edge, colour): pale up to the band edge, saturated past it.
+WHITE = np.array([0.95, 0.95, 0.95])
+PALE_RED, RED, DARK_RED = np.array([0.97, 0.66, 0.55]), np.array([0.86, 0.22, 0.14]), \
+    np.array([0.45, 0.0, 0.05])
+PALE_BLUE, BLUE, DARK_BLUE = np.array([0.62, 0.74, 0.95]), np.array([0.17, 0.38, 0.86]), \
+    np.array([0.04, 0.08, 0.42])
+# Sequential ramp (violation, triangle size).
+SEQ = [(0.0, np.array([0.99, 0.93, 0.55])), (0.5, np.array([0.93, 0.45, 0.15])),
+       (1.0, np.array([0.45, 0.02, 0.10]))]
+SEQ_SIZE = [(0.0, np.array([0.23, 0.30, 0.75])), (0.5, np.array([0.55, 0.80, 0.60])),
+            (1.0, np.array([0.98, 0.85, 0.25]))]
+INSIDE = np.array([0.82, 0.86, 0.88])     # violation mode: faces inside every band
 
 
 class RenderUnavailable(RuntimeError):
     """GGUI could not open a (possibly offscreen) window: no Vulkan device or no display."""
 
 
-def open_window(title, size, show_window):
+def check_display():
+    """Raise ``RenderUnavailable`` if $DISPLAY names an X server that does not answer. GLFW
+    would print "cannot initialize GLFW" and end the process without a Python error."""
+    import ctypes
+    import ctypes.util
+    import os
+    name = os.environ.get("DISPLAY")
+    if not name or os.environ.get("WAYLAND_DISPLAY"):
+        return
+    path = ctypes.util.find_library("X11")
+    if path is None:
+        return
     try:
-        return ti.ui.Window(title, size, vsync=show_window, show_window=show_window)
-    except Exception as err:  # GGUI raises plain RuntimeError with a Vulkan message
+        x11 = ctypes.CDLL(path)
+    except OSError:
+        return
+    x11.XOpenDisplay.restype = ctypes.c_void_p
+    x11.XOpenDisplay.argtypes = [ctypes.c_char_p]
+    x11.XCloseDisplay.argtypes = [ctypes.c_void_p]
+    dpy = x11.XOpenDisplay(name.encode())
+    if not dpy:
+        raise RenderUnavailable(f"cannot connect to the X display '{name}' (is the X server "
+                                "running and may this user connect? check DISPLAY and xhost); "
+                                "without a screen use xvfb-run")
+    x11.XCloseDisplay(dpy)
+
+
+def open_window(title, size, show_window, vsync=None):
+    if show_window:
+        check_display()
+    try:
+        return ti.ui.Window(title, tuple(int(s) for s in size),
+                            vsync=show_window if vsync is None else vsync,
+                            show_window=show_window)
+    except Exception as err:  # GGUI raises plain RuntimeError with a Vulkan or GLFW message
+        reason = str(err).splitlines()[0][:120] if str(err) else type(err).__name__
+        if show_window:
+            raise RenderUnavailable(
+                f"cannot open a window ({reason}). Install a Vulkan driver (on Debian: apt-get "
+                "install mesa-vulkan-drivers libvulkan1)") from None
         raise RenderUnavailable(
-            f"cannot open a GGUI window ({str(err).splitlines()[0][:120]}). "
-            "Install a Vulkan driver (on Debian: apt-get install mesa-vulkan-drivers libvulkan1; "
-            "for a window without a screen also xvfb and run under xvfb-run), "
+            f"cannot open an offscreen Vulkan surface ({reason}). "
+            "Install a Vulkan driver (on Debian: apt-get install mesa-vulkan-drivers libvulkan1), "
             "or run with --no-images") from None
 
 
+# -- colours ---------------------------------------------------------------------------------
 def diverging(values, scale):
     """Blue (negative) - white (0) - red (positive) colours for ``values / scale`` in [-1, 1]."""
     t = np.clip(np.asarray(values) / max(scale, 1e-12), -1.0, 1.0)[:, None]
@@ -38,55 +99,167 @@ def diverging(values, scale):
     return np.where(t >= 0, white + t * (red - white), white - t * (blue - white))
 
 
-def face_colors(mode, x, uv, faces, grain, strain_cfg=None, rest_area=None):
-    """Per-face RGB for a colour mode; heat maps come from ``cloth.metrics`` (one definition).
-    Returns (colors (F, 3), legend text)."""
+def _ramp(t, stops):
+    t = np.clip(np.asarray(t, float), 0.0, 1.0)
+    pos = np.array([s[0] for s in stops])
+    cols = np.array([s[1] for s in stops])
+    return np.stack([np.interp(t, pos, cols[:, c]) for c in range(3)], axis=-1)
+
+
+def band_diverging(values, band):
+    """Zero-centred diverging colours with a step at the band edges ``band = (lo, hi)``
+    (lo < 0 < hi): white at 0, pale up to the edge, saturated from the edge to full colour at
+    twice the edge. Returns (N, 3)."""
+    lo, hi = band
+    hi = max(hi, 1e-6)
+    lo = min(lo, -1e-6)
+    s = np.asarray(values, float)
+    out = np.empty(s.shape + (3,))
+    pos = s >= 0
+    tp = s[pos] / hi                                  # 1 at the band edge
+    out[pos] = np.where((tp <= 1.0)[:, None], _ramp(tp, [(0, WHITE), (1, PALE_RED)]),
+                        _ramp(tp - 1.0, [(0, RED), (1, DARK_RED)]))
+    tn = s[~pos] / lo
+    out[~pos] = np.where((tn <= 1.0)[:, None], _ramp(tn, [(0, WHITE), (1, PALE_BLUE)]),
+                         _ramp(tn - 1.0, [(0, BLUE), (1, DARK_BLUE)]))
+    return out
+
+
+@dataclass
+class Legend:
+    """What a colour mode means: a colour bar from ``lo`` to ``hi`` with tick ``marks`` (band
+    edges), for the panel (numbers) and the canvas (the bar)."""
+    title: str
+    lo: float
+    hi: float
+    colors: callable                     # values (N,) -> rgb (N, 3)
+    marks: list = field(default_factory=list)
+    unit: str = "strain"
+    note: str = ""
+
+    @property
+    def text(self):
+        fmt = self.fmt
+        s = f"{self.title}: {fmt(self.lo)} .. {fmt(self.hi)}"
+        if self.marks:
+            s += " | band edges " + ", ".join(fmt(m) for m in self.marks)
+        return s + (f" ({self.note})" if self.note else "")
+
+    def fmt(self, v):
+        if self.unit == "strain":
+            return f"{100 * v:+.2f}%"
+        if self.unit == "mm":
+            return f"{v:.1f} mm"
+        return f"{v:.3g}"
+
+
+def strain_bands(strain_cfg):
+    """(warp, weft, bias) bands from a ``strain`` config section (bias automatic if [])."""
+    s = strain_cfg or {}
+    warp = tuple(s.get("warp") or (-0.01, 0.01))
+    weft = tuple(s.get("weft") or (-0.05, 0.05))
+    bias = tuple(s["bias"]) if s.get("bias") else metrics.default_bias_band(warp, weft)
+    return warp, weft, bias
+
+
+def face_colors_legend(mode, x, uv, faces, grain, strain_cfg=None, rest_area=None,
+                       strains=None):
+    """Per-face RGB for a colour mode and its ``Legend`` (None for shading). Heat maps come
+    from ``cloth.metrics`` (one definition); pass ``strains`` if already computed."""
     if mode == "shading":
-        return np.tile(CLOTH_FRONT, (len(faces), 1)), ""
-    st = metrics.face_strains(x, uv, faces, grain)
-    strain_cfg = strain_cfg or {}
-    band = {"warp-strain": strain_cfg.get("warp"), "weft-strain": strain_cfg.get("weft")}
-    if mode in ("warp-strain", "weft-strain", "bias-strain", "principal-strain"):
-        key = {"warp-strain": "warp", "weft-strain": "weft", "bias-strain": "bias",
-               "principal-strain": "principal_max"}[mode]
-        b = band.get(mode) or [-0.05, 0.05]
-        scale = 2.0 * max(abs(b[0]), abs(b[1]), 1e-3)
-        return diverging(st[key], scale), f"{key} strain, full colour at +/-{scale:.3g}"
-    if mode == "violation":
-        warp, weft = strain_cfg.get("warp", [-1, 1]), strain_cfg.get("weft", [-1, 1])
-        viol = np.maximum(metrics.band_violation(st["warp"], warp),
-                          metrics.band_violation(st["weft"], weft))
-        return diverging(viol, 0.01), "band violation, full red at 0.01"
+        return np.tile(CLOTH_FRONT, (len(faces), 1)), None
+    if mode not in COLOR_MODES:
+        raise ValueError(f"unknown colour mode '{mode}': use one of {', '.join(COLOR_MODES)}")
     if mode == "size":
         area = metrics.material_areas(uv, faces) if rest_area is None else rest_area
-        s = np.sqrt(area)
-        t = (s - s.min()) / max(s.max() - s.min(), 1e-12)
-        return diverging(2 * t - 1, 1.0), "triangle size, blue small, red large"
-    raise ValueError(f"unknown colour mode '{mode}': use one of {', '.join(COLOR_MODES)}")
+        edge = 1e3 * np.sqrt(2.0 * np.asarray(area))      # mm: leg of a right triangle
+        lo, hi = float(edge.min()), float(edge.max())
+        if hi - lo < 1e-9:
+            lo, hi = lo - 0.5, hi + 0.5
+        colors = lambda v: _ramp((np.asarray(v) - lo) / (hi - lo), SEQ_SIZE)  # noqa: E731
+        return colors(edge), Legend("triangle size (rest edge)", lo, hi, colors, unit="mm")
+    st = strains if strains is not None else metrics.face_strains(x, uv, faces, grain)
+    warp, weft, bias = strain_bands(strain_cfg)
+    if mode == "violation":
+        viol = np.maximum(metrics.band_violation(st["warp"], warp),
+                          metrics.band_violation(st["weft"], weft))
+        scale = 0.01
+
+        def colors(v):
+            v = np.asarray(v, float)
+            return np.where((v <= 0)[:, None], INSIDE, _ramp(v / scale, SEQ))
+        return colors(viol), Legend("band violation (warp, weft)", 0.0, scale, colors,
+                                    note="grey: inside both bands")
+    key, band, title = {
+        "warp-strain": ("warp", warp, "warp strain"),
+        "weft-strain": ("weft", weft, "weft strain"),
+        "bias-strain": ("bias", bias, "bias strain"),
+        "principal-strain": ("principal_max", (min(warp[0], weft[0]), max(warp[1], weft[1])),
+                             "max principal strain"),
+    }[mode]
+    colors = lambda v: band_diverging(v, band)  # noqa: E731
+    return colors(st[key]), Legend(title, 2 * min(band[0], -1e-6), 2 * max(band[1], 1e-6),
+                                   colors, marks=[band[0], 0.0, band[1]])
 
 
+def face_colors(mode, x, uv, faces, grain, strain_cfg=None, rest_area=None):
+    """Per-face RGB for a colour mode and the legend as one line of text."""
+    rgb, legend = face_colors_legend(mode, x, uv, faces, grain, strain_cfg, rest_area)
+    return rgb, (legend.text if legend else "")
+
+
+def vertex_normals(x, faces):
+    """Area-weighted unit vertex normals (V, 3)."""
+    n = np.cross(x[faces[:, 1]] - x[faces[:, 0]], x[faces[:, 2]] - x[faces[:, 0]])
+    out = np.zeros_like(x)
+    for c in range(3):
+        idx = faces[:, c]
+        for k in range(3):
+            out[:, k] += np.bincount(idx, weights=n[:, k], minlength=len(x))
+    return out / np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-20)
+
+
+def _logging_level():
+    for name in ("trace", "debug", "info", "warn", "error", "critical"):
+        if ti._logging.is_logging_effective(name):
+            return name
+    return "info"
+
+
+# -- the renderer ----------------------------------------------------------------------------
 class ClothRenderer:
-    """Draws cloth meshes, obstacle meshes and a ground grid into a GGUI scene."""
+    """Draws cloth meshes, obstacle meshes, a ground grid and a colour bar into a GGUI window.
+    ``orbit`` (an ``OrbitCamera``) holds the view; ``reset_camera`` returns to the scene's."""
 
-    def __init__(self, window, camera_cfg=None, ground_y=0.0):
+    def __init__(self, window, camera_cfg=None, ground_y=0.0, ground_half=3.0):
         self.window = window
         self.canvas = window.get_canvas()
         self.scene = window.get_scene()
         self.camera = ti.ui.Camera()
-        self.camera_cfg = dict(camera_cfg or {})
-        self.reset_camera()
         self._buffers = {}
-        self.ground_y = ground_y
+        self.ground_y, self.ground_half = ground_y, ground_half
+        self.set_camera_cfg(camera_cfg)
         self._make_ground()
+        self._legend = None
+
+    def set_camera_cfg(self, camera_cfg):
+        c = dict(camera_cfg or {})
+        self.camera_cfg = c
+        self.orbit = OrbitCamera(c.get("position", [0.0, 1.5, 3.0]),
+                                 c.get("lookat", [0.0, 1.0, 0.0]), c.get("fov", 40.0))
+        self.orbit.apply(self.camera)
 
     def reset_camera(self):
-        c = self.camera_cfg
-        self.camera.position(*c.get("position", [0.0, 1.5, 3.0]))
-        self.camera.lookat(*c.get("lookat", [0.0, 1.0, 0.0]))
-        self.camera.up(0.0, 1.0, 0.0)
-        self.camera.fov(c.get("fov", 40.0))
+        self.orbit.reset()
+        self.orbit.apply(self.camera)
 
-    def _make_ground(self, half=3.0, n=13):
+    @property
+    def aspect(self):
+        w, h = self.window.get_window_shape()
+        return w / max(h, 1)
+
+    def _make_ground(self, n=13):
+        half = self.ground_half
         s = np.linspace(-half, half, n)
         lines = []
         for t in s:
@@ -95,58 +268,186 @@ class ClothRenderer:
         self.ground = ti.Vector.field(3, ti.f32, len(lines))
         self.ground.from_numpy(np.array(lines, np.float32))
 
-    def _buffer(self, key, n):
+    def _fields(self, key, n, kinds):
         """Render fields (f32) per key, reallocated only when they must grow."""
         buf = self._buffers.get(key)
         if buf is None or buf[0].shape[0] < n:
             cap = max(n, 16) * 3 // 2
-            buf = (ti.Vector.field(3, ti.f32, cap), ti.Vector.field(3, ti.f32, cap),
-                   ti.Vector.field(3, ti.f32, cap))
+            buf = tuple(ti.Vector.field(d, dt, cap) for d, dt in kinds)
             self._buffers[key] = buf
         return buf
 
-    def add_mesh(self, key, x, faces, face_rgb, wireframe=False):
-        """Upload one triangle mesh with per-face colours (flat normals) and draw it."""
+    @staticmethod
+    def _upload(fld, arr, dtype=np.float32):
+        full = np.zeros((fld.shape[0],) + arr.shape[1:], dtype)
+        full[: len(arr)] = arr
+        fld.from_numpy(full)
+
+    def add_mesh(self, key, x, faces, face_rgb, wireframe=False, smooth=False, offset=None):
+        """Upload one triangle mesh with per-face colours and draw it; ``smooth`` interpolates
+        vertex normals, ``wireframe`` overlays the edges, ``offset`` translates it."""
         x = np.asarray(x, np.float64)
+        faces = np.asarray(faces)
+        if offset is not None:
+            x = x + np.asarray(offset, float)
         corners = x[faces].reshape(-1, 3)
-        n = np.cross(x[faces[:, 1]] - x[faces[:, 0]], x[faces[:, 2]] - x[faces[:, 0]])
-        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-20)
+        if smooth:
+            vn = vertex_normals(x, faces)
+            normals = vn[faces].reshape(-1, 3)
+        else:
+            n = np.cross(x[faces[:, 1]] - x[faces[:, 0]], x[faces[:, 2]] - x[faces[:, 0]])
+            n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-20)
+            normals = np.repeat(n, 3, axis=0)
         cnt = len(corners)
-        pos, nrm, col = self._buffer(key, cnt)
-        cap = pos.shape[0]
-        pad = lambda a: np.concatenate([a, np.zeros((cap - len(a), 3))]).astype(np.float32)  # noqa
-        pos.from_numpy(pad(corners))
-        nrm.from_numpy(pad(np.repeat(n, 3, axis=0)))
-        col.from_numpy(pad(np.repeat(np.asarray(face_rgb), 3, axis=0)))
+        pos, nrm, col = self._fields(key, cnt, [(3, ti.f32)] * 3)
+        self._upload(pos, corners)
+        self._upload(nrm, normals)
+        self._upload(col, np.repeat(np.asarray(face_rgb, float), 3, axis=0))
         self.scene.mesh(pos, normals=nrm, per_vertex_color=col, two_sided=True,
-                        vertex_count=cnt, show_wireframe=wireframe)
+                        vertex_count=cnt)
+        if wireframe:
+            self.add_wireframe(key + ".wire", x, faces, vn if smooth else vertex_normals(x, faces))
+
+    def add_wireframe(self, key, x, faces, normals):
+        """Mesh edges as lines, lifted a little off both sides so the surface does not hide
+        them."""
+        e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+        e = np.unique(np.sort(e, axis=1), axis=0)
+        size = np.ptp(x, axis=0).max() if len(x) else 1.0
+        lift = 2e-3 * size * normals
+        pts = np.concatenate([x + lift, x - lift])
+        idx = np.concatenate([e, e + len(x)]).astype(np.int32)
+        pos, = self._fields(key + ".v", len(pts), [(3, ti.f32)])
+        ind = self._buffers.get(key + ".i")
+        if ind is None or ind.shape[0] < idx.size:
+            ind = ti.field(ti.i32, max(idx.size, 16) * 3 // 2)
+            self._buffers[key + ".i"] = ind
+        self._upload(pos, pts)
+        full = np.zeros(ind.shape[0], np.int32)
+        full[: idx.size] = idx.reshape(-1)
+        ind.from_numpy(full)
+        self.scene.lines(pos, width=1.0, indices=ind, color=WIRE, vertex_count=len(pts),
+                         index_count=idx.size)
+
+    def add_points(self, key, pts, radius, color):
+        pts = np.asarray(pts, float).reshape(-1, 3)
+        pos, = self._fields(key, len(pts), [(3, ti.f32)])
+        self._upload(pos, pts)
+        self.scene.particles(pos, radius=radius, color=tuple(color), index_count=len(pts))
 
     def begin(self):
+        self.orbit.apply(self.camera)
         self.scene.set_camera(self.camera)
         self.scene.ambient_light((0.35, 0.35, 0.38))
         self.scene.point_light(pos=(2.0, 4.0, 3.0), color=(0.9, 0.9, 0.9))
         self.scene.point_light(pos=(-3.0, 3.0, -2.0), color=(0.35, 0.35, 0.4))
         self.scene.lines(self.ground, width=1.0, color=tuple(GROUND))
 
-    def finish(self):
-        self.canvas.set_background_color((0.96, 0.96, 0.97))
+    def finish(self, legend=None, bar_rect=(0.70, 0.075, 0.27, 0.025)):
+        """Render the scene into the canvas (call before every capture) and draw the colour
+        bar of ``legend`` (rect x, y, w, h in window fractions, y up)."""
+        self.canvas.set_background_color(BACKGROUND)
         self.canvas.scene(self.scene)
+        self._legend = (legend, bar_rect) if legend is not None else None
+        if legend is not None:
+            self.draw_colorbar(legend, bar_rect)
 
-    def image(self):
-        """The last drawn frame as (H, W, 3) uint8, top row first."""
-        buf = self.window.get_image_buffer_as_numpy()
+    def draw_colorbar(self, legend, rect):
+        x0, y0, w, h = rect
+        n = 64
+        vals = np.linspace(legend.lo, legend.hi, n + 1)
+        mids = 0.5 * (vals[1:] + vals[:-1])
+        rgb = legend.colors(mids)
+        xs = x0 + w * np.arange(n + 1) / n
+        tris, cols = [], []
+        for i in range(n):
+            a, b = xs[i], xs[i + 1]
+            tris += [[a, y0], [b, y0], [b, y0 + h], [a, y0], [b, y0 + h], [a, y0 + h]]
+            cols += [rgb[i]] * 6
+        for m in legend.marks:   # tick marks at band edges (and zero)
+            t = (m - legend.lo) / (legend.hi - legend.lo)
+            if 0 <= t <= 1:
+                xm = x0 + w * t
+                tw = 0.0015
+                tris += [[xm - tw, y0 - 0.3 * h], [xm + tw, y0 - 0.3 * h], [xm + tw, y0 + 1.3 * h],
+                         [xm - tw, y0 - 0.3 * h], [xm + tw, y0 + 1.3 * h], [xm - tw, y0 + 1.3 * h]]
+                cols += [np.array(WIRE)] * 6
+        pos, col = self._fields("colorbar", len(tris), [(2, ti.f32), (3, ti.f32)])
+        self._upload(pos, np.array(tris))
+        self._upload(col, np.array(cols))
+        # Unused rows are degenerate triangles at the origin (zero area): nothing is drawn.
+        self.canvas.triangles(pos, per_vertex_color=col)
+
+    def image(self, annotate=True):
+        """The last drawn frame as (H, W, 3) uint8, top row first; with a heat map the colour
+        bar gets its numbers (GGUI draws no text into the frame)."""
+        level = _logging_level()
+        ti.set_logging_level(ti.WARN)     # GGUI logs every image dump at info level
+        try:
+            buf = self.window.get_image_buffer_as_numpy()
+        finally:
+            ti.set_logging_level(level)
         img = np.flipud(np.asarray(buf).transpose(1, 0, 2))[:, :, :3]
-        return (np.clip(img, 0.0, 1.0) * 255 + 0.5).astype(np.uint8)
+        img = (np.clip(img, 0.0, 1.0) * 255 + 0.5).astype(np.uint8)
+        if annotate and self._legend is not None:
+            img = label_colorbar(img, *self._legend)
+        return img
 
 
-def draw_simulation(renderer, sim, color="shading", wireframe=False, extra_cloths=()):
-    """Draw a simulator's cloth (and obstacles) in one colour mode, ready for capture."""
-    renderer.begin()
+def label_colorbar(img, legend, rect):
+    """Write the legend's title and numbers next to its colour bar (Pillow)."""
+    from PIL import Image, ImageDraw, ImageFont
+    h, w = img.shape[:2]
+    size = max(9, min(14, h // 40))
+    try:
+        font = ImageFont.load_default(size=size)
+    except TypeError:           # Pillow < 10.1: one bitmap size
+        font = ImageFont.load_default()
+    pil = Image.fromarray(img)
+    d = ImageDraw.Draw(pil)
+    x0, y0, bw, bh = rect
+    left, right = x0 * w, (x0 + bw) * w
+    top, bottom = (1 - y0 - bh) * h, (1 - y0) * h
+    ink = (40, 40, 46)
+    edges = [m for m in legend.marks if m != 0.0]
+    above = top - 0.3 * (bottom - top) - 2
+    if edges:
+        d.text((left, above), "band " + " .. ".join(legend.fmt(m) for m in edges), fill=ink,
+               font=font, anchor="ls")
+        above -= size + 3
+    d.text((left, above), legend.title, fill=ink, font=font, anchor="ls")
+    below = bottom + 0.3 * (bottom - top) + 2
+    d.text((left, below), legend.fmt(legend.lo), fill=ink, font=font, anchor="lt")
+    d.text((right, below), legend.fmt(legend.hi), fill=ink, font=font, anchor="rt")
+    return np.asarray(pil)
+
+
+def draw_cloth(renderer, sim, key="cloth", color="shading", wireframe=False, smooth=True,
+               offset=None, strains=None):
+    """Draw one simulator's cloth and obstacles (after ``renderer.begin()``); returns the
+    colour mode's ``Legend`` (None for shading)."""
     m = sim.model
     x = m.positions()
-    rgb, _ = face_colors(color, x, m.uv, m.faces, m.grain, sim.cfg.get("strain"), m.rest_area)
-    renderer.add_mesh("cloth", x, m.faces, rgb, wireframe=wireframe)
+    if strains is None and color not in ("shading", "size"):
+        strains = sim.face_strains()
+    rgb, legend = face_colors_legend(color, x, m.uv, m.faces, m.grain, sim.cfg.get("strain"),
+                                     m.rest_area, strains=strains)
+    renderer.add_mesh(key, x, m.faces, rgb, wireframe=wireframe, smooth=smooth, offset=offset)
     for k, o in enumerate(sim.setup.obstacles):
         v, f = o.mesh_at(sim.time)
-        renderer.add_mesh(f"obstacle{k}", v, np.asarray(f), np.tile([0.62, 0.66, 0.72], (len(f), 1)))
-    renderer.finish()
+        f = np.asarray(f)
+        renderer.add_mesh(f"{key}.obstacle{k}", v, f, np.tile(OBSTACLE, (len(f), 1)),
+                          smooth=False, offset=offset)
+    return legend
+
+
+def draw_simulation(renderer, sim, color="shading", wireframe=False, extra_cloths=(),
+                    smooth=True, legend=True):
+    """Draw a simulator's cloth (and obstacles) in one colour mode, ready for capture. The
+    window app and headless frames both come through here (or ``draw_cloth``)."""
+    renderer.begin()
+    lg = draw_cloth(renderer, sim, "cloth", color, wireframe=wireframe, smooth=smooth)
+    for k, (x, faces, rgb) in enumerate(extra_cloths):
+        renderer.add_mesh(f"extra{k}", x, faces, rgb, smooth=smooth)
+    renderer.finish(lg if legend else None)
+    return lg

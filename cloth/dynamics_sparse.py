@@ -1,0 +1,295 @@
+"""The same backward-Euler Newton step as ``ImplicitEuler``, with the linear system assembled as
+a Taichi sparse matrix and solved by Eigen (``ti.linalg``): a sparse Cholesky factorisation
+(``"llt"`` / ``"ldlt"``) or Taichi's sparse CG on the Jacobi-scaled matrix (``"sparse-cg"``).
+``"matrix-free"`` falls back to the parent's matrix-free PCG.
+
+System (identical to dynamics.py, same PSD-projected K, same right-hand side):
+
+    A = (1 + h alpha) M + h (beta + h) K_psd,    A dv = h (f - alpha M v) - h (beta + h) K_psd v
+
+Pinned vertices are eliminated: their dv is prescribed (lands them on their target), the
+coupling ``A_fp dv_p`` moves to the right-hand side (computed matrix-free with the parent's
+``_apply_A``), and only the free-free block ``A_ff`` is assembled (3 rows per free vertex, in
+the order of a compact free-vertex index). The direct solvers read only the lower triangle, so
+only that is assembled for them (about half the triplets).
+
+Per step: ``_prepare`` (forces, kinematics, rhs, residual, free index; one serial kernel),
+``_assemble`` (per-element 3x3 blocks into a ``ti.types.sparse_matrix_builder``) + ``build``,
+``factorize`` (``analyze_pattern`` only when the mesh or the pin set changed), ``solve``, and
+``_finish`` (scatter dv, update v and x). ``last_timings`` holds the ms of each phase.
+"""
+import time
+
+import numpy as np
+import taichi as ti
+
+from .dynamics import DynamicsSettings, ImplicitEuler
+from .model import ClothModel
+
+LINEAR_SOLVERS = ("llt", "ldlt", "sparse-cg", "matrix-free")
+
+
+@ti.data_oriented
+class SparseImplicitEuler(ImplicitEuler):
+    """``ImplicitEuler`` whose linear solve is a sparse direct (or sparse CG) solve.
+
+    ``linear_solver``: ``llt`` (default), ``ldlt``, ``sparse-cg`` or ``matrix-free``.
+    After a step: ``last_timings`` (ms: prepare, assembly, analyze, factorize, solve, finish),
+    ``last_cg_iters`` (0 for a direct solve) and ``last_cg_residual`` (relative 2-norm residual
+    of the free rows, computed only when ``check_residual``)."""
+
+    def __init__(self, model: ClothModel, settings: DynamicsSettings = None, stitches=None,
+                 linear_solver="llt", check_residual=False):
+        if linear_solver not in LINEAR_SOLVERS:
+            raise ValueError(f"unknown linear solver '{linear_solver}': use one of "
+                             f"{', '.join(LINEAR_SOLVERS)}")
+        self.linear_solver = linear_solver
+        self.check_residual = check_residual
+        self._builder = None
+        self._builder_key = None
+        self._solver = None
+        self._pattern_key = None
+        self.last_timings = {}
+        rt = ti.lang.impl.get_runtime()
+        self._dtype = ti.f64 if rt.default_fp == ti.f64 else ti.f32
+        super().__init__(model, settings, stitches)
+
+    def on_mesh_changed(self):
+        super().on_mesh_changed()
+        m = self.model
+        if getattr(self, "_free_for", None) != m.v_cap:
+            self.free_index = ti.field(ti.i32, m.v_cap)
+            self._free_for = m.v_cap
+        self._pattern_key = None       # the sparsity pattern must be analysed again
+
+    # -- public API ---------------------------------------------------------------------------
+    def step(self, h):
+        if self.linear_solver == "matrix-free":
+            return super().step(h)
+        m, mat, s = self.model, self.model.material, self.settings
+        k = (mat.k_warp, mat.k_weft, mat.k_shear, mat.k_bend)
+        alpha, beta, kst = mat.damp_mass, mat.damp_stiff, s.stitch_stiffness
+        direct = self.linear_solver in ("llt", "ldlt")
+        T = {}
+        t0 = time.perf_counter()
+        # Warm start only helps the iterative solver; a direct solve starts from dv_free = 0.
+        n_free = int(self._prepare(h, ti.Vector(list(s.gravity)), *k, alpha, beta, kst,
+                                   m.n_verts, m.n_faces, m.n_edges, self.n_stitches,
+                                   0 if direct else 1))
+        t1 = time.perf_counter()
+        T["prepare"] = 1e3 * (t1 - t0)
+        n = 3 * n_free
+        if n == 0:
+            self._finish(np.zeros(1), h, m.n_verts, 0)
+            self.last_cg_iters, self.last_cg_residual = 0, 0.0
+            self.last_timings = T
+            return 0
+        lower = 1 if direct else 0
+        scaled = 0 if direct else 1
+        self._ensure_builder(n, m)
+        self._assemble(self._builder, h, *k, alpha, beta, kst, m.n_verts, m.n_faces, m.n_edges,
+                       self.n_stitches, lower, scaled)
+        A = self._builder.build()
+        t2 = time.perf_counter()
+        T["assembly"] = 1e3 * (t2 - t1)
+        b = np.zeros(n, dtype=np.float64 if self._dtype == ti.f64 else np.float32)
+        self._gather(b, m.n_verts, scaled)
+        iters = 0
+        if direct:
+            key = (m.n_verts, m.n_faces, m.n_edges, n_free, self.n_stitches, self.linear_solver)
+            if self._pattern_key != key:
+                self._solver = ti.linalg.SparseSolver(dtype=self._dtype,
+                                                      solver_type=self.linear_solver.upper(),
+                                                      ordering="AMD")
+                self._solver.analyze_pattern(A)
+                self._pattern_key = key
+            t3 = time.perf_counter()
+            T["analyze"] = 1e3 * (t3 - t2)
+            self._solver.factorize(A)
+            t4 = time.perf_counter()
+            T["factorize"] = 1e3 * (t4 - t3)
+            x = self._solver.solve(b)
+            if not self._solver.info():
+                raise RuntimeError("sparse factorisation failed: the system matrix is not "
+                                   "positive definite (non-finite state or zero masses?)")
+            t5 = time.perf_counter()
+            T["solve"] = 1e3 * (t5 - t4)
+        else:
+            t4 = time.perf_counter()
+            T["analyze"] = T["factorize"] = 0.0
+            # Jacobi-scaled system S A S y = S r with S = diag(A)^-1/2; stop on the absolute
+            # residual tol * |S r| (close to the matrix-free code's preconditioned criterion).
+            bn = float(np.linalg.norm(b))
+            x = self._sparse_cg(A, b, s.cg_max_iters, max(s.cg_tol * bn, 1e-300))
+            t5 = time.perf_counter()
+            T["solve"] = 1e3 * (t5 - t4)
+            iters = -1   # Taichi's SparseCG does not report its iteration count
+        if self.check_residual:
+            r = b - (A @ x if not direct else self._sym_matvec(A, x))
+            self.last_cg_residual = float(np.linalg.norm(r) / max(np.linalg.norm(b), 1e-300))
+        else:
+            self.last_cg_residual = 0.0
+        self._finish(np.ascontiguousarray(x, dtype=b.dtype), h, m.n_verts, scaled)
+        T["finish"] = 1e3 * (time.perf_counter() - t5)
+        self.last_timings = T
+        self.last_cg_iters = iters
+        return iters
+
+    def _sparse_cg(self, A, b, max_iter, atol):
+        """Taichi's (unpreconditioned) sparse CG from x0 = 0. ``ti.linalg.SparseCG`` prints
+        its iteration count to stdout on every solve, so the core solver is built here with
+        verbose off when this Taichi version has it; the count is not returned either way."""
+        try:
+            from taichi._lib import core as _ti_core
+            make = _ti_core.make_double_cg_solver if self._dtype == ti.f64 else \
+                _ti_core.make_float_cg_solver
+            cg = make(A.matrix, int(max_iter), float(atol), False)
+            cg.set_b(b)
+            cg.set_x(np.zeros_like(b))
+            cg.solve()
+            return np.asarray(cg.get_x())
+        except (ImportError, AttributeError, TypeError):
+            x, _ = ti.linalg.SparseCG(A, b, x0=np.zeros_like(b), max_iter=max_iter,
+                                      atol=atol).solve()
+            return np.asarray(x)
+
+    @staticmethod
+    def _sym_matvec(L, x):
+        """A x for A stored as its lower triangle L: L x + L^T x - diag(L) x."""
+        d = np.array([L[i, i] for i in range(L.shape[0])]) if L.shape[0] < 3000 else None
+        if d is None:
+            raise ValueError("check_residual with a direct solver is for small systems")
+        return L @ x + L.transpose() @ x - d * x
+
+    # -- helpers ------------------------------------------------------------------------------
+    def _ensure_builder(self, n, m):
+        # Triplets (full blocks; the lower triangle needs about half): 9 per free vertex
+        # (mass), 81 per face, 144 per interior edge, 36 per stitch.
+        cap = 9 * m.n_verts + 81 * m.n_faces + 144 * m.n_edges + 36 * self.n_stitches
+        key = (n, cap)
+        if self._builder_key != key:
+            self._builder = ti.linalg.SparseMatrixBuilder(n, n, max_num_triplets=cap,
+                                                          dtype=self._dtype)
+            self._builder_key = key
+
+    # -- kernels ------------------------------------------------------------------------------
+    @ti.kernel
+    def _prepare(self, h: float, g: ti.types.vector(3, float), kw: float, kf: float, ks: float,
+                 kb: float, alpha: float, beta: float, kst: float, nv: ti.i32, nf: ti.i32,
+                 ne: ti.i32, nst: ti.i32, warm: ti.i32) -> ti.i32:
+        """Forces, rhs, prescribed pinned dv, residual r = b - A dv0 in ``res`` (free rows),
+        the compact free-vertex index and the diagonal blocks of A in ``precond``."""
+        ti.loop_config(serialize=True)
+        for _ in range(1):
+            x, v, m = ti.static(self.model.state.x, self.model.state.v, self.model.vert_mass)
+            for i in range(nv):
+                self.force[i] = m[i] * g
+                self.precond[i] = (1.0 + h * alpha) * m[i] * ti.Matrix.identity(float, 3)
+            self._update_kinematics(nf, ne)
+            self._add_elastic_forces(kw, kf, ks, kb, kst, nf, ne, nst)
+            self._add_K_diagonal(h * (beta + h), kw, kf, ks, kb, kst, nf, ne, nst)
+            for i in range(nv):
+                self.rhs[i] = h * (self.force[i] - alpha * m[i] * v[i])
+            self._add_K_product(v, self.rhs, -h * (beta + h), kw, kf, ks, kb, kst, nf, ne, nst, 0)
+            n_free = 0
+            for i in range(nv):
+                if self.model.vert_pinned[i] != 0:
+                    self.dv[i] = (self.model.vert_pin_target[i] - x[i]) / h - v[i]
+                    self.free_index[i] = -1
+                else:
+                    if warm == 0:
+                        self.dv[i] = ti.Vector([0.0, 0.0, 0.0])
+                    self.free_index[i] = n_free
+                    n_free += 1
+            self._apply_A(self.dv, self.Ap, h, alpha, beta, kw, kf, ks, kb, kst, nv, nf, ne, nst)
+            for i in range(nv):
+                self.res[i] = self.rhs[i] - self.Ap[i]
+                if self.model.vert_pinned[i] != 0:
+                    self.res[i] = ti.Vector([0.0, 0.0, 0.0])
+            self.scalars[2] = n_free
+        return ti.cast(self.scalars[2], ti.i32)
+
+    @ti.func
+    def _scale_of(self, i, c, scaled: ti.i32):
+        s = 1.0
+        if scaled != 0:
+            s = 1.0 / ti.sqrt(self.precond[i][c, c])
+        return s
+
+    @ti.func
+    def _add_block(self, B: ti.template(), va, vb, blk, lower: ti.i32, scaled: ti.i32):
+        """B[rows of va, cols of vb] += blk for free va, vb (lower triangle only if asked).
+        Runtime loops, not static ones: an unrolled assembly kernel takes minutes to compile."""
+        ra, rb = self.free_index[va], self.free_index[vb]
+        if ra >= 0 and rb >= 0:
+            for a, c in ti.ndrange(3, 3):
+                r, col = 3 * ra + a, 3 * rb + c
+                if lower == 0 or r >= col:
+                    B[r, col] += blk[a, c] * self._scale_of(va, a, scaled) * \
+                        self._scale_of(vb, c, scaled)
+
+    @ti.kernel
+    def _assemble(self, B: ti.types.sparse_matrix_builder(), h: float, kw: float, kf: float,
+                  ks: float, kb: float, alpha: float, beta: float, kst: float, nv: ti.i32,
+                  nf: ti.i32, ne: ti.i32, nst: ti.i32, lower: ti.i32, scaled: ti.i32):
+        """The free-free block of A = (1 + h alpha) M + h (beta + h) K_psd, element by element:
+        the blocks whose action is ``_add_K_product(..., exact=0)`` and whose diagonal is
+        ``_add_K_diagonal``. Uses the kinematics left by ``_prepare``."""
+        ti.loop_config(serialize=True)
+        for _ in range(1):
+            sc = h * (beta + h)
+            I = ti.Matrix.identity(float, 3)
+            for i in range(nv):
+                self._add_block(B, i, i, (1.0 + h * alpha) * self.model.vert_mass[i] * I,
+                                lower, scaled)
+            for f in range(nf):
+                tri = self.model.face_verts[f]
+                A = self.model.face_rest_area[f]
+                fu, fv, E = self.face_fu[f], self.face_fv[f], self.face_E[f]
+                wa, wb = self.face_wa[f], self.face_wb[f]
+                E0, E1 = ti.max(E[0], 0.0), ti.max(E[1], 0.0)
+                uu, vv = fu.outer_product(fu), fv.outer_product(fv)
+                for n, q in ti.ndrange(3, 3):
+                    gn = wa[n] * fv + wb[n] * fu
+                    gq = wa[q] * fv + wb[q] * fu
+                    aa, bb = wa[n] * wa[q], wb[n] * wb[q]
+                    blk = kw * aa * uu + kf * bb * vv + ks * gn.outer_product(gq) \
+                        + (kw * E0 * aa + kf * E1 * bb) * I
+                    self._add_block(B, tri[n], tri[q], sc * A * blk, lower, scaled)
+            for e in range(ne):
+                if self.model.edge_faces[e][1] >= 0:
+                    kk = sc * kb * self.model.edge_bend_weight[e]
+                    G = self.edge_grad[e]
+                    for n, q in ti.ndrange(4, 4):
+                        gn = ti.Vector([G[n, 0], G[n, 1], G[n, 2]])
+                        gq = ti.Vector([G[q, 0], G[q, 1], G[q, 2]])
+                        self._add_block(B, self._edge_vertex(e, n), self._edge_vertex(e, q),
+                                        kk * gn.outer_product(gq), lower, scaled)
+            for s in range(nst):
+                a, b = self.stitch[s][0], self.stitch[s][1]
+                self._add_block(B, a, a, sc * kst * I, lower, scaled)
+                self._add_block(B, b, b, sc * kst * I, lower, scaled)
+                self._add_block(B, a, b, -sc * kst * I, lower, scaled)
+                self._add_block(B, b, a, -sc * kst * I, lower, scaled)
+
+    @ti.kernel
+    def _gather(self, b: ti.types.ndarray(), nv: ti.i32, scaled: ti.i32):
+        for i in range(nv):
+            r = self.free_index[i]
+            if r >= 0:
+                for c in ti.static(range(3)):
+                    b[3 * r + c] = self.res[i][c] * self._scale_of(i, c, scaled)
+
+    @ti.kernel
+    def _finish(self, sol: ti.types.ndarray(), h: float, nv: ti.i32, scaled: ti.i32):
+        """dv_free += solution (unscaled), then v += dv, x += h v, pins exactly on target."""
+        for i in range(nv):
+            r = self.free_index[i]
+            if r >= 0:
+                for c in ti.static(range(3)):
+                    self.dv[i][c] += sol[3 * r + c] * self._scale_of(i, c, scaled)
+            x, v = ti.static(self.model.state.x, self.model.state.v)
+            v[i] += self.dv[i]
+            x[i] += h * v[i]
+            if self.model.vert_pinned[i] != 0:
+                x[i] = self.model.vert_pin_target[i]

@@ -1,0 +1,327 @@
+"""The interactive app without a window (its state machine: every control has a visible effect
+on the simulation) and its drawing offscreen against checked-in reference images.
+
+Regenerate the reference images (after an intended change of the look or of the dynamics):
+
+    .venv/bin/python -m tests.test_app --regenerate
+"""
+import os
+import sys
+
+import numpy as np
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+REFERENCE_DIR = os.path.join(ROOT, "tests", "reference_images")
+REFERENCE_SIZE = (320, 240)
+REFERENCE_FRAMES = 20
+REFERENCE_MODES = ("shading", "warp-strain")
+# Tolerances for another Vulkan driver or GPU: mean absolute difference (0..1) and the share
+# of pixels that differ by more than a quarter of full scale.
+MEAN_TOL, OUTLIER_TOL = 0.02, 0.02
+
+
+RESOLUTION = 11
+
+
+def run(state, frames):
+    for _ in range(frames):
+        state.tick()
+
+
+@pytest.fixture(scope="module")
+def shared():
+    """One app state for the module: every simulator compiles its kernels once, and
+    ``AppState.reset`` reloads the mesh without compiling again."""
+    from ui.state import AppState
+    return AppState.from_scene("hanging", [{"cloth": {"resolution": RESOLUTION}}])
+
+
+def restore(shared):
+    """Back to frame 0 with the scene's settings."""
+    from ui.state import MATERIAL_KEYS
+    base = shared.base_cfg
+    shared.switch_method(base["strain"]["method"])
+    shared.set_band("warp", *base["strain"]["warp"])
+    shared.set_band("weft", *base["strain"]["weft"])
+    shared.set_auto_bias(True)
+    shared.set_substeps(base["sim"]["substeps"])
+    shared.set_iterations(base["strain"]["iters"])
+    for key in MATERIAL_KEYS:
+        shared.set_material(key, base["material"][key])
+    shared.reset()
+    shared.resume()
+    return shared
+
+
+@pytest.fixture
+def st(shared):
+    return restore(shared)
+
+
+# -- the state machine ------------------------------------------------------------------------
+def test_pause_holds_the_cloth_and_step_advances_exactly_one_frame(st):
+    run(st, 2)
+    st.pause()
+    x0 = st.sim.model.positions()
+    run(st, 3)
+    assert st.sim.frame == 2 and np.array_equal(st.sim.model.positions(), x0)
+    st.step()
+    assert st.sim.frame == 3 and st.paused
+    assert np.abs(st.sim.model.positions() - x0).max() > 1e-4
+    st.resume()
+    run(st, 2)
+    assert st.sim.frame == 5
+
+
+def test_reset_restarts_the_scene_and_keeps_the_settings(st):
+    x_start = st.sim.model.positions()
+    st.set_substeps(2)
+    run(st, 4)
+    assert np.abs(st.sim.model.positions() - x_start).max() > 1e-3
+    st.reset()
+    assert st.sim.frame == 0 and st.sim.time == 0.0
+    assert np.allclose(st.sim.model.positions(), x_start)
+    assert np.allclose(st.sim.model.velocities(), 0.0)
+    assert st.sim.substeps == 2 and np.isclose(st.sim.h, 1 / (2 * st.cfg["sim"]["fps"]))
+
+
+def test_method_switch_limits_the_stretch_at_the_next_step(st):
+    assert st.sim.method == "none"
+    run(st, 12)
+    w_free = st.readouts()["violation"]["warp"][0]
+    st.reset()
+    assert st.switch_method("mapping"), st.message
+    assert st.sim.method == "mapping" and st.sim.stage("strain_limit").enabled
+    run(st, 12)
+    assert st.message == "" and not st.failed
+    w_lim = st.readouts()["violation"]["warp"][0]
+    # The soft default cloth stretches far past the 1 % warp band without limiting.
+    assert w_free > 0.05 and w_lim < 0.5 * w_free
+    assert st.readouts()["sl_iterations"] > 0
+    st.switch_method("none")
+    assert st.sim.method == "none" and not st.sim.stage("strain_limit").enabled
+
+
+def test_band_change_reaches_the_limiter_and_moves_the_bias_band(st):
+    from cloth import metrics
+    st.switch_method("mapping")
+    st.set_band("warp", hi=0.04)
+    assert st.sim.strain.warp == (-0.01, 0.04)
+    assert st.cfg["strain"]["warp"] == [-0.01, 0.04]
+    assert st.auto_bias and st.cfg["strain"]["bias"] == []
+    assert np.allclose(st.sim.strain.bias, metrics.default_bias_band((-0.01, 0.04), (-0.05, 0.05)))
+    # The visible effect: the limiter now lets the warp stretch past the old 1 % edge, up to
+    # about the new one.
+    run(st, 12)
+    r = st.readouts()
+    assert r["strain_max"]["warp"] > 0.02 and r["violation"]["warp"][0] < 0.02
+    st.set_band("bias", lo=-0.04, hi=0.04)
+    assert not st.auto_bias and st.sim.strain.bias == (-0.04, 0.04)
+    assert st.cfg["strain"]["bias"] == [-0.04, 0.04]
+
+
+def test_sliders_change_the_time_step_and_the_material_live(st):
+    run(st, 8)
+    soft_warp, soft_time = st.readouts()["strain_max"]["warp"], st.sim.time
+    st.reset()
+    st.set_material("k_warp", 1000.0)
+    st.set_material("k_weft", 1000.0)
+    assert st.sim.model.material.k_warp == 1000.0 and st.cfg["material"]["k_warp"] == 1000.0
+    st.set_substeps(2)
+    assert st.sim.substeps == 2
+    run(st, 8)
+    assert st.sim.time == pytest.approx(soft_time)
+    assert st.readouts()["strain_max"]["warp"] < 0.5 * soft_warp
+    st.set_iterations(7)
+    assert st.cfg["strain"]["iters"] == 7
+
+
+def test_scripted_vertex_drag_moves_the_cloth_and_releases_it(st):
+    run(st, 5)
+    x = st.sim.model.positions()
+    target_v = int(np.argmin(x[:, 1]))                 # the lowest vertex
+    eye = x[target_v] + np.array([0.0, 0.0, 2.0])
+    hit = st.pick_ray(eye, x[target_v] - eye)
+    assert hit == (0, target_v)
+    assert not st.sim.model.pinned[target_v]
+    st.begin_drag(*hit)
+    goal = x[target_v] + np.array([0.0, 0.3, 0.4])
+    st.drag(goal)
+    run(st, 3)
+    xd = st.sim.model.positions()
+    assert np.allclose(xd[target_v], goal, atol=1e-9)           # held like a moving pin
+    neighbours = np.linalg.norm(st.sim.model.uv - st.sim.model.uv[target_v], axis=1) < 0.2
+    assert xd[neighbours, 2].mean() > x[neighbours, 2].mean() + 0.05   # the cloth follows
+    st.end_drag()
+    assert st.sim.model.vert_pinned[target_v] == 0
+    run(st, 5)
+    assert np.linalg.norm(st.sim.model.positions()[target_v] - goal) > 0.02   # let go: it falls
+
+
+def test_orbit_camera_rays_hit_the_projected_points():
+    from ui.camera import OrbitCamera
+    cam = OrbitCamera((0.3, 1.4, 2.5), (0.0, 1.2, 0.0), 40.0)
+    cam.orbit(0.1, -0.05)
+    cam.pan(0.02, 0.03, 1.6)
+    pts = np.array([[0.1, 1.0, 0.2], [-0.4, 1.6, -0.1]])
+    s, depth = cam.project(pts, 1.6)
+    for p, (sx, sy), z in zip(pts, s, depth):
+        o, d = cam.ray(sx, sy, 1.6)
+        assert np.linalg.norm(np.cross(p - o, d)) < 1e-9 and z > 0
+    cam.reset()
+    assert np.allclose(cam.position, [0.3, 1.4, 2.5])
+
+
+# -- drawing offscreen ----------------------------------------------------------------------
+def reference_renderer():
+    from ui.render import ClothRenderer, open_window
+    window = open_window("test_app", REFERENCE_SIZE, show_window=False)
+    return ClothRenderer(window, {"position": [0, 1.45, 2.6], "lookat": [0, 1.4, 0]})
+
+
+def reference_images(state):
+    """The hanging cloth (RESOLUTION^2 vertices) after REFERENCE_FRAMES frames, each mode."""
+    from ui.render import draw_simulation
+    renderer = reference_renderer()
+    sim = state.sim
+    assert sim.frame == 0 and sim.method == "none"
+    for _ in range(REFERENCE_FRAMES):
+        sim.step_frame()
+    out = {}
+    for mode in REFERENCE_MODES:
+        draw_simulation(renderer, sim, mode)
+        out[mode] = renderer.image()
+    return out, sim, renderer
+
+
+@pytest.fixture(scope="module")
+def rendered(shared):
+    from ui.render import RenderUnavailable
+    restore(shared)
+    try:
+        return reference_images(shared)
+    except RenderUnavailable as err:
+        pytest.skip(f"rendering tests need a Vulkan device (lavapipe will do): {err}")
+
+
+@pytest.mark.parametrize("mode", REFERENCE_MODES)
+def test_offscreen_frame_matches_the_reference_image(rendered, mode):
+    import imageio.v2 as imageio
+    images, _, _ = rendered
+    path = os.path.join(REFERENCE_DIR, f"hanging_{mode}.png")
+    ref = imageio.imread(path)[:, :, :3].astype(float) / 255
+    img = images[mode].astype(float) / 255
+    assert img.shape == ref.shape
+    diff = np.abs(img - ref).max(axis=2)
+    assert diff.mean() < MEAN_TOL and (diff > 0.25).mean() < OUTLIER_TOL, (
+        f"{mode}: mean difference {diff.mean():.4f}, {100 * (diff > 0.25).mean():.2f} % of "
+        f"pixels far off; if the change is intended regenerate with "
+        f"'.venv/bin/python -m tests.test_app --regenerate'")
+
+
+def test_picking_matches_what_ggui_draws(rendered):
+    """The orbit camera's projection is GGUI's: a projected cloth vertex lands on cloth."""
+    images, sim, renderer = rendered
+    img = images["shading"].astype(float) / 255
+    h, w = img.shape[:2]
+    x = sim.model.positions()
+    (sx, sy), = renderer.orbit.project(x[[len(x) // 2]], w / h)[0]
+    px, py = int(sx * w), int((1 - sy) * h)
+    patch = img[py - 2:py + 3, px - 2:px + 3]
+    assert (patch[..., 0] > patch[..., 2] + 0.15).all()       # orange cloth, not background
+
+
+def test_heat_map_marks_the_band_edges():
+    from ui.render import face_colors_legend
+    from cloth.sheet import make_sheet
+    uv, faces = make_sheet(1, 1, 3, 3)
+    grain = np.tile(np.eye(2), (len(faces), 1, 1))
+    rgbs = []
+    for s in (0.0, 0.009, 0.011, -0.011):
+        x = np.c_[uv[:, 0] * (1 + s), uv[:, 1], np.zeros(len(uv))]
+        rgb, legend = face_colors_legend("warp-strain", x, uv, faces, grain,
+                                         {"warp": [-0.01, 0.01]})
+        rgbs.append(rgb[0])
+    white, inside, outside, below = rgbs
+    assert np.allclose(white, white[0], atol=0.01)              # zero strain: white
+    assert inside[0] > inside[2] and outside[0] > outside[2]      # stretched: red side
+    assert np.abs(outside - inside).max() > 0.3                   # a step at the band edge
+    assert below[2] > below[0]                                    # compressed: blue
+    assert legend.marks == [-0.01, 0.0, 0.01] and legend.lo < -0.01 < 0.01 < legend.hi
+
+
+WINDOW_DRIVER = """
+import sys
+sys.path.insert(0, {root!r})
+from cloth import backend
+backend.init("cpu", "f64")
+from ui.state import AppState
+from ui.app import App
+st = AppState.from_scene("hanging", [{{"cloth": {{"resolution": 7}}}}])
+app = App(st, size=(640, 400), out_dir={out!r})
+for k in range(3):
+    app.frame()
+app.toggle_record()
+for k in range(3):
+    app.frame()
+app.toggle_record()
+shot = app.screenshot()
+st.color, st.wireframe = "violation", True
+app.frame()
+print("frame", st.sim.frame, "message", st.message)
+"""
+
+
+def test_window_app_runs_under_xvfb(tmp_path):
+    """The real window (panel, legend, recording, screenshot) in a virtual X server; a
+    separate process, since a window needs its own GGUI context."""
+    import shutil
+    import subprocess
+    if shutil.which("xvfb-run") is None:
+        pytest.skip("xvfb-run is not installed (apt-get install xvfb)")
+    code = WINDOW_DRIVER.format(root=ROOT, out=str(tmp_path))
+    proc = subprocess.run(["xvfb-run", "-a", "-s", "-screen 0 1280x800x24", sys.executable,
+                           "-c", code], capture_output=True, text=True, timeout=300)
+    if "cannot open" in proc.stderr and "Vulkan" in proc.stderr:
+        pytest.skip("no Vulkan device for a window")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "frame 6 message screenshot:" in proc.stdout      # the first window frame does not step
+    rec = next((tmp_path / "recordings").iterdir())
+    assert sorted(p.name for p in rec.iterdir()) == ["frame_0000.png", "frame_0001.png",
+                                                      "frame_0002.png", "video.mp4"]
+    assert len(list((tmp_path / "screenshots").iterdir())) == 1
+
+
+def test_scene_switch_rebuilds_with_that_scenes_defaults(shared):
+    """Last: it replaces the shared simulator with the scene's default one."""
+    st = shared
+    faces = st.sim.model.n_faces
+    assert not st.switch_scene("no-such-scene")
+    assert "unknown scene" in st.message and st.sim.model.n_faces == faces
+    assert st.switch_scene("hanging")
+    assert st.sim.frame == 0 and st.cfg["cloth"]["resolution"] == 25
+    assert st.sim.model.n_faces == 2 * 24 * 24 != faces
+
+
+def regenerate():
+    import imageio.v2 as imageio
+    from cloth import backend
+    backend.init("cpu", "f64")
+    from ui.state import AppState
+    os.makedirs(REFERENCE_DIR, exist_ok=True)
+    images, _, _ = reference_images(
+        AppState.from_scene("hanging", [{"cloth": {"resolution": RESOLUTION}}]))
+    for mode, img in images.items():
+        path = os.path.join(REFERENCE_DIR, f"hanging_{mode}.png")
+        imageio.imwrite(path, img)
+        print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    if "--regenerate" in sys.argv:
+        if ROOT not in sys.path:
+            sys.path.insert(0, ROOT)
+        regenerate()
+    else:
+        print(__doc__)

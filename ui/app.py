@@ -1,0 +1,446 @@
+"""The interactive GGUI app: the 3-D view, the control panel, mouse and keys. All decisions
+live in ``ui.state.AppState``; this module only turns window input into its method calls and
+draws (through ``ui.render``, the same code as headless frames).
+
+Mouse (outside the panel):
+    right drag          orbit around the target        shift + right drag / middle drag: pan
+    ctrl + right drag   zoom (up: closer)               ctrl or shift + left drag: grab cloth
+Keys:
+    space pause/run   n single step   r reset simulation   v reset view   z / x zoom in / out
+    w wireframe   s smooth/flat   c next colour mode   m next method   p screenshot
+    o record on/off   1..7 colour modes   esc quit
+
+Environment: LOOM_APP_FRAMES=N quits after N window frames and prints frame-time statistics
+(used for measurements and smoke tests); LOOM_APP_NO_VSYNC=1 disables vsync.
+"""
+import os
+import sys
+import time
+
+import numpy as np
+import taichi as ti
+
+from cloth.simulator import STRAIN_METHODS
+
+from .render import COLOR_MODES, ClothRenderer, draw_cloth, open_window
+from .state import AppState
+
+PANEL = (0.0, 0.0, 0.26, 1.0)            # controls: x, y (top-down), width, height
+VIEW = (0.74, 0.0, 0.26, 0.56)           # colour modes and read-outs, top right
+LEGEND = (0.74, 0.875, 0.26, 0.125)      # the legend (numbers), bottom right
+BAR = (0.755, 0.14, 0.23, 0.022)         # its colour bar (x, y bottom-up, w, h)
+SHORT = {"dynamics": "dyn", "strain_limit": "limit", "collision": "coll", "remesh": "remesh"}
+COLOR_LABELS = {"shading": "shading", "warp-strain": "warp strain", "weft-strain": "weft strain",
+                "bias-strain": "bias strain", "principal-strain": "max principal strain",
+                "violation": "band violation", "size": "triangle size"}
+
+
+def moved(new, old):
+    """Did the user move a slider? GGUI's sliders hand back float32, so an untouched one
+    differs from the double it was given in the last digits."""
+    return abs(new - old) > 1e-5 * max(1.0, abs(old))
+
+
+class Recorder:
+    """Frames of the 3-D view to PNG files, and to video.mp4 (imageio) when stopped."""
+
+    def __init__(self, folder, fps):
+        self.folder, self.fps, self.count = folder, fps, 0
+        os.makedirs(folder, exist_ok=True)
+
+    def add(self, img):
+        import imageio.v2 as imageio
+        imageio.imwrite(os.path.join(self.folder, f"frame_{self.count:04d}.png"), img)
+        self.count += 1
+
+    def close(self):
+        if self.count == 0:
+            return None
+        import imageio.v2 as imageio
+        path = os.path.join(self.folder, "video.mp4")
+        with imageio.get_writer(path, fps=self.fps, macro_block_size=8, quality=7) as w:
+            for k in range(self.count):
+                w.append_data(imageio.imread(os.path.join(self.folder, f"frame_{k:04d}.png")))
+        return path
+
+
+class App:
+    def __init__(self, state: AppState, size=(1280, 800), out_dir="out"):
+        # Always a shown window: GGUI's panel crashes in an offscreen window (tests drive the
+        # app under Xvfb, see tests/test_app.py).
+        self.state = state
+        vsync = not os.environ.get("LOOM_APP_NO_VSYNC")
+        self.window = open_window("Loom", size, show_window=True, vsync=vsync)
+        self.renderer = ClothRenderer(self.window, state.sim.setup.camera)
+        self.gui = self.window.get_gui()
+        self.out_dir = out_dir
+        self.recorder = None
+        self.mouse = None          # (mode, last cursor) while a camera drag is on
+        self.frame_times = []      # ms per window frame
+        self.render_times = []     # ms of drawing, panel and show per window frame
+        self.parts = []            # (draw, panel, show) ms per window frame
+        self.sim_times = []        # ms of simulation per window frame
+        self.frames_shown = 0
+        self._last = time.perf_counter()
+        self.reset_view()
+
+    # -- view ---------------------------------------------------------------------------------
+    def reset_view(self):
+        r = self.renderer
+        r.set_camera_cfg(self.state.sim.setup.camera)
+        if len(self.state.sims) > 1:
+            # Fit the three cloths between the panels, looking from the scene's direction.
+            pts = np.concatenate([self.state.world_positions(i)
+                                  for i in range(len(self.state.sims))])
+            r.orbit.fit(pts, r.aspect, x_range=(PANEL[2] + 0.01, VIEW[0] - 0.01),
+                        y_range=(0.2, 0.8))
+            r.orbit.home = (r.orbit.position.copy(), r.orbit.target.copy(), r.orbit.fov)
+        r.orbit.apply(r.camera)
+
+    def in_panel(self, pos):
+        x, y = pos
+        yd = 1 - y
+        return x < PANEL[0] + PANEL[2] or (x > VIEW[0] and yd < VIEW[1] + VIEW[3]) or \
+            (x > LEGEND[0] and yd > LEGEND[1] - 0.06 and self.state.color != "shading")
+
+    # -- input --------------------------------------------------------------------------------
+    def handle_events(self):
+        w, st = self.window, self.state
+        pos = w.get_cursor_pos()
+        for e in w.get_events(ti.ui.PRESS):
+            key = e.key
+            if key in (ti.ui.LMB, ti.ui.RMB, ti.ui.MMB):
+                if self.in_panel(pos):
+                    continue
+                mod_ctrl, mod_shift = w.is_pressed(ti.ui.CTRL), w.is_pressed(ti.ui.SHIFT)
+                if key == ti.ui.LMB and (mod_ctrl or mod_shift):
+                    o, d = self.renderer.orbit.ray(*pos, self.renderer.aspect)
+                    hit = st.pick_ray(o, d)
+                    if hit is not None:
+                        st.begin_drag(*hit)
+                        self.mouse = ("grab", pos)
+                elif key == ti.ui.RMB:
+                    mode = "zoom" if mod_ctrl else "pan" if mod_shift else "orbit"
+                    self.mouse = (mode, pos)
+                elif key == ti.ui.MMB:
+                    self.mouse = ("pan", pos)
+            elif key == ti.ui.ESCAPE:
+                w.running = False
+            elif key == " ":
+                st.toggle_pause()
+            elif key == "n":
+                st.step()
+            elif key == "r":
+                self.reset_sim()
+            elif key == "v":
+                self.renderer.reset_camera()
+            elif key == "z":
+                self.renderer.orbit.zoom(0.85)
+            elif key == "x":
+                self.renderer.orbit.zoom(1 / 0.85)
+            elif key == "w":
+                st.wireframe = not st.wireframe
+            elif key == "s":
+                st.smooth = not st.smooth
+            elif key == "c":
+                st.color = COLOR_MODES[(COLOR_MODES.index(st.color) + 1) % len(COLOR_MODES)]
+            elif key == "m" and not st.compare:
+                st.switch_method(STRAIN_METHODS[(STRAIN_METHODS.index(st.sim.method) + 1)
+                                                % len(STRAIN_METHODS)])
+            elif key == "p":
+                self.screenshot()
+            elif key == "o":
+                self.toggle_record()
+            elif isinstance(key, str) and key in "1234567" and len(key) == 1:
+                st.color = COLOR_MODES[int(key) - 1]
+        for e in w.get_events(ti.ui.RELEASE):
+            if e.key in (ti.ui.LMB, ti.ui.RMB, ti.ui.MMB) and self.mouse is not None:
+                if self.mouse[0] == "grab" and e.key == ti.ui.LMB:
+                    st.end_drag()
+                    self.mouse = None
+                elif self.mouse[0] != "grab" and e.key != ti.ui.LMB:
+                    self.mouse = None
+        if self.mouse is not None:
+            mode, last = self.mouse
+            dx, dy = pos[0] - last[0], pos[1] - last[1]
+            orbit = self.renderer.orbit
+            if mode == "orbit":
+                orbit.orbit(dx, dy)
+            elif mode == "pan":
+                orbit.pan(dx, dy, self.renderer.aspect)
+            elif mode == "zoom":
+                orbit.zoom(float(np.exp(-2.0 * dy)))
+            elif mode == "grab":
+                o, d = orbit.ray(*pos, self.renderer.aspect)
+                p = st.drag_plane_point(o, d)
+                if p is not None:
+                    st.drag(p)
+            self.mouse = (mode, pos)
+
+    def reset_sim(self):
+        self.state.reset()
+
+    # -- panel --------------------------------------------------------------------------------
+    def panel(self):
+        g, st = self.gui, self.state
+        with g.sub_window("Loom", *PANEL):
+            # Scene and run control.
+            g.text(f"scene: {st.scene_name}" + ("   (comparison)" if st.compare else ""))
+            import scenes
+            names = list(scenes.SCENES)
+            if len(names) > 1:
+                for name in names:
+                    if name != st.scene_name and g.button(f"load {name}"):
+                        if st.switch_scene(name):
+                            self.reset_view()
+            if g.button("run" if st.paused else "pause"):
+                st.toggle_pause()
+            if g.button("step one frame"):
+                st.step()
+            if g.button("reset simulation"):
+                self.reset_sim()
+            if g.button("reset view"):
+                self.renderer.reset_camera()
+            if g.button("stop recording" if self.recorder else "record"):
+                self.toggle_record()
+            if g.button("screenshot"):
+                self.screenshot()
+            if st.message:
+                g.text(st.message[:200], color=(0.8, 0.1, 0.1))
+
+            # Strain limiting.
+            g.text("")
+            g.text("strain limiting" + (": svd | warp-weft | mapping" if st.compare else ""))
+            if not st.compare:
+                for m in STRAIN_METHODS:
+                    if g.checkbox(m, st.sim.method == m) and st.sim.method != m:
+                        st.switch_method(m)
+            b = st.bands()
+            for name in ("warp", "weft", "bias"):
+                lo, hi = b[name]
+                nlo = g.slider_float(f"{name} min %", 100 * lo, -20.0, 0.0) / 100
+                nhi = g.slider_float(f"{name} max %", 100 * hi, 0.0, 20.0) / 100
+                if moved(nlo, lo) or moved(nhi, hi):
+                    st.set_band(name, nlo, nhi)
+            auto = g.checkbox("automatic bias band", st.auto_bias)
+            if auto != st.auto_bias:
+                st.set_auto_bias(auto)
+            iters = g.slider_int("SL iterations", int(st.cfg["strain"]["iters"]), 1, 200)
+            if iters != st.cfg["strain"]["iters"]:
+                st.set_iterations(iters)
+
+            # Dynamics.
+            g.text("")
+            sub = g.slider_int("substeps", int(st.cfg["sim"]["substeps"]), 1, 20)
+            if sub != st.cfg["sim"]["substeps"]:
+                st.set_substeps(sub)
+            mat = st.cfg["material"]
+            for key, lo, hi in (("k_warp", -1.0, 4.0), ("k_weft", -1.0, 4.0),
+                                ("k_shear", -2.0, 3.0), ("k_bend", -8.0, -3.0)):
+                old = np.log10(max(mat[key], 1e-12))
+                new = g.slider_float(f"log10 {key}", old, lo, hi)
+                if moved(new, old):
+                    st.set_material(key, 10 ** new)
+            for key, hi in (("damp_mass", 2.0), ("damp_stiff", 0.02)):
+                new = g.slider_float(key, float(mat[key]), 0.0, hi)
+                if moved(new, mat[key]):
+                    st.set_material(key, new)
+            if st.has_remesh:
+                on = g.checkbox("remeshing", st.remesh_on)
+                if on != st.remesh_on:
+                    st.set_remesh(on)
+            if st.has_self_collision:
+                on = g.checkbox("self-collision", st.self_collision_on)
+                if on != st.self_collision_on:
+                    st.set_self_collision(on)
+
+        with g.sub_window("view", *VIEW):
+            g.text("colour (keys 1-7)")
+            for m in COLOR_MODES:
+                if g.checkbox(COLOR_LABELS[m], st.color == m):
+                    st.color = m
+            st.wireframe = g.checkbox("wireframe (w)", st.wireframe)
+            st.smooth = g.checkbox("smooth shading (s)", st.smooth)
+            g.text("")
+            self.readouts()
+
+    def readouts(self):
+        g, st = self.gui, self.state
+        for i in range(len(st.sims)):
+            r = st.readouts(i)
+            if i == 0:
+                g.text(f"frame {r['frame']}  t = {r['time']:.2f} s  "
+                       f"{r['faces']} faces")
+                g.text(f"{self.fps():.1f} fps  render {st.render_ms:.1f} ms  "
+                       f"sim {sum(st.readouts(k)['sim_ms'] for k in range(len(st.sims))):.1f} ms")
+            if st.compare:
+                continue      # per-method numbers sit under each cloth
+            stages = "  ".join(f"{SHORT.get(k, k)} {v:.1f}" for k, v in r["stage_ms"].items())
+            g.text(f"method {r['method']}")
+            g.text(f"  ms: {stages}")
+            g.text(f"  SL iters {r['sl_iterations']}  CG iters {r['cg_iterations']}")
+            for name in ("warp", "weft", "bias"):
+                mx, rms = r["violation"][name]
+                g.text(f"  {name:4s} violation max {100 * mx:6.2f}%  rms {100 * rms:6.2f}%")
+
+    def legend(self, lg):
+        if lg is None:
+            return
+        g = self.gui
+        with g.sub_window("legend", *LEGEND):
+            g.text(lg.title + (f"  ({lg.note})" if lg.note else ""))
+            edges = [m for m in lg.marks if m != 0.0]
+            if edges:
+                g.text("band " + " .. ".join(lg.fmt(m) for m in edges) + "  (ticks; pale inside)")
+            g.text(f"{lg.fmt(lg.lo)}" + " " * 18 + f"{lg.fmt(lg.hi)}")
+
+    def labels(self):
+        """Method names above the three cloths of the comparison view."""
+        st, orbit = self.state, self.renderer.orbit
+        for i, label in enumerate(st.labels):
+            x = st.world_positions(i)
+            top = np.array([0.5 * (x[:, 0].min() + x[:, 0].max()), x[:, 1].max() + 0.08,
+                            0.5 * (x[:, 2].min() + x[:, 2].max())])
+            (sx, sy), = orbit.project(top[None], self.renderer.aspect)[0]
+            r = st.readouts(i)
+            w, h = 0.155, 0.16
+            if 0 <= sx <= 1 and 0 <= sy <= 1:
+                with self.gui.sub_window(label, float(np.clip(sx - w / 2, 0, 1 - w)),
+                                         float(np.clip(1 - sy - h, 0, 1 - h)), w, h):
+                    sl = r["stage_ms"].get("strain_limit", 0.0)
+                    self.gui.text(f"SL {r['sl_iterations']} it, {sl:.1f} ms")
+                    for name in ("warp", "weft", "bias"):
+                        mx, rms = r["violation"][name]
+                        self.gui.text(f"{name} max {100 * mx:.2f}% rms {100 * rms:.2f}%")
+
+    # -- drawing ------------------------------------------------------------------------------
+    def draw(self):
+        st, r = self.state, self.renderer
+        r.begin()
+        legend = None
+        for i, s in enumerate(st.sims):
+            strains = st.strains(i) if st.color not in ("shading", "size") else None
+            lg = draw_cloth(r, s, f"cloth{i}", st.color, wireframe=st.wireframe,
+                            smooth=st.smooth, offset=st.offsets[i], strains=strains)
+            legend = legend or lg
+        if st.grab is not None:
+            i, v = st.grab[:2]
+            x = st.world_positions(i)[v]
+            size = np.ptp(st.world_positions(i), axis=0).max()
+            r.add_points("grab", np.stack([x, st.grab_target]), 0.02 * size, (0.1, 0.75, 0.25))
+        r.finish(legend, BAR)
+        return legend
+
+    def screenshot(self, path=None):
+        import imageio.v2 as imageio
+        folder = os.path.join(self.out_dir, "screenshots")
+        os.makedirs(folder, exist_ok=True)
+        stamp = time.strftime("%Y%m%d_%H%M%S")
+        path = path or os.path.join(
+            folder, f"{self.state.scene_name}_{stamp}_f{self.state.sim.frame:04d}.png")
+        self.draw()
+        imageio.imwrite(path, self.renderer.image())
+        self.state.message = f"screenshot: {path}"
+        return path
+
+    def toggle_record(self):
+        st = self.state
+        if self.recorder is None:
+            folder = os.path.join(self.out_dir, "recordings",
+                                  f"{st.scene_name}_{time.strftime('%Y%m%d_%H%M%S')}")
+            self.recorder = Recorder(folder, st.cfg["sim"]["fps"])
+            st.message = f"recording to {folder}/"
+        else:
+            path = self.recorder.close()
+            st.message = f"recorded {self.recorder.count} frames" + (f": {path}" if path else "")
+            self.recorder = None
+
+    def fps(self):
+        recent = self.frame_times[-30:]
+        return 1000.0 / (sum(recent) / len(recent)) if recent else 0.0
+
+    # -- the loop -----------------------------------------------------------------------------
+    def frame(self):
+        st = self.state
+        self.handle_events()
+        stepped_before = st.sim.frame
+        ts = time.perf_counter()
+        if self.frames_shown == 1 and st.message.startswith("compiling"):
+            st.message = ""
+        if self.frames_shown > 0:
+            # The first window frame shows the initial state before the first step compiles
+            # the kernels (tens of seconds for three simulators in the comparison view).
+            st.tick()
+        elif not st.message:
+            st.message = "compiling the simulation kernels: the first step can take a while"
+        self.frames_shown += 1
+        t0 = time.perf_counter()
+        self.sim_times.append(1e3 * (t0 - ts))
+        legend = self.draw()
+        if self.recorder is not None and st.sim.frame != stepped_before:
+            self.recorder.add(self.renderer.image())
+        t1 = time.perf_counter()
+        self.panel()
+        self.legend(legend)
+        if st.compare:
+            self.labels()
+        t2 = time.perf_counter()
+        self.window.show()
+        now = time.perf_counter()
+        st.render_ms = 1e3 * (now - t0)
+        self.render_times.append(st.render_ms)
+        self.parts.append((1e3 * (t1 - t0), 1e3 * (t2 - t1), 1e3 * (now - t2)))
+        self.frame_times.append(1e3 * (now - self._last))
+        st.fps = self.fps()
+        self._last = now
+
+    def run(self, max_frames=None):
+        n = 0
+        while self.window.running and (max_frames is None or n < max_frames):
+            self.frame()
+            n += 1
+        if self.recorder is not None:
+            self.toggle_record()
+        return 0
+
+    def stats(self, skip=10):
+        """Mean window frame time, render time and simulation time (ms) after ``skip``
+        warm-up frames."""
+        ft = np.array(self.frame_times[skip:]) if len(self.frame_times) > skip else \
+            np.array(self.frame_times)
+        rt = np.array(self.render_times[skip:]) if len(self.render_times) > skip else \
+            np.array(self.render_times)
+        parts = np.array(self.parts[skip:] if len(self.parts) > skip else self.parts)
+        return {"frames": len(ft), "frame_ms": float(ft.mean()) if ft.size else 0.0,
+                "draw_ms": float(parts[:, 0].mean()) if parts.size else 0.0,
+                "panel_ms": float(parts[:, 1].mean()) if parts.size else 0.0,
+                "show_ms": float(parts[:, 2].mean()) if parts.size else 0.0,
+                "render_ms": float(rt.mean()) if rt.size else 0.0,
+                "fps": 1000.0 / float(ft.mean()) if ft.size else 0.0}
+
+
+def _run(state):
+    max_frames = os.environ.get("LOOM_APP_FRAMES")
+    app = App(state)
+    code = app.run(int(max_frames) if max_frames else None)
+    if max_frames:
+        s = app.stats()
+        share = 100 * s["render_ms"] / max(s["frame_ms"], 1e-9)
+        print(f"loom: {s['frames']} window frames, {s['fps']:.1f} fps, "
+              f"frame {s['frame_ms']:.1f} ms, render {s['render_ms']:.1f} ms ({share:.0f} %: "
+              f"draw {s['draw_ms']:.1f}, panel {s['panel_ms']:.1f}, show {s['show_ms']:.1f}), "
+              f"simulation {np.mean(app.sim_times[10:] or [0]):.1f} ms, "
+              f"{state.sim.model.n_faces} faces", file=sys.stderr)
+    return code
+
+
+def run_app(sim, cfg, module):
+    """The interactive window for one simulator. Raises ``RenderUnavailable`` (with a
+    message that names the fix) when no window can be opened. Returns the exit code."""
+    return _run(AppState(sim, cfg, module))
+
+
+def run_compare(cfg, module):
+    """The teaching view: the same scene with svd, warp-weft and mapping side by side in one
+    window, labelled, sharing every control."""
+    return _run(AppState(None, cfg, module, compare=True))

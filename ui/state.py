@@ -1,0 +1,454 @@
+"""The interactive app as a state machine, separate from the window: every panel control, key
+and mouse gesture of ``ui/app.py`` is one method here, so tests drive it without a display.
+
+One ``AppState`` holds one simulator, or three in the comparison view (the same scene with
+the methods svd, warp-weft and mapping side by side). Controls that change settings apply to
+every simulator; ``switch_method`` applies to the single view only.
+
+    state = AppState.from_scene("hanging")
+    state.switch_method("mapping"); state.set_band("warp", hi=0.02)
+    state.tick()                     # one frame unless paused
+    v = state.pick_ray(origin, direction)[1]
+    state.begin_drag(0, v); state.drag(point); state.tick(); state.end_drag()
+"""
+import copy
+import traceback
+
+import numpy as np
+
+from cloth import metrics
+from cloth.simulator import STRAIN_METHODS, SimulationDiverged, Simulator
+
+COMPARE_METHODS = ("svd", "warp-weft", "mapping")
+BANDS = ("warp", "weft", "bias")
+MATERIAL_KEYS = ("k_warp", "k_weft", "k_shear", "k_bend", "damp_mass", "damp_stiff")
+
+
+def build_simulator(module, cfg):
+    setup = module.build(cfg)
+    return Simulator(setup, cfg)
+
+
+class AppState:
+    def __init__(self, sim, cfg, module, compare=False):
+        self.module = module
+        self.scene_name = cfg.get("scene", getattr(module, "__name__", "scene").split(".")[-1])
+        self.compare = compare
+        self.base_cfg = copy.deepcopy(cfg)     # the scene's settings as started (reset target)
+        self.color = cfg.get("output", {}).get("color", "shading")
+        self.wireframe = False
+        self.smooth = True
+        self.paused = False
+        self.message = ""           # last error or notice, shown in the panel
+        self.failed = False         # the simulation diverged or a stage raised: reset first
+        self.render_ms = 0.0
+        self.fps = 0.0
+        self.grab = None            # (sim index, vertex, was_pinned, old_target, uv) while held
+        self.grab_target = None
+        self._strain_cache = {}
+        self.auto_bias = not cfg.get("strain", {}).get("bias")
+        self._install(sim, cfg)
+
+    @classmethod
+    def from_scene(cls, name, overrides=(), compare=False):
+        import scenes
+        from scenes.common import resolve
+        module = scenes.get(name)
+        cfg = resolve(module.DEFAULTS, list(overrides))
+        cfg["scene"] = name
+        sim = None if compare else build_simulator(module, cfg)
+        return cls(sim, cfg, module, compare=compare)
+
+    # -- building -----------------------------------------------------------------------------
+    def _install(self, sim, cfg):
+        """Adopt ``sim`` (or build the three comparison simulators) for ``cfg``."""
+        self.cfg = cfg
+        if self.compare:
+            self.sims, self.labels = [], []
+            for m in COMPARE_METHODS:
+                c = copy.deepcopy(cfg)
+                c["strain"]["method"] = m
+                self.sims.append(build_simulator(self.module, c))
+                self.labels.append(m)
+        else:
+            self.sims = [sim if sim is not None else build_simulator(self.module, cfg)]
+            self.labels = [self.sims[0].method]
+        self.offsets = self._layout()
+        self.grab = None
+        self._self_solvers = [s.collider.self_solver if s.collider is not None else None
+                              for s in self.sims]
+        self._strain_cache.clear()
+
+    def _layout(self):
+        """World offsets of the simulators: side by side along x in the comparison view."""
+        if len(self.sims) == 1:
+            return [np.zeros(3)]
+        x = self.sims[0].model.positions()
+        width = max(np.ptp(x[:, 0]), np.ptp(x[:, 2]), 0.2)
+        gap = 1.35 * width
+        k = len(self.sims)
+        return [np.array([(i - (k - 1) / 2) * gap, 0.0, 0.0]) for i in range(k)]
+
+    @property
+    def sim(self):
+        return self.sims[0]
+
+    def _each(self, fn):
+        """Apply ``fn(sim)`` to every simulator; a ValueError becomes the panel message."""
+        try:
+            for s in self.sims:
+                fn(s)
+            return True
+        except (ValueError, ImportError) as err:
+            self.message = str(err)
+            return False
+
+    # -- time ---------------------------------------------------------------------------------
+    def pause(self):
+        self.paused = True
+
+    def resume(self):
+        if self.failed:
+            return      # a diverged run must be reset first
+        self.paused = False
+
+    def toggle_pause(self):
+        self.resume() if self.paused else self.pause()
+
+    def tick(self):
+        """One window frame: advance the simulation one frame unless paused."""
+        if not self.paused:
+            self._advance()
+
+    def step(self):
+        """Advance exactly one frame (the single-step button); pauses."""
+        self.paused = True
+        if not self.failed:
+            self._advance()
+
+    def _advance(self):
+        for i, s in enumerate(self.sims):
+            try:
+                s.step_frame()
+            except SimulationDiverged as err:
+                self.paused = self.failed = True
+                self.message = f"diverged ({self.labels[i]}): {err}. Press reset."
+                return False
+            except Exception as err:   # a stage failed: keep the window, show why, pause
+                traceback.print_exc()
+                self.paused = self.failed = True
+                first = str(err).strip().splitlines()
+                self.message = (f"stage error ({self.labels[i]}): {type(err).__name__}"
+                                f" {first[0][:160] if first else ''} (traceback on stderr). "
+                                "Press reset.")
+                return False
+            if self.grab is not None and self.grab[0] == i and s.stage("remesh").enabled:
+                self._regrab()
+        self._strain_cache.clear()
+        return True
+
+    def reset(self):
+        """Restart the scene with the current settings (method, bands, sliders kept). The
+        simulators reload the scene's initial mesh into their fields, so no kernel compiles
+        again; if that fails they are rebuilt."""
+        self.end_drag()
+        self.message, self.failed = "", False
+        try:
+            for s in self.sims:
+                self._restart(s)
+        except Exception:       # anything unexpected: the slow, sure way
+            traceback.print_exc()
+            self._install(None, copy.deepcopy(self.cfg))
+        self._strain_cache.clear()
+
+    @staticmethod
+    def _restart(s):
+        m = s.model
+        m.load(s.setup.mesh)                 # the builder's mesh: the initial state
+        s.dynamics.on_mesh_changed()
+        if s.strain is not None:
+            s.strain.on_mesh_changed()       # cold multipliers
+        if s.collider is not None and hasattr(s.collider, "on_mesh_changed"):
+            s.collider.on_mesh_changed()
+        s.frame, s.time = 0, 0.0
+        s.last_good = m.mesh_arrays()
+        for stage in s.stages:
+            stage.ms = 0.0
+
+    def switch_scene(self, name):
+        """Load another scene with its defaults (the colour mode is kept)."""
+        import scenes
+        from scenes.common import resolve
+        try:
+            module = scenes.get(name)
+            cfg = resolve(module.DEFAULTS, [])
+        except (KeyError, ValueError) as err:
+            self.message = str(err).strip("'\"")
+            return False
+        cfg["scene"] = name
+        self.module, self.scene_name = module, name
+        self.base_cfg = copy.deepcopy(cfg)
+        self.auto_bias = not cfg["strain"].get("bias")
+        self.message, self.failed = "", False
+        self._install(None, cfg)
+        return True
+
+    # -- strain limiting ----------------------------------------------------------------------
+    def switch_method(self, name):
+        """Switch the strain-limiting method live (next substep). Single view only."""
+        if self.compare:
+            self.message = "the comparison view runs all three methods"
+            return False
+        if name not in STRAIN_METHODS:
+            self.message = f"unknown method '{name}'"
+            return False
+        ok = self._each(lambda s: s.set_method(name))
+        if ok:
+            self.cfg["strain"]["method"] = name
+            self.labels = [name]
+        return ok
+
+    @property
+    def method(self):
+        return "compare" if self.compare else self.sim.method
+
+    def bands(self):
+        """Current (warp, weft, bias) bands; bias from the automatic rule when auto."""
+        s = self.cfg["strain"]
+        warp, weft = tuple(s["warp"]), tuple(s["weft"])
+        bias = metrics.default_bias_band(warp, weft) if self.auto_bias or not s["bias"] \
+            else tuple(s["bias"])
+        return {"warp": warp, "weft": weft, "bias": bias}
+
+    def set_band(self, which, lo=None, hi=None):
+        """Move one edge (or both) of the warp, weft or bias band; min stays <= 0 <= max.
+        Changing bias turns off its automatic value."""
+        if which not in BANDS:
+            raise ValueError(f"band must be one of {BANDS}")
+        old = self.bands()[which]
+        lo = old[0] if lo is None else min(float(lo), 0.0)
+        hi = old[1] if hi is None else max(float(hi), 0.0)
+        lo = max(lo, -0.9)
+        new = {which: (lo, hi)}
+        if which == "bias":
+            self.auto_bias = False
+        elif self.auto_bias:
+            b = self.bands()
+            b[which] = (lo, hi)
+            new["bias"] = metrics.default_bias_band(b["warp"], b["weft"])
+        ok = self._each(lambda s: s.set_bands(**new))
+        if ok:
+            for k, v in new.items():
+                if k != "bias" or not self.auto_bias:
+                    self.cfg["strain"][k] = list(v)
+                for s in self.sims:
+                    if k != "bias" or not self.auto_bias:
+                        s.cfg["strain"][k] = list(v)
+                    else:
+                        s.cfg["strain"]["bias"] = []
+        self._strain_cache.clear()
+        return ok
+
+    def set_auto_bias(self, on=True):
+        self.auto_bias = bool(on)
+        if on:
+            self.cfg["strain"]["bias"] = []
+            b = self.bands()
+            return self._each(lambda s: (s.set_bands(bias=b["bias"]),
+                                         s.cfg["strain"].__setitem__("bias", [])))
+        return True
+
+    def set_iterations(self, n):
+        n = max(1, int(n))
+        self.cfg["strain"]["iters"] = n
+        for s in self.sims:
+            s.cfg["strain"]["iters"] = n
+            if s.strain is not None:
+                s.strain.max_iters = n
+
+    # -- time step and material ---------------------------------------------------------------
+    def set_substeps(self, n):
+        n = max(1, int(n))
+        self.cfg["sim"]["substeps"] = n
+        for s in self.sims:
+            s.cfg["sim"]["substeps"] = n
+            s.substeps = n
+            s.h = 1.0 / (s.cfg["sim"]["fps"] * n)
+
+    def set_material(self, key, value):
+        """Change a stiffness or damping live (the dynamics reads the material every step)."""
+        if key not in MATERIAL_KEYS:
+            raise ValueError(f"material key must be one of {MATERIAL_KEYS}")
+        value = float(value)
+        if value < 0 or (key in ("k_warp", "k_weft") and value <= 0):
+            self.message = f"material.{key} must be positive"
+            return False
+        self.cfg["material"][key] = value
+        for s in self.sims:
+            s.cfg["material"][key] = value
+            setattr(s.model.material, key, value)
+        return True
+
+    # -- optional stages ----------------------------------------------------------------------
+    @property
+    def has_remesh(self):
+        return "remesh" in self.cfg
+
+    @property
+    def remesh_on(self):
+        return self.sim.stage("remesh").enabled
+
+    def set_remesh(self, on):
+        if not self.has_remesh:
+            self.message = "this scene has no remeshing settings"
+            return False
+
+        def apply(s):
+            if on and s.remesher is None:
+                s._make_remesher(s.cfg["remesh"])
+            s.stage("remesh").enabled = bool(on) and s.remesher is not None
+            s.cfg["remesh"]["enabled"] = bool(on)
+        ok = self._each(apply)
+        if ok:
+            self.cfg["remesh"]["enabled"] = bool(on)
+        return ok
+
+    @property
+    def has_self_collision(self):
+        return any(sc is not None for sc in self._self_solvers)
+
+    @property
+    def self_collision_on(self):
+        c = self.sim.collider
+        return c is not None and c.self_solver is not None
+
+    def set_self_collision(self, on):
+        if not self.has_self_collision:
+            self.message = "this scene has no self-collision"
+            return False
+        for s, solver in zip(self.sims, self._self_solvers):
+            s.collider.self_solver = solver if on else None
+            s.collider.self_collision = bool(on)
+            if not s.setup.obstacles:
+                s.stage("collision").enabled = bool(on)
+        return True
+
+    # -- picking and dragging -----------------------------------------------------------------
+    def world_positions(self, i):
+        return self.sims[i].model.positions() + self.offsets[i]
+
+    def pick_ray(self, origin, direction, max_dist=None):
+        """The cloth vertex nearest to a world ray (drawn positions, comparison offsets
+        included): (sim index, vertex) or None if none lies within ``max_dist`` of the ray
+        (default: 3 % of the cloth size). Among close vertices the nearest to the eye wins."""
+        o = np.asarray(origin, float)
+        d = np.asarray(direction, float)
+        d = d / np.linalg.norm(d)
+        best = None
+        for i in range(len(self.sims)):
+            x = self.world_positions(i)
+            rel = x - o
+            t = rel @ d
+            perp = np.linalg.norm(rel - t[:, None] * d, axis=1)
+            lim = max_dist if max_dist is not None else 0.03 * max(np.ptp(x, axis=0).max(), 0.1)
+            ok = (perp < lim) & (t > 0)
+            if not ok.any():
+                continue
+            cand = np.flatnonzero(ok)
+            # Front-most: within a small depth window of the nearest hit, take the closest to
+            # the ray.
+            tmin = t[cand].min()
+            front = cand[t[cand] < tmin + lim]
+            v = int(front[np.argmin(perp[front])])
+            if best is None or t[v] < best[2]:
+                best = (i, v, t[v])
+        return None if best is None else best[:2]
+
+    def begin_drag(self, i, v):
+        """Hold vertex ``v`` of simulator ``i``: it becomes a pin that follows ``drag``."""
+        if self.grab is not None:
+            self.end_drag()
+        m = self.sims[i].model
+        was = int(m.vert_pinned[v])
+        old = np.array(m.vert_pin_target[v], float)
+        self.grab = (i, int(v), was, old, m.uv[v].copy())
+        self.grab_target = m.positions()[v] + self.offsets[i]
+        self._pin(i, v, self.grab_target - self.offsets[i])
+
+    def drag(self, point):
+        """Move the held vertex's target to ``point`` (world, as drawn)."""
+        if self.grab is None:
+            return
+        i, v = self.grab[:2]
+        self.grab_target = np.asarray(point, float)
+        self._pin(i, v, self.grab_target - self.offsets[i])
+
+    def end_drag(self):
+        """Release: the vertex gets back its own pin state and target."""
+        if self.grab is None:
+            return
+        i, v, was, old, _ = self.grab
+        m = self.sims[i].model
+        if v < m.n_verts:
+            m.vert_pinned[v] = was
+            m.vert_pin_target[v] = old.tolist()
+        self.grab = None
+        self.grab_target = None
+
+    def _pin(self, i, v, target):
+        m = self.sims[i].model
+        m.vert_pinned[v] = 1
+        m.vert_pin_target[v] = [float(c) for c in target]
+
+    def _regrab(self):
+        """After a remesh, vertex numbers change: find the held material point again."""
+        i, _, was, old, uv = self.grab
+        m = self.sims[i].model
+        v = int(np.argmin(np.linalg.norm(m.uv - uv, axis=1)))
+        was = int(m.pinned[v])
+        old = np.array(m.vert_pin_target[v], float)
+        self.grab = (i, v, was, old, uv)
+        self._pin(i, v, self.grab_target - self.offsets[i])
+
+    def drag_plane_point(self, origin, direction):
+        """Where a ray meets the plane through the held point facing the ray (for mouse
+        drags); None if nothing is held."""
+        if self.grab is None:
+            return None
+        o, d = np.asarray(origin, float), np.asarray(direction, float)
+        p = self.grab_target
+        n = d / np.linalg.norm(d)
+        t = (p - o) @ n
+        return o + t * n / max(n @ n, 1e-12)
+
+    # -- read-outs ----------------------------------------------------------------------------
+    def strains(self, i=0):
+        """Face strains of simulator ``i`` (cached until the next frame or band change)."""
+        key = (i, self.sims[i].frame)
+        if key not in self._strain_cache:
+            self._strain_cache[key] = self.sims[i].face_strains()
+        return self._strain_cache[key]
+
+    def readouts(self, i=0):
+        """Numbers for the panel: frame, time, faces, stage and render times, iterations, and
+        per-band max and area-weighted RMS violation (strain)."""
+        s = self.sims[i]
+        st = self.strains(i)
+        area = s.model.rest_area
+        b = self.bands()
+        out = {"frame": s.frame, "time": s.time, "faces": s.model.n_faces,
+               "vertices": s.model.n_verts, "method": s.method,
+               "stage_ms": {st_.name: st_.ms for st_ in s.stages if st_.enabled},
+               "sim_ms": sum(st_.ms for st_ in s.stages),
+               "render_ms": self.render_ms, "fps": self.fps,
+               "sl_iterations": s.strain.last_iterations if s.strain is not None
+               and s.stage("strain_limit").enabled else 0,
+               "cg_iterations": s.dynamics.last_cg_iters}
+        viol = {}
+        for name in BANDS:
+            v = metrics.band_violation(st[name], b[name])
+            viol[name] = metrics.summarize(v, area)
+        out["violation"] = viol
+        out["strain_max"] = {n: float(np.max(st[n])) for n in BANDS}
+        out["strain_min"] = {n: float(np.min(st[n])) for n in BANDS}
+        return out
