@@ -170,6 +170,10 @@ class Simulator:
             self.strain.on_mesh_changed()
         if self.collider is not None:
             self.collider.on_mesh_changed()
+        # Flips and collapses change some triangles' deformation; project once more so the
+        # limits hold on the new mesh at the end of every frame (nearly free when they do).
+        if self.strain is not None and self.stage("strain_limit").enabled:
+            self.strain.project(self.h)
 
     def _obstacle_distance(self, points):
         """Signed distance of world points to the nearest obstacle now (for remeshing)."""
