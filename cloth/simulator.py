@@ -92,8 +92,16 @@ class Simulator:
             self._make_collider()
         if cfg.get("remesh", {}).get("enabled", False):
             self._make_remesher(cfg["remesh"])
+        self._relax_initial_state()
         self.last_good = self.model.mesh_arrays()
         self.remesh_stats = {}
+
+    def _relax_initial_state(self):
+        """Project a scene's starting shape onto the strain limits without touching the
+        velocities (h = 0): a start outside the limits (a garment wrapped around a body) would
+        otherwise be corrected in the first substep with a velocity jump of dx / h."""
+        if self.strain is not None and self.stage("strain_limit").enabled:
+            self.strain.project(0.0)
 
     # -- stages -------------------------------------------------------------------------------
     def _make_dynamics(self, stitches):
