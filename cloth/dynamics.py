@@ -341,6 +341,22 @@ class ImplicitEuler:
             if self.model.vert_pinned[i] != 0:
                 dst[i] = ti.Vector([0.0, 0.0, 0.0])
 
+    @ti.func
+    def _linearise(self, h, g, kw, kf, ks, kb, alpha, beta, kst, nv: ti.i32, nf: ti.i32,
+                   ne: ti.i32, nst: ti.i32):
+        """Forces and element quantities at the start of the step, the diagonal blocks of A
+        (in ``precond``) and the right-hand side h (f - alpha M v) - h (beta + h) K v."""
+        m, v = ti.static(self.model.vert_mass, self.model.state.v)
+        for i in range(nv):
+            self.force[i] = m[i] * g
+            self.precond[i] = (1.0 + h * alpha) * m[i] * ti.Matrix.identity(float, 3)
+        self._update_kinematics(nf, ne)
+        self._add_elastic_forces(kw, kf, ks, kb, kst, nf, ne, nst)
+        self._add_K_diagonal(h * (beta + h), kw, kf, ks, kb, kst, nf, ne, nst)
+        for i in range(nv):
+            self.rhs[i] = h * (self.force[i] - alpha * m[i] * v[i])
+        self._add_K_product(v, self.rhs, -h * (beta + h), kw, kf, ks, kb, kst, nf, ne, nst, 0)
+
     @ti.kernel
     def _step(self, h: float, g: ti.types.vector(3, float), kw: float, kf: float, ks: float,
               kb: float, alpha: float, beta: float, kst: float, nv: ti.i32, nf: ti.i32,
@@ -349,18 +365,8 @@ class ImplicitEuler:
         # phase costs more than the work below ~50k triangles (METHOD.md section 4 hints).
         ti.loop_config(serialize=True)
         for _ in range(1):
-            x, v, m = ti.static(self.model.state.x, self.model.state.v, self.model.vert_mass)
-            # Forces and element quantities at the start of the step.
-            for i in range(nv):
-                self.force[i] = m[i] * g
-                self.precond[i] = (1.0 + h * alpha) * m[i] * ti.Matrix.identity(float, 3)
-            self._update_kinematics(nf, ne)
-            self._add_elastic_forces(kw, kf, ks, kb, kst, nf, ne, nst)
-            self._add_K_diagonal(h * (beta + h), kw, kf, ks, kb, kst, nf, ne, nst)
-            # Right-hand side: h (f - alpha M v) - h (beta + h) K v.
-            for i in range(nv):
-                self.rhs[i] = h * (self.force[i] - alpha * m[i] * v[i])
-            self._add_K_product(v, self.rhs, -h * (beta + h), kw, kf, ks, kb, kst, nf, ne, nst, 0)
+            x, v = ti.static(self.model.state.x, self.model.state.v)
+            self._linearise(h, g, kw, kf, ks, kb, alpha, beta, kst, nv, nf, ne, nst)
             # Pinned vertices: the dv that lands them on their target at the end of the step.
             # Free vertices start CG from the last step's dv (warm start: near rest, successive
             # velocity changes are alike); on_mesh_changed zeroes it after a remesh.

@@ -181,16 +181,8 @@ class SparseImplicitEuler(ImplicitEuler):
         the compact free-vertex index and the diagonal blocks of A in ``precond``."""
         ti.loop_config(serialize=True)
         for _ in range(1):
-            x, v, m = ti.static(self.model.state.x, self.model.state.v, self.model.vert_mass)
-            for i in range(nv):
-                self.force[i] = m[i] * g
-                self.precond[i] = (1.0 + h * alpha) * m[i] * ti.Matrix.identity(float, 3)
-            self._update_kinematics(nf, ne)
-            self._add_elastic_forces(kw, kf, ks, kb, kst, nf, ne, nst)
-            self._add_K_diagonal(h * (beta + h), kw, kf, ks, kb, kst, nf, ne, nst)
-            for i in range(nv):
-                self.rhs[i] = h * (self.force[i] - alpha * m[i] * v[i])
-            self._add_K_product(v, self.rhs, -h * (beta + h), kw, kf, ks, kb, kst, nf, ne, nst, 0)
+            x, v = ti.static(self.model.state.x, self.model.state.v)
+            self._linearise(h, g, kw, kf, ks, kb, alpha, beta, kst, nv, nf, ne, nst)
             n_free = 0
             for i in range(nv):
                 if self.model.vert_pinned[i] != 0:
