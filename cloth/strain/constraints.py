@@ -38,6 +38,10 @@ N_CONSTRAINTS = {"svd": 4, "warp-weft": 6, "mapping": 8}
 METHOD_IDS = {"svd": 0, "warp-weft": 1, "mapping": 2}
 K_MAX = 8
 
+# Regularisation of 1/(eta1 - eta2) in the svd family's principal-frame curvature (a Newton
+# model term only: values and gradients do not depend on it). See svd_constraints.
+SVD_DELTA = 1e-4
+
 # Regularisation of 1/(eta1^2 - eta2^2) in the principal-direction derivative (METHOD 3.3).
 # 1/D -> D/(D^2 + delta^2): bounded by 1/(2 delta), zero at D = 0 (where V is arbitrary and the
 # exact value is 0 * inf). Error: the V-term is multiplied by D^2/(D^2 + delta^2), a relative
@@ -55,7 +59,7 @@ MAPPING_DELTA = 1e-6
 def _constraints_type(k):
     return ti.types.struct(g=ti.types.vector(k, float), grad=ti.types.matrix(k, 9, float),
                            cm=ti.types.matrix(k, 3, float), what=ti.types.matrix(k, 3, float),
-                           kappa=ti.types.vector(k, float))
+                           kappa=ti.types.vector(k, float), twist=ti.types.matrix(k, 9, float))
 
 
 Constraints4, Constraints6, Constraints8 = (_constraints_type(k) for k in (4, 6, 8))
@@ -173,9 +177,22 @@ def set_band(out: ti.template(), c_lo: ti.template(), c_hi: ti.template(), sqa, 
 
 # ---- the three families (METHOD 3.1-3.3) ---------------------------------------------------
 @ti.func
-def svd_constraints(x0, x1, x2, Dm_inv, sqa, warp, weft):
+def svd_constraints(x0, x1, x2, Dm_inv, sqa, warp, weft, delta):
     """METHOD 3.1 / paper eq. 7: eta1 in the warp band, eta2 in the weft band; the grain is
-    ignored on purpose (isotropic limit). d eta_j / dx_n = (M_n . v_j) U_j (eq. 8/9)."""
+    ignored on purpose (isotropic limit). d eta_j / dx_n = (M_n . v_j) U_j (eq. 8/9).
+
+    Curvature: ``kappa`` models eta_j as ||F v_j|| with v_j frozen. The exact second
+    derivative (checked against finite differences of numpy's SVD) is, with
+    a = U_1.dF v_2, b = U_2.dF v_1 (the in-plane twist) and n = U_1 x U_2,
+        d2 eta_1 = (a + b)^2 / (2 (eta1 - eta2)) + (a - b)^2 / (2 (eta1 + eta2))
+                   + (n.dF v_1)^2 / eta1,
+        d2 eta_2 = -(a + b)^2 / (2 (eta1 - eta2)) + (a - b)^2 / (2 (eta1 + eta2))
+                   + (n.dF v_2)^2 / eta2,
+    so the upper eta_1 and the lower eta_2 constraints gain the positive semi-definite term
+    T T^T / (2 (eta1 - eta2)), T_n = (M_n.v_2) U_1 + (M_n.v_1) U_2, stored as ``twist`` =
+    sqrt(sqa / 2 * r) T with 1/(eta1 - eta2) regularised to r = D / (D^2 + delta^2) (bounded
+    where eta1 = eta2, where eta_1 is not differentiable). Without it Newton cannot see that
+    a triangle near eta1 = eta2 can shed its largest stretch by turning its frame."""
     out = Constraints4(0)
     F = deformation_gradient(x0, x1, x2, Dm_inv)
     eta1, eta2, V, U, _D = stretch_svd(F)
@@ -188,6 +205,16 @@ def svd_constraints(x0, x1, x2, Dm_inv, sqa, warp, weft):
         cm = Mr @ vj
         set_band(out, 2 * j, 2 * j + 1, sqa, eta, band, spread(cm, uj), cm, uj,
                  1.0 / ti.max(eta, 1e-2))
+    gap = eta1 - eta2
+    r = gap / (gap * gap + delta * delta)
+    v1 = ti.Vector([V[0, 0], V[1, 0]])
+    v2 = ti.Vector([V[0, 1], V[1, 1]])
+    u1 = ti.Vector([U[0, 0], U[1, 0], U[2, 0]])
+    u2 = ti.Vector([U[0, 1], U[1, 1], U[2, 1]])
+    tw = ti.sqrt(0.5 * sqa * r) * (spread(Mr @ v2, u1) + spread(Mr @ v1, u2))
+    for m in ti.static(range(9)):
+        out.twist[1, m] = tw[m]        # eta_1 upper
+        out.twist[2, m] = tw[m]        # eta_2 lower
     return out
 
 
@@ -283,7 +310,7 @@ def face_constraints(method: ti.template(), x0, x1, x2, Dm_inv, grain, sqa, warp
                      delta, by_alignment: ti.template()):
     """Dispatch on the (compile-time) method id of METHOD_IDS."""
     if ti.static(method == 0):
-        return svd_constraints(x0, x1, x2, Dm_inv, sqa, warp, weft)
+        return svd_constraints(x0, x1, x2, Dm_inv, sqa, warp, weft, delta)
     elif ti.static(method == 1):
         return warp_weft_constraints(x0, x1, x2, Dm_inv, grain, sqa, warp, weft, shear)
     else:

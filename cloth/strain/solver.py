@@ -18,9 +18,9 @@ import time
 import numpy as np
 
 from .. import metrics
-from .constraints import MAPPING_DELTA, METHOD_IDS, N_CONSTRAINTS
+from .constraints import MAPPING_DELTA, METHOD_IDS, N_CONSTRAINTS, SVD_DELTA
 from . import workspace as W
-from .workspace import ST_CG, ST_COMP, ST_ITERS, ST_NEWTON, ST_VIOL, Workspace
+from .workspace import ST_CG, ST_CONVERGED, ST_ITERS, ST_NEWTON, ST_VIOL, Workspace
 
 METHOD_NAMES = ("svd", "warp-weft", "mapping", "none")
 SOLVERS = ("al", "jacobi", "gauss-seidel")
@@ -58,11 +58,32 @@ class StrainLimiter:
 
     After each ``project`` call: ``last_iterations``, ``last_violation_max`` (strain units),
     ``last_converged``, ``last_ms``, and for the AL ``last_newton`` / ``last_cg`` totals.
+
+    AL settings: ``max_newton`` Newton steps per round, each a PCG solve of at most
+    ``max_cg`` iterations (times sqrt(n_faces / 1000) above 1000 faces) to the relative
+    residual ``cg_rtol``; penalty ``mu_scale`` x the
+    mean vertex mass, x ``mu_grow`` per round, capped at ``mu_max_scale`` x the mean mass.
+    ``active_margin`` (strain): constraints this close to activating are already in the
+    Newton model. ``adaptive_margin`` adapts that margin like a trust region (a full step
+    divides it by 4, a short one multiplies it by 4): with a fixed 1e-2 margin the inner
+    solves converge only linearly near the solution, so tight solves (the KKT test) use it;
+    on 1k-triangle projections it was not better than the fixed margin, so it is off by
+    default. ``svd_delta`` (attribute, default ``constraints.SVD_DELTA``; 0 disables) is the
+    regularisation of the svd family's principal-frame curvature.
+
+    Measured on the hanging scene (about 1k triangles, one substep per frame): the whole AL
+    solve runs as one kernel launch (with one launch per phase, Python's handling of the
+    kernel arguments cost as much as the solve), ``cg_rtol`` = 0.1 needs as many Newton
+    steps as 1e-3 with half the CG iterations, and the svd curvature halves svd's CG work.
+    Tried without gain: fewer Newton steps per round (1-3: more rounds, 1 diverges), a higher
+    or faster-growing penalty, a larger CG budget, starting PCG from the previous call's
+    correction, and an exact Newton step (sparse Cholesky): the rounds are bound by the
+    non-smooth active set, not by the linear solves.
     """
 
     def __init__(self, model, method="mapping", warp=(-0.01, 0.01), weft=(-0.05, 0.05),
                  bias=None, solver="al", tol=1e-4, max_iters=None, max_newton=5,
-                 max_cg=50, cg_rtol=1e-3, mu_scale=1e2, mu_grow=4.0, mu_max_scale=1e6,
+                 max_cg=50, cg_rtol=0.1, mu_scale=1e2, mu_grow=4.0, mu_max_scale=1e6,
                  mapping_delta=MAPPING_DELTA, jacobi_omega=1.0, active_margin=1e-2,
                  adaptive_margin=False):
         if solver not in SOLVERS:
@@ -91,6 +112,7 @@ class StrainLimiter:
         self.max_newton, self.max_cg, self.cg_rtol = int(max_newton), int(max_cg), cg_rtol
         self.mu_scale, self.mu_grow, self.mu_max_scale = mu_scale, mu_grow, mu_max_scale
         self.mapping_delta = float(mapping_delta)
+        self.svd_delta = SVD_DELTA
         self.jacobi_omega = float(jacobi_omega)
         self.active_margin = float(active_margin)
         self.adaptive_margin = bool(adaptive_margin)
@@ -139,12 +161,13 @@ class StrainLimiter:
     def _upload_params(self):
         if self._ws is None or self.warp is None or self.weft is None:
             return
-        params = np.zeros(8)
+        params = np.zeros(W.N_PARAMS)
         params[W.P_WARP:W.P_WARP + 2] = self.warp
         params[W.P_WEFT:W.P_WEFT + 2] = self.weft
         params[W.P_SHEAR:W.P_SHEAR + 2] = self.shear_band()
         params[W.P_MARGIN] = self.active_margin
         params[W.P_DELTA] = self.mapping_delta
+        params[W.P_SVD_DELTA] = self.svd_delta
         self._ws.params.from_numpy(params)
 
     # ---- mesh changes --------------------------------------------------------------------
@@ -222,83 +245,32 @@ class StrainLimiter:
     def _assemble(self, mid, pos):
         ws = self._ws
         W.assemble(mid, self.model.n_faces, pos, ws.face_verts, ws.Dm_inv, ws.grain,
-                   ws.rest_area, ws.params, ws.g, ws.grad, ws.cm, ws.what, ws.kappa)
-
-    def _merit(self, K, mu, pos):
-        ws, m = self._ws, self.model
-        return W.merit_at(K, m.n_verts, m.n_faces, mu, pos, ws.x_hat, ws.mass, ws.lam, ws.g)
+                   ws.rest_area, ws.params, ws.g, ws.grad, ws.cm, ws.what, ws.kappa,
+                   ws.twist)
 
     def _solve_al(self, mid, K):
-        """The AL loop (METHOD 4): rounds of inexact minimisation of L_A by projected Newton
-        with a backtracking line search, then the multiplier step of eq. 27 and mu *= 4."""
+        """The AL loop (METHOD 4), one kernel launch (workspace.solve_al): rounds of inexact
+        minimisation of L_A by projected Newton with a backtracking line search, then the
+        multiplier step of eq. 27 and mu *= mu_grow. Returns (rounds, Newton steps,
+        converged)."""
         ws, m = self._ws, self.model
-        nv, nf = m.n_verts, m.n_faces
         mean_mass = self._mean_mass()
         mu, mu_max = self.mu_scale * mean_mass, self.mu_max_scale * mean_mass
         # An inner loop stops once its steps are far below the tolerance (in metres).
-        step_tol = 0.01 * self.tol * float(np.sqrt(np.mean(m.rest_area[:nf])))
-        self._assemble(mid, ws.x)
-        if W.max_violation(K, nf, ws.rest_area, ws.g) < self.tol:
-            # x_hat is feasible, so it is its own projection (all multipliers 0 for this
-            # call); the warm-start multipliers are kept for the next call.
-            ws.stats[ST_VIOL] = W.max_violation(K, nf, ws.rest_area, ws.g)
-            return 0, 0, True
-        rounds, newton, converged = 0, 0, False
-        margin = self.active_margin
-        while rounds < self.max_iters and not converged:
-            for _ in range(self.max_newton):
-                ws.params[W.P_MARGIN] = margin
-                slope = W.newton_direction(
-                    K, nv, nf, mu, self.max_cg, self.cg_rtol, ws.params, ws.x, ws.x_hat,
-                    ws.mass, ws.pinned, ws.face_verts, ws.rest_area, ws.lam, ws.g, ws.grad,
-                    ws.cm, ws.what, ws.kappa, ws.d, ws.r, ws.z, ws.p, ws.Ap, ws.P_inv,
-                    ws.stats)
-                newton += 1
-                if not slope < 0.0:
-                    break
-                step, alpha = self._line_search(mid, K, mu, slope)
-                if self.adaptive_margin:
-                    margin = self._adapt_margin(margin, alpha)
-                if step < step_tol:
-                    break
-            W.update_multipliers(K, nf, mu, mu_max, ws.rest_area, ws.lam, ws.g, ws.stats)
-            rounds += 1
-            stats = ws.stats.to_numpy()
-            # Feasible and complementary (the multiplier step moved little).
-            converged = stats[ST_VIOL] < self.tol and stats[ST_COMP] < self.tol
-            mu = min(mu * self.mu_grow, mu_max)
-        return rounds, newton, converged
-
-    @staticmethod
-    def _adapt_margin(margin, alpha):
-        """Adapt the near-activity margin of the Newton model (workspace.apply_hessian) like a
-        trust region: after a full step trust the exact active set more (margin / 4), after a
-        short one widen it (x 4). Measured: with a fixed 1e-2 margin the inner solves converge
-        only linearly near the solution (the model is stiff in directions that are not), so
-        tight solves (KKT test) use this; on 1k-triangle cold projections it was not better
-        than the fixed margin, so it is off by default."""
-        if alpha >= 1.0:
-            return margin * 0.25
-        if alpha < 0.25:
-            return min(max(4.0 * margin, 1e-4), 0.1)
-        return margin
-
-    def _line_search(self, mid, K, mu, slope, shrink=0.5, tries=12):
-        """Backtracking (Armijo) on L_A along d. Leaves the constraints assembled at the new
-        x. Returns the largest vertex move and the step fraction (0, 0 if none accepted)."""
-        ws, nv = self._ws, self.model.n_verts
-        L0 = self._merit(K, mu, ws.x)
-        alpha = 1.0
-        for _ in range(tries):
-            trial = W.try_step(mid, K, nv, self.model.n_faces, mu, alpha, ws.x, ws.d,
-                               ws.x_trial, ws.x_hat, ws.mass, ws.lam, ws.face_verts,
-                               ws.Dm_inv, ws.grain, ws.rest_area, ws.params, ws.g, ws.grad,
-                               ws.cm, ws.what, ws.kappa)
-            if trial <= L0 + 1e-4 * alpha * slope:
-                return W.accept_trial(nv, ws.x, ws.x_trial), alpha
-            alpha *= shrink
-        self._assemble(mid, ws.x)
-        return 0.0, 0.0
+        step_tol = 0.01 * self.tol * float(np.sqrt(np.mean(m.rest_area[:m.n_faces])))
+        # CG iterations grow with the cloth's diameter in triangles (corrections travel across
+        # it): above 1000 faces the budget grows like sqrt(n_faces / 1000). Measured on the
+        # hanging scene at 3.9k faces: 50 iterations left 3-7 of 20 substeps unconverged,
+        # ~100 none (mapping) and 2 (warp-weft), at half the time of the old defaults.
+        max_cg = int(round(self.max_cg * max(1.0, np.sqrt(m.n_faces / 1000.0))))
+        W.solve_al(mid, K, m.n_verts, m.n_faces, mu, self.mu_grow, mu_max, self.max_iters,
+                   self.max_newton, max_cg, self.cg_rtol, self.tol, step_tol,
+                   int(self.adaptive_margin), ws.params, ws.x, ws.x_hat, ws.x_trial, ws.mass,
+                   ws.pinned, ws.face_verts, ws.Dm_inv, ws.grain, ws.rest_area, ws.lam, ws.g,
+                   ws.grad, ws.cm, ws.what, ws.kappa, ws.twist, ws.b, ws.d, ws.r, ws.z, ws.p,
+                   ws.Ap, ws.P_inv, ws.stats)
+        stats = ws.stats.to_numpy()
+        return int(stats[ST_ITERS]), int(stats[ST_NEWTON]), bool(stats[ST_CONVERGED] > 0)
 
     def constraint_values(self):
         """(n_faces, k) constraint values g / sqrt(a) (strain units, <= 0 satisfied) of the
