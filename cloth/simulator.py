@@ -68,9 +68,8 @@ class Simulator:
         self.substeps = int(sim["substeps"])
         self.frame, self.time = 0, 0.0
         self.grow_count = 0
-        remeshing = bool(cfg.get("remesh", {}).get("enabled", False))
         self.model = ClothModel(setup.mesh, setup.material,
-                                capacity_factor=2.0 if remeshing else 1.2)
+                                capacity_factor=self._capacity_factor(setup.mesh, cfg))
         self._pin_rest = setup.mesh.pin_target.copy()
         self.dynamics_settings = DynamicsSettings(
             gravity=tuple(sim["gravity"]), stitch_stiffness=float(sim.get("stitch_stiffness", 0.0)),
@@ -95,6 +94,19 @@ class Simulator:
         self._relax_initial_state()
         self.last_good = self.model.mesh_arrays()
         self.remesh_stats = {}
+
+    @staticmethod
+    def _capacity_factor(mesh, cfg, cap_faces=200_000):
+        """Spare room in the fields. With remeshing, room for the finest mesh the sizing
+        allows (2.5 x the count of equilateral triangles of edge size_min that tile it), so a
+        refining cloth rarely outgrows its fields (growing means recompiling the kernels)."""
+        rcfg = cfg.get("remesh", {})
+        if not rcfg.get("enabled", False):
+            return 1.2
+        from .metrics import material_areas
+        area = material_areas(mesh.uv, mesh.faces).sum()
+        finest = 2.5 * area / (0.433 * rcfg["size_min"] ** 2)
+        return max(2.0, min(finest, cap_faces) / len(mesh.faces))
 
     def _relax_initial_state(self):
         """Project a scene's starting shape onto the strain limits without touching the

@@ -40,14 +40,14 @@ def test_switching_method_mid_run_takes_effect_next_substep():
     assert sim.metrics_row()["own_violation_max"] < TOL
 
 
-@pytest.mark.parametrize("method", METHODS)
-def test_remeshing_hanging_keeps_limits_and_invariants(method):
+@pytest.mark.parametrize("method,frames", [("svd", 60), ("warp-weft", 60), ("mapping", 300)])
+def test_remeshing_hanging_keeps_limits_and_invariants(method, frames):
     sim, cfg = make_sim(cloth={"resolution": 9}, strain={"method": method},
                         remesh={"enabled": True, "size_min": 0.06, "size_max": 0.2})
     area0 = sim.model.rest_area.sum()
     pins_uv = sim.model.uv[sim.model.pinned].copy()
     counts = set()
-    for _ in range(60):
+    for _ in range(frames):
         sim.step_frame()
         row = sim.metrics_row()
         counts.add(row["faces"])
