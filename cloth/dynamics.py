@@ -62,31 +62,33 @@ class ImplicitEuler:
             np.asarray(stitches, np.int32).reshape(-1, 2)
         self.last_cg_iters = 0
         self.last_cg_residual = 0.0
-        self._allocated_for = None
+        # Every field is allocated once, here: kernels keep the fields they were compiled
+        # with, so a field made later would leave them reading a stale (or freed) one. The
+        # model never grows in place (the simulator builds a new model and new solvers).
+        V, F, E = model.v_cap, model.f_cap, model.e_cap
+        vec = lambda n: ti.Vector.field(3, float, n)  # noqa: E731
+        self.force, self.dv, self.rhs, self.res = vec(V), vec(V), vec(V), vec(V)
+        self.z, self.p, self.Ap = vec(V), vec(V), vec(V)
+        self.precond = ti.Matrix.field(3, 3, float, V)
+        self.face_fu, self.face_fv, self.face_E = vec(F), vec(F), vec(F)
+        self.face_wa, self.face_wb = vec(F), vec(F)   # warp / weft weights of the 3 verts
+        self.edge_grad = ti.Matrix.field(4, 3, float, E)
+        self.edge_theta = ti.field(float, E)
+        self.scalars = ti.field(float, 4)
+        self.stitch_cap = max(len(self.stitches_np), 1)
+        self.stitch = ti.Vector.field(2, ti.i32, self.stitch_cap)
         self.on_mesh_changed()
 
     # -- allocation ---------------------------------------------------------------------------
     def on_mesh_changed(self):
-        """Call after the model's fields were refilled (remeshing). Work fields follow the
-        model's capacity and are reallocated only when it grew."""
-        m = self.model
-        caps = (m.v_cap, m.f_cap, m.e_cap)
-        if self._allocated_for != caps:
-            V, F, E = caps
-            vec = lambda n: ti.Vector.field(3, float, n)  # noqa: E731
-            self.force, self.dv, self.rhs, self.res = vec(V), vec(V), vec(V), vec(V)
-            self.z, self.p, self.Ap = vec(V), vec(V), vec(V)
-            self.precond = ti.Matrix.field(3, 3, float, V)
-            self.face_fu, self.face_fv, self.face_E = vec(F), vec(F), vec(F)
-            self.face_wa, self.face_wb = vec(F), vec(F)   # warp / weft weights of the 3 verts
-            self.edge_grad = ti.Matrix.field(4, 3, float, E)
-            self.edge_theta = ti.field(float, E)
-            self.scalars = ti.field(float, 4)
-            self._allocated_for = caps
+        """Call after the model's fields were refilled (remeshing): forget the warm start and
+        upload the (remapped) stitch pairs."""
+        if len(self.stitches_np) > self.stitch_cap:
+            raise ValueError(f"{len(self.stitches_np)} stitches exceed the {self.stitch_cap} "
+                             "this solver was built for: build a new ImplicitEuler")
         self.dv.fill(0.0)
-        ns = max(len(self.stitches_np), 1)
-        self.stitch = ti.Vector.field(2, ti.i32, ns)
-        self.stitch.from_numpy(np.resize(self.stitches_np, (ns, 2)).astype(np.int32))
+        self.stitch.from_numpy(np.resize(self.stitches_np, (self.stitch_cap, 2)).astype(np.int32)
+                               if len(self.stitches_np) else np.zeros((1, 2), np.int32))
         self.n_stitches = len(self.stitches_np)
 
     def set_stitches(self, pairs):
