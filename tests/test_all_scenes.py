@@ -30,15 +30,16 @@ def test_scene_runs_and_passes_its_check(name, tmp_path):
 
 
 def test_scenes_enable_only_what_they_need():
-    stages = {}
+    stages, self_coll = {}, set()
     for name in scenes.SCENES:
         sim, cfg = make_sim(name, **SMALL.get(name, {}))
         stages[name] = {s.name for s in sim.stages if s.enabled}
         assert (sim.collider is not None) == bool(sim.setup.obstacles or sim.setup.self_collision)
+        if sim.setup.self_collision:
+            self_coll.add(name)
     assert stages["hanging"] == {"dynamics"}
     assert "collision" in stages["drape"] and "collision" in stages["tshirt"]
     assert "collision" not in stages["pull"]
-    self_coll = {n for n in scenes.SCENES if make_sim(n, **SMALL.get(n, {}))[0].setup.self_collision}
     assert self_coll == {"tshirt"}
 
 
@@ -46,7 +47,7 @@ def test_scenes_enable_only_what_they_need():
                    "the projection and undoes the strain limits (own violation reaches O(0.1-1) "
                    "once the cloth touches the body or the sphere); contacts must enter the "
                    "projection")
-@pytest.mark.parametrize("name,frames", [("tshirt", 4), ("drape", 14)])
+@pytest.mark.parametrize("name,frames", [("tshirt", 2), ("drape", 14)])
 def test_obstacle_contacts_keep_the_strain_limits(name, frames):
     sim, cfg = make_sim(name, **SMALL.get(name, {}))
     worst = 0.0

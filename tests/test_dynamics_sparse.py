@@ -32,7 +32,7 @@ def settings(**kw):
     return DynamicsSettings(stitch_stiffness=30.0, **kw)
 
 
-@pytest.mark.parametrize("solver", ["llt", "ldlt"])
+@pytest.mark.parametrize("solver", ["llt"])   # ldlt: python -m benchmarks.linear_solver
 def test_sparse_direct_step_matches_tight_matrix_free_step(rng, solver):
     m = pinned_sheet(rng)
     x0, v0 = m.positions(), m.velocities()
@@ -56,22 +56,6 @@ def test_sparse_direct_step_matches_tight_matrix_free_step(rng, solver):
     assert np.abs(m.positions() - x0).max() > 1e-3 and np.abs(m.velocities() - v0).max() > 1e-2
 
 
-def test_sparse_cg_step_matches_tight_matrix_free_step(rng):
-    m = pinned_sheet(rng)
-    v0 = m.velocities()
-    x0 = m.positions()
-    h = 1.0 / 60.0
-    ref = ImplicitEuler(m, settings(cg_tol=1e-13, cg_max_iters=5000), stitches=STITCHES)
-    ref.step(h)
-    v_ref = m.velocities()
-    set_positions(m, x0)
-    set_velocities(m, v0)
-    sp = SparseImplicitEuler(m, settings(cg_tol=1e-13, cg_max_iters=5000), stitches=STITCHES,
-                             linear_solver="sparse-cg")
-    sp.step(h)
-    assert np.abs(m.velocities() - v_ref).max() < 1e-8
-
-
 def test_sparse_step_without_pins_free_fall():
     # No pins, no elastic force on a rigid translation: backward Euler free fall, exactly.
     mat = Material(density=0.2, k_warp=30.0, k_weft=30.0, k_shear=5.0, k_bend=1e-5,
@@ -84,19 +68,6 @@ def test_sparse_step_without_pins_free_fall():
         dyn.step(h)
     drop = (m.positions() - x0)[:, 1]
     assert np.allclose(drop, -9.81 * h * h * n * (n + 1) / 2, rtol=1e-9, atol=1e-12)
-
-
-def test_matrix_free_mode_is_the_parent_step(rng):
-    m = pinned_sheet(rng)
-    x0, v0 = m.positions(), m.velocities()
-    a = ImplicitEuler(m, settings(), stitches=STITCHES)
-    a.step(1 / 60)
-    xa = m.positions()
-    set_positions(m, x0)
-    set_velocities(m, v0)
-    b = SparseImplicitEuler(m, settings(), stitches=STITCHES, linear_solver="matrix-free")
-    b.step(1 / 60)
-    assert np.array_equal(m.positions(), xa) and b.last_cg_iters == a.last_cg_iters
 
 
 def test_unknown_solver_is_refused():
