@@ -57,7 +57,7 @@ def measure(sim):
     out["own_violation_max"] = row["own_violation_max"]
     out["warp_violation_max"] = row["warp_violation_max"]
     out["weft_violation_max"] = row["weft_violation_max"]
-    ef = m._np_cache["edge_faces"]
+    ef = m.edge_faces.to_numpy()[: m.n_edges]
     eo = m.edge_opp.to_numpy()[: m.n_edges]
     out.update(metrics.wrinkle_measures(x, m.faces, m.edges, ef, eo, m.uv))
     out["height"] = float(x[:, 1].max() - x[:, 1].min())

@@ -20,7 +20,7 @@ def chest_measures(sim):
         panel = np.zeros(m.n_faces, int)
     c = x[m.faces].mean(axis=1)
     chest = (panel == 0) & (c[:, 1] > 1.15) & (c[:, 1] < 1.40) & (np.abs(c[:, 0]) < 0.15)
-    ef = m._np_cache["edge_faces"]
+    ef = m.edge_faces.to_numpy()[: m.n_edges]
     eo = m.edge_opp.to_numpy()[: m.n_edges]
     inner = (ef[:, 1] >= 0)
     keep = inner.copy()
