@@ -5,10 +5,14 @@ a pose ``(c, R)`` maps local to world, ``x = R p + c``. A static obstacle has a 
 scripted one gets its pose from ``path(t)`` (a Python callable of time), evaluated once per
 substep on the host at the substep's start and end time and sent to the kernel as arguments.
 
-The collider runs once per substep, after strain limiting (METHOD.md section 1, step 5):
+The collider runs once per substep (METHOD.md section 1, step 5):
 
     col = Collider(model, [Plane(...), Sphere(...)], thickness=0.004, self_collision=False)
     col.resolve(h, t)          # t = time at the *start* of the substep, h = substep length
+
+With strain limiting the Simulator runs it before the projection and hands the projection the
+contacts as half-space constraints (``contact_planes``), then runs the obstacle pass once more
+to remove what the planes' linearisation leaves (see ``Simulator._strain_limit``).
 
 For each cloth vertex it needs where the vertex was at the substep's start; with implicit Euler
 followed by a velocity-consistent strain projection (``v += dx / h``) that is exactly
@@ -148,6 +152,13 @@ class Obstacle:
             self.sdf_local(p + ti.Vector([0.0, 0.0, e])) - self.sdf_local(p - ti.Vector([0.0, 0.0, e])),
         ])
         return safe_normalize(g, ti.Vector([0.0, 0.0, 1.0]))
+
+    @ti.func
+    def nearest_two(self, p):
+        """The two nearest parts of the shape as (sdf1, normal1, sdf2, normal2), for contact
+        planes; a single solid has one part (sdf2 = 1e30). Unions override it: near a
+        concave corner the second part's plane keeps the cloth out of it."""
+        return self.sdf_local(p), self.grad_local(p), 1e30, ti.Vector([0.0, 0.0, 1.0])
 
     # pose --------------------------------------------------------------------------------------
     @property
@@ -410,6 +421,7 @@ class Collider:
         self._last_t = 0.0
         self._counter = ti.field(ti.i32, ())
         self._maxval = ti.field(float, ())
+        self._moved = ti.field(float, ())      # largest push of the last obstacle pass (m)
         self.self_solver = None
         if self.self_collision:
             from .collision_self import SelfCollision
@@ -453,14 +465,27 @@ class Collider:
         self.last_ms_obstacles = 1e3 * (t_end - t_mid)
         self.last_ms = 1e3 * (t_end - t_start)
 
-    def _obstacle_pass(self, h, t, out, mark):
+    def resolve_obstacles(self, h, t):
+        """The obstacle pass of ``resolve`` alone, keeping its statistics (the Simulator's
+        ``collision_final`` stage after the projection), without the continuous test: the
+        crossings were caught before the projection, and after it ``x - h v`` is no longer
+        where the vertex started (the first pass moved x without the matching v), so a
+        continuous test from there finds false crossings (measured on tshirt: vertices thrown
+        to the far side of an arm, 27 cm). Returns how far it moved the vertex it moved most
+        (m)."""
+        self._moved[None] = 0.0
+        if self.obstacles:
+            self._obstacle_pass(h, t, self._counter, False, ccd=False)
+        return float(self._moved[None])
+
+    def _obstacle_pass(self, h, t, out, mark, ccd=True):
         st = self.model.state
         n = self.model.n_verts
         for o in self.obstacles:
             c0, R0 = o.pose(t)
             c1, R1 = o.pose(t + h)
             vlin, omega = o.velocity(t, h)
-            step = min(o.ccd_step(self.thickness), 1e30)
+            step = min(o.ccd_step(self.thickness), 1e30) if ccd else -1.0
             self._resolve_obstacle(o, st.x, st.v, self.model.vert_pinned, out, mark, n, h,
                                    self.thickness, o.mu, ti.Matrix(R0), ti.Vector(c0),
                                    ti.Matrix(R1), ti.Vector(c1), ti.Vector(vlin),
@@ -489,7 +514,7 @@ class Collider:
                 s_hit = 0.0        # fraction of the substep before the contact began
                 nloc = ti.Vector([0.0, 0.0, 1.0])
                 entry = False
-                if phi0 >= 0.0:
+                if phi0 >= 0.0 and step > 0.0:      # step <= 0: no continuous test
                     # Continuous test: walk the relative motion in the obstacle's frame and find
                     # the first time the thickened surface is crossed.
                     seg = p1 - p0
@@ -560,6 +585,7 @@ class Collider:
                             if ph < 0.0:
                                 pt = pt - ph * o.grad_local(pt)
                         xn = R1 @ pt + c1
+                    ti.atomic_max(self._moved[None], (xn - x1).norm())
                     x[i] = xn
                     if ti.static(not mark):
                         ti.atomic_add(out[None], 1)
@@ -569,6 +595,60 @@ class Collider:
                     # too, and must not count as supported.)
                     if phi0 < 0.1 * th:
                         out[i] = 1
+
+    # -- contacts as constraints of the strain projection -----------------------------------
+    def contact_planes(self, t, out, reach=None):
+        """Write each free vertex's contact half-space at time t into ``out`` (a Taichi ndarray
+        of vec4 per vertex, ``StrainLimiter.contact_planes``): for the vertex's nearest
+        obstacle within ``reach`` (m, at least ``thickness``) of the thickened surface, the
+        tangent plane of that surface as (n, d) with n.x >= d on the free side; elsewhere
+        (0, 0, 0, -1e30), which no position violates. ``out`` has two slots per vertex: the
+        two nearest planes over the obstacles and their parts (``Obstacle.nearest_two``), so
+        a vertex in a concave corner of a body (arm against torso) keeps out of both parts
+        instead of being pushed from one into the other by the fix-up passes.
+
+        The strain projection then keeps contact vertices outside while it limits the
+        strains, instead of the collider pushing them out afterwards and undoing the limits
+        (issue #5). ``reach`` also catches vertices the projection would pull into the
+        obstacle. On a curved obstacle the plane is its linearisation: a vertex sliding along
+        it by s sinks by about s^2 / (2 radius), which the obstacle pass after the projection
+        removes (``test_obstacle_contacts_keep_the_strain_limits`` in tests/test_all_scenes.py)."""
+        reach = self.thickness if reach is None else max(float(reach), self.thickness)
+        n = self.model.n_verts
+        self._clear_planes(n, out)
+        for o in self.obstacles:
+            c, R = o.pose(t)
+            self._planes(o, self.model.state.x, self.model.vert_pinned, n, self.thickness,
+                         reach, ti.Matrix(R), ti.Vector(c), out)
+
+    @ti.kernel
+    def _clear_planes(self, n: ti.i32, out: ti.types.ndarray()):
+        for i in range(n):
+            for j in ti.static(range(2)):
+                out[i, j] = ti.Vector([0.0, 0.0, 0.0, -1e30])
+
+    @ti.kernel
+    def _planes(self, o: ti.template(), x: ti.template(), pinned: ti.template(), n: ti.i32,
+                th: float, reach: float, R: mat3, c: vec3, out: ti.types.ndarray()):
+        for i in range(n):
+            if pinned[i] == 0:
+                xi = x[i]
+                p = R.transpose() @ (xi - c)
+                d1, n1, d2, n2 = o.nearest_two(p)
+                for k in ti.static(range(2)):
+                    gap = (d1 if k == 0 else d2) - th
+                    if gap < reach:
+                        nw = R @ (n1 if k == 0 else n2)
+                        plane = ti.Vector([nw[0], nw[1], nw[2], nw.dot(xi) - gap])
+                        # Keep the two nearest planes, nearest first (unset: gap 1e30).
+                        p0, p1 = out[i, 0], out[i, 1]
+                        gap0 = p0[0] * xi[0] + p0[1] * xi[1] + p0[2] * xi[2] - p0[3]
+                        gap1 = p1[0] * xi[0] + p1[1] * xi[1] + p1[2] * xi[2] - p1[3]
+                        if gap < gap0:
+                            out[i, 1] = p0
+                            out[i, 0] = plane
+                        elif gap < gap1:
+                            out[i, 1] = plane
 
     # -- diagnostics -------------------------------------------------------------------------
     def max_penetration(self, t=None):

@@ -83,3 +83,27 @@ class CapsuleUnion(Obstacle):
                 t = ti.math.clamp((p - a).dot(ab) / L2, 0.0, 1.0)
             best = ti.min(best, (p - (a + t * ab)).norm() - self.fr[k])
         return best
+
+    @ti.func
+    def nearest_two(self, p):
+        """The two nearest primitives' distances and outward normals (exact, per capsule)."""
+        d1, d2 = 1e30, 1e30
+        n1 = ti.Vector([0.0, 0.0, 1.0])
+        n2 = ti.Vector([0.0, 0.0, 1.0])
+        for k in range(self.n):
+            a, b = self.fa[k], self.fb[k]
+            ab = b - a
+            t = 0.0
+            L2 = ab.dot(ab)
+            if L2 > 1e-20:
+                t = ti.math.clamp((p - a).dot(ab) / L2, 0.0, 1.0)
+            off = p - (a + t * ab)
+            dist = off.norm()
+            d = dist - self.fr[k]
+            nk = off / dist if dist > 1e-12 else ti.Vector([0.0, 0.0, 1.0])
+            if d < d1:
+                d2, n2 = d1, n1
+                d1, n1 = d, nk
+            elif d < d2:
+                d2, n2 = d, nk
+        return d1, n1, d2, n2

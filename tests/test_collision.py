@@ -420,3 +420,28 @@ def test_self_collision_follows_a_refilled_mesh():
     old_geo = sc.geo
     col.on_mesh_changed()
     assert sc.geo is not old_geo and sc.geo.x0.shape[0] == sc.model.v_cap
+
+
+def test_capsule_union_reports_its_two_nearest_parts():
+    """Contact planes come from the two nearest primitives (a concave corner needs both)."""
+    from cloth.collision import Collider
+    from cloth.collision_union import CapsuleUnion
+    from tests.helpers import sheet_model
+    body = CapsuleUnion([{"kind": "sphere", "center": [0.0, 0.0, 0.0], "radius": 0.1},
+                         {"kind": "sphere", "center": [0.3, 0.0, 0.0], "radius": 0.1}])
+    model = sheet_model(n=2, size=0.01)
+    x = model.positions()
+    x[:] = [0.12, 0.05, 0.0]                   # nearer the first sphere, within reach of both
+    full = model.state.x.to_numpy()
+    full[: len(x)] = x
+    model.state.x.from_numpy(full)
+    col = Collider(model, [body], thickness=0.004)
+    out = ti.ndarray(ti.types.vector(4, float), (model.v_cap, 2))
+    col.contact_planes(0.0, out, reach=0.2)
+    planes = out.to_numpy()[0]
+    p = np.array([0.12, 0.05, 0.0])
+    for k, centre in enumerate(([0.0, 0.0, 0.0], [0.3, 0.0, 0.0])):
+        n = (p - centre) / np.linalg.norm(p - centre)
+        np.testing.assert_allclose(planes[k, :3], n, atol=1e-9)
+        # The plane is the thickened sphere's tangent plane: n.x >= n.centre + r + thickness.
+        np.testing.assert_allclose(planes[k, 3], n @ centre + 0.1 + 0.004, atol=1e-9)

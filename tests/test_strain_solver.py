@@ -211,3 +211,61 @@ def test_mesh_change_and_new_model():
     other = StrainLimiter(bigger, method="warp-weft")
     other.project(H)
     assert other.last_converged and other.last_ms < 5000
+
+
+def two_panels(gap=0.01, n=5):
+    """Two 0.5 m panels side by side in material space, their facing edges stitched, the right
+    panel placed ``gap`` metres too far right; no pins."""
+    uv_a, f_a = make_sheet(0.5, 0.5, n, n, pattern="alternating")
+    uv_b = uv_a + [0.5, 0.0]
+    uv = np.r_[uv_a, uv_b]
+    faces = np.r_[f_a, f_a + len(uv_a)]
+    x = np.c_[uv, np.zeros(len(uv))]
+    x[len(uv_a):, 0] += gap
+    right_a = np.flatnonzero(np.isclose(uv_a[:, 0], 0.5))
+    left_b = np.flatnonzero(np.isclose(uv_b[:, 0], 0.5)) + len(uv_a)
+    order_a = right_a[np.argsort(uv[right_a, 1])]
+    order_b = left_b[np.argsort(uv[left_b, 1])]
+    return ClothModel(MeshArrays(uv=uv, x=x, faces=faces), Material()), np.c_[order_a, order_b]
+
+
+@pytest.mark.parametrize("solver", ["al", "gauss-seidel"])
+def test_seams_close_inside_the_projection_and_conserve_momentum(solver):
+    model, stitches = two_panels()
+    x_hat = model.positions()
+    limiter = StrainLimiter(model, method="warp-weft", stitches=stitches, solver=solver)
+    limiter.project(H)
+    x = model.positions()
+    assert limiter.last_converged
+    scale = limiter._edge_scale()
+    assert np.linalg.norm(x[stitches[:, 0]] - x[stitches[:, 1]], axis=1).max() < \
+        limiter.tol * scale
+    assert limiter.constraint_values().max() < limiter.tol
+    # Seams and strain limits are internal: the correction carries no net momentum (AL: to
+    # round-off; the sweeps move each pair by mass-weighted halves as well).
+    dp = (model.mass[:, None] * (x - x_hat)).sum(axis=0)
+    assert np.abs(dp).max() < 1e-9 * model.mass.sum()
+    # The 1 cm gap closes from both sides.
+    assert np.isclose(np.mean(x[stitches[:, 1], 0] - x_hat[stitches[:, 1], 0]), -0.005,
+                      atol=1e-3)
+
+
+def test_contact_half_spaces_hold_with_the_limits():
+    model = stretched_sheet(pins=False)
+    x0 = model.positions()
+    x0[:, 2] = -0.02 * x0[:, 0]              # tilted below the plane z = 0 on one side
+    set_positions(model, x0)
+    limiter = StrainLimiter(model, method="mapping")
+    planes = np.zeros((model.v_cap, 2, 4))
+    planes[:, :, 3] = -1e30
+    planes[:, 0] = [0.0, 0.0, 1.0, 0.0]       # n = +z, d = 0: z >= 0 for every vertex
+    limiter.contact_planes.from_numpy(planes)
+    limiter.project(H, contacts=True)
+    x = model.positions()
+    assert limiter.last_converged
+    assert x[:, 2].min() > -limiter.tol * limiter._edge_scale()
+    assert limiter.constraint_values().max() < limiter.tol
+    # Without contacts the same call clears the planes: the sheet stays where it is in z.
+    set_positions(model, x0)
+    limiter.project(H)
+    assert model.positions()[:, 2].min() < -0.01

@@ -20,7 +20,8 @@ import numpy as np
 from .. import metrics
 from .constraints import MAPPING_DELTA, METHOD_IDS, N_CONSTRAINTS, SVD_DELTA
 from . import workspace as W
-from .workspace import ST_CG, ST_CONVERGED, ST_ITERS, ST_NEWTON, ST_VIOL, Workspace
+from .workspace import (ST_CG, ST_CONVERGED, ST_ITERS, ST_NEWTON, ST_START_VIOL, ST_VIOL,
+                        Workspace)
 
 METHOD_NAMES = ("svd", "warp-weft", "mapping", "none")
 SOLVERS = ("al", "jacobi", "gauss-seidel")
@@ -85,7 +86,7 @@ class StrainLimiter:
                  bias=None, solver="al", tol=1e-4, max_iters=None, max_newton=5,
                  max_cg=50, cg_rtol=0.1, mu_scale=1e2, mu_grow=4.0, mu_max_scale=1e6,
                  mapping_delta=MAPPING_DELTA, jacobi_omega=1.0, active_margin=1e-2,
-                 adaptive_margin=False):
+                 adaptive_margin=False, stitches=None):
         if solver not in SOLVERS:
             raise StrainLimitError(f"unknown strain-limiting solver '{solver}': use one of "
                                    f"{', '.join(SOLVERS)}")
@@ -118,6 +119,8 @@ class StrainLimiter:
         self.adaptive_margin = bool(adaptive_margin)
         if not 0 <= active_margin < 1:
             raise StrainLimitError(f"active_margin must be in [0, 1) (got {active_margin})")
+        self._stitches = np.zeros((0, 2), np.int32) if stitches is None else \
+            np.asarray(stitches, np.int32).reshape(-1, 2)
         self.method = None
         self.warp = self.weft = self.bias = None
         self._ws = None
@@ -129,6 +132,8 @@ class StrainLimiter:
         self.last_iterations, self.last_violation_max = 0, 0.0
         self.last_converged, self.last_ms = True, 0.0
         self.last_newton = self.last_cg = 0
+        self.last_reverted, self.reverted_count = False, 0
+        self.unconverged_kick = 0.1
 
     # ---- settings ------------------------------------------------------------------------
     def set_method(self, name):
@@ -168,7 +173,23 @@ class StrainLimiter:
         params[W.P_MARGIN] = self.active_margin
         params[W.P_DELTA] = self.mapping_delta
         params[W.P_SVD_DELTA] = self.svd_delta
+        # Contact violations are metres; divided by the typical edge they read like strains.
+        m = self.model
+        params[W.P_CONTACT_SCALE] = self._edge_scale()
         self._ws.params.from_numpy(params)
+
+    def set_stitches(self, pairs):
+        """Seams as vertex pairs (S, 2): the projection holds each pair together (a seam
+        held only by the dynamics' stitch springs is torn open by the projection, which is
+        infinitely stiff against them; measured on tshirt with mapping: seams 26 cm open
+        after 10 frames). Call again when a remesh renumbers the vertices."""
+        self._stitches = np.asarray(pairs, np.int32).reshape(-1, 2)
+        ws = self._ws
+        if len(self._stitches) > ws.s_cap:
+            ws.set_stitch_capacity(len(self._stitches))
+        ws.lam_s.fill(0.0)
+        if len(self._stitches):
+            ws.stitch.from_numpy(np.resize(self._stitches, (ws.s_cap, 2)).astype(np.int32))
 
     # ---- mesh changes --------------------------------------------------------------------
     def _current_mesh_key(self):
@@ -184,8 +205,11 @@ class StrainLimiter:
         ws = self._ws
         if ws is None or ws.f_cap != m.f_cap or ws.v_cap != m.v_cap:
             self._ws = ws = Workspace(m.f_cap, m.v_cap)
-            self._upload_params()
         ws.lam.fill(0.0)
+        ws.lam_c.fill(0.0)                     # vertices are renumbered too
+        self.set_stitches(self._stitches)
+        W.clear_contacts(m.v_cap, ws.contact)
+        self._upload_params()                  # the contact scale follows the mesh
         # The model's rest data, copied once per mesh (kernels read only the work arrays).
         ws.face_verts.from_numpy(m.face_verts.to_numpy())
         ws.Dm_inv.from_numpy(m.face_Dm_inv.to_numpy())
@@ -205,9 +229,33 @@ class StrainLimiter:
         mass = self.model.mass
         return float(mass[free].mean() if free.any() else mass.mean())
 
-    def project(self, h):
+    @property
+    def contact_planes(self):
+        """The per-vertex contact half-spaces (n, d), n.x >= d, as a Taichi ndarray of vec4 to
+        be filled by the caller (``Collider.contact_planes``) before ``project(h,
+        contacts=True)``; (0, 0, 0, workspace.NO_CONTACT) where a vertex has none."""
+        self._sync_mesh()
+        return self._ws.contact
+
+    def project(self, h, contacts=False, warm=True):
         """Project model.state.x (holding x_hat on entry) onto the strain limits in place and
-        add the correction to the velocities (v += dx / h; h <= 0 leaves v alone)."""
+        add the correction to the velocities (v += dx / h; h <= 0 leaves v alone). With
+        ``contacts`` the half-spaces in ``contact_planes`` are constraints of the same
+        projection (else they are cleared first).
+
+        ``warm=False`` solves from zero multipliers and then puts the previous ones back: for
+        a second projection within a substep (after a contact fix-up), whose x_hat is already
+        projected, so the substep's multipliers (the forces that held the cloth against
+        inertia) are far from its own (measured on tshirt: warm, such re-projections failed
+        to converge in 50 rounds and the cloth blew up; cold, 24 rounds).
+
+        An AL solve that ends unconverged *and* further from feasible than it started is not
+        applied (x and v are left as they came, ``last_reverted`` is set). An unconverged
+        solve that did improve is applied, but its velocity change per vertex is capped at
+        ``unconverged_kick`` (m/s): an unconverged Newton iterate can have moved a vertex far,
+        and dx / h would become a kick (measured on tshirt: an unconverged solve with a final
+        violation of 2e-3 had moved one vertex 18 cm, 11 m/s, and the shirt blew up; reverting
+        such solves instead left the cloth stuck outside its limits)."""
         t0 = time.perf_counter()
         if self.method == "none":
             self.last_iterations, self.last_violation_max = 0, 0.0
@@ -218,22 +266,40 @@ class StrainLimiter:
         nv, nf = m.n_verts, m.n_faces
         mid, K = METHOD_IDS[self.method], N_CONSTRAINTS[self.method]
         ws.pinned.from_numpy(m.vert_pinned.to_numpy())      # a scene may re-pin at any time
+        if not contacts:
+            W.clear_contacts(nv, ws.contact)
         W.field_to_array(m.state.x, ws.x, nv)
         W.field_to_array(m.state.v, ws.v, nv)
         W.begin_solve(nv, ws.x, ws.x_hat, ws.x_start, ws.stats)
+        self.last_reverted = False
         if self.solver == "al":
+            saved = None
+            if not warm:
+                saved = [a.to_numpy() for a in (ws.lam, ws.lam_c, ws.lam_s)]
+                for a in (ws.lam, ws.lam_c, ws.lam_s):
+                    a.fill(0.0)
             rounds, newton, converged = self._solve_al(mid, K)
+            if saved is not None:
+                for a, val in zip((ws.lam, ws.lam_c, ws.lam_s), saved):
+                    a.from_numpy(val)
             stats = ws.stats.to_numpy()
+            if not converged and stats[ST_VIOL] > max(stats[ST_START_VIOL], self.tol):
+                W.copy_vectors(nv, ws.x_start, ws.x)
+                stats[ST_VIOL] = stats[ST_START_VIOL]
+                self.last_reverted = True
+                self.reverted_count += 1
         else:
             W.pbd_solve(mid, int(self.solver == "jacobi"), nv, nf, self.tol, self.max_iters,
                         self.jacobi_omega, ws.x, ws.face_verts, ws.Dm_inv, ws.grain,
-                        ws.rest_area, ws.params, ws.mass, ws.pinned, ws.acc, ws.cnt, ws.stats)
+                        ws.rest_area, ws.params, ws.mass, ws.pinned, ws.contact,
+                        len(self._stitches), ws.stitch, ws.acc, ws.cnt, ws.stats)
             # Measure the final positions (a sweep sees each face before moving it).
             self._assemble(mid, ws.x)
             stats = ws.stats.to_numpy()
             stats[ST_VIOL] = W.max_violation(K, nf, ws.rest_area, ws.g)
             rounds, newton, converged = int(stats[ST_ITERS]), 0, stats[ST_VIOL] < self.tol
-        W.finish_solve(nv, float(h), ws.x, ws.x_start, ws.v)
+        kick = -1.0 if converged else self.unconverged_kick
+        W.finish_solve(nv, float(h), kick, ws.x, ws.x_start, ws.v)
         W.array_to_field(ws.x, m.state.x, nv)
         W.array_to_field(ws.v, m.state.v, nv)
         self.last_iterations = int(rounds)
@@ -241,6 +307,9 @@ class StrainLimiter:
         self.last_converged = bool(converged)
         self.last_newton, self.last_cg = int(newton), int(stats[ST_CG])
         self.last_ms = 1e3 * (time.perf_counter() - t0)
+
+    def _edge_scale(self):
+        return float(np.sqrt(np.mean(self.model.rest_area[:self.model.n_faces])))
 
     def _assemble(self, mid, pos):
         ws = self._ws
@@ -263,12 +332,14 @@ class StrainLimiter:
         # hanging scene at 3.9k faces: 50 iterations left 3-7 of 20 substeps unconverged,
         # ~100 none (mapping) and 2 (warp-weft), at half the time of the old defaults.
         max_cg = int(round(self.max_cg * max(1.0, np.sqrt(m.n_faces / 1000.0))))
-        W.solve_al(mid, K, m.n_verts, m.n_faces, mu, self.mu_grow, mu_max, self.max_iters,
+        W.solve_al(mid, K, m.n_verts, m.n_faces, len(self._stitches), mu, self.mu_grow,
+                   mu_max, self.max_iters,
                    self.max_newton, max_cg, self.cg_rtol, self.tol, step_tol,
                    int(self.adaptive_margin), ws.params, ws.x, ws.x_hat, ws.x_trial, ws.mass,
                    ws.pinned, ws.face_verts, ws.Dm_inv, ws.grain, ws.rest_area, ws.lam, ws.g,
-                   ws.grad, ws.cm, ws.what, ws.kappa, ws.twist, ws.b, ws.d, ws.r, ws.z, ws.p,
-                   ws.Ap, ws.P_inv, ws.stats)
+                   ws.grad, ws.cm, ws.what, ws.kappa, ws.twist, ws.contact, ws.lam_c,
+                   ws.stitch, ws.lam_s, ws.b, ws.d, ws.r, ws.z, ws.p, ws.Ap, ws.P_inv,
+                   ws.stats)
         stats = ws.stats.to_numpy()
         return int(stats[ST_ITERS]), int(stats[ST_NEWTON]), bool(stats[ST_CONVERGED] > 0)
 

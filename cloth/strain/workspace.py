@@ -24,10 +24,16 @@ A = ti.types.ndarray()          # any ndarray; kernels compile once per dtype / 
 T = ti.template()               # how a ti.func takes an array (by reference)
 
 # Indices into the ``stats`` array (read back once per solve).
-ST_ITERS, ST_VIOL, ST_CONVERGED, ST_CG, ST_NEWTON, ST_COMP = range(6)
+ST_ITERS, ST_VIOL, ST_CONVERGED, ST_CG, ST_NEWTON, ST_COMP, ST_START_VIOL = range(7)
 # Indices into the ``params`` array.
-P_WARP, P_WEFT, P_SHEAR, P_MARGIN, P_DELTA, P_SVD_DELTA = 0, 2, 4, 6, 7, 8
+P_WARP, P_WEFT, P_SHEAR, P_MARGIN, P_DELTA, P_SVD_DELTA, P_CONTACT_SCALE = 0, 2, 4, 6, 7, 8, 9
 N_PARAMS = 10
+# A vertex without a contact half-space: n = 0 and d far below any position, so d - n.x never
+# comes near activating.
+NO_CONTACT = -1e30
+# Contact half-spaces per vertex: the two nearest obstacle parts' planes (in a concave corner of
+# a body, keeping out of one primitive's plane alone walks into the next primitive).
+CONTACT_SLOTS = 2
 
 
 class Workspace:
@@ -46,6 +52,11 @@ class Workspace:
         self.pinned = ti.ndarray(ti.i32, V)
         # Multipliers lambda >= 0, one per constraint (warm-started across calls).
         self.lam = ti.ndarray(float, (F, K))
+        # Contact half-spaces n.x >= d per vertex as (n, d) (see ``contact_g``) and their
+        # multipliers: the obstacles are constraints of the same projection, so a contact
+        # cannot undo the limits afterwards (issue #5).
+        self.contact = ti.ndarray(ti.types.vector(4, float), (V, CONTACT_SLOTS))
+        self.lam_c = ti.ndarray(float, (V, CONTACT_SLOTS))
         # Constraint data at the current iterate (see constraints.py for the meaning).
         self.g = ti.ndarray(float, (F, K))
         self.grad = ti.ndarray(vec9, (F, K))
@@ -63,6 +74,14 @@ class Workspace:
         self.cnt = ti.ndarray(float, V)
         self.params = ti.ndarray(float, N_PARAMS)  # bands (warp, weft, shear), margin, deltas
         self.stats = ti.ndarray(float, 8)
+        self.set_stitch_capacity(1)
+
+    def set_stitch_capacity(self, n):
+        """Seams: vertex pairs (a, b) held together, x_a = x_b, and their multipliers
+        (vectors: an equality has a multiplier of either sign per component)."""
+        self.s_cap = max(int(n), 1)
+        self.stitch = ti.ndarray(ti.types.vector(2, ti.i32), self.s_cap)
+        self.lam_s = ti.ndarray(ti.types.vector(3, float), self.s_cap)
 
 
 # ---- copies between the model's fields and the work arrays -----------------------------------
@@ -76,6 +95,13 @@ def field_to_array(src: ti.template(), dst: A, n: int):
 def array_to_field(src: A, dst: ti.template(), n: int):
     for i in range(n):
         dst[i] = src[i]
+
+
+@ti.kernel
+def clear_contacts(n: int, contact: A):
+    for i in range(n):
+        for j in ti.static(range(CONTACT_SLOTS)):
+            contact[i, j] = ti.Vector([0.0, 0.0, 0.0, NO_CONTACT])
 
 
 # ---- constraint evaluation ---------------------------------------------------------------------
@@ -145,12 +171,45 @@ def dot(a: T, b: T, nv):
 
 
 @ti.func
-def merit(K, nv, nf, mu, pos: T, x_hat: T, mass: T, lam: T, g: T):
+def contact_normal(contact: T, n, j):
+    c = contact[n, j]
+    return ti.Vector([c[0], c[1], c[2]])
+
+
+@ti.func
+def contact_g(contact: T, pos: T, n, j):
+    """Vertex n's contact constraint d - n.x <= 0 (metres, like g = strain x sqrt(a)): the
+    vertex stays on the outer side of the obstacle's tangent plane at its contact point (the
+    plane of the thickened surface, see ``Collider.contact_planes``). Linear in x, so it adds
+    mu n n^T to the Newton matrix and no curvature."""
+    return contact[n, j][3] - contact_normal(contact, n, j).dot(pos[n])
+
+
+@ti.func
+def stitch_g(stitch: T, pos: T, s):
+    """Seam s's equality constraint x_a - x_b = 0 (metres, a 3-vector). Linear, so in the AL
+    it adds mu (e_a - e_b)(e_a - e_b)^T to the Newton matrix and no curvature. (Measured on
+    tshirt: the inequality |x_a - x_b| <= 2 mm instead, with its curvature 1/|x_a - x_b|,
+    needed 96-190 AL rounds where the contacts and seams met; see the closing note of #5.)"""
+    ab = stitch[s]
+    return pos[ab[0]] - pos[ab[1]]
+
+
+@ti.func
+def merit(K, nv, nf, ns, mu, pos: T, x_hat: T, mass: T, lam: T, g: T, contact: T,
+          lam_c: T, stitch: T, lam_s: T):
     """L_A = 1/2 sum m |x - x_hat|^2 + sum (mu/2) max(0, g + lam/mu)^2 - lam^2/(2 mu), the
-    slack variables of eq. 25 eliminated, with g as last assembled (at ``pos``)."""
+    slack variables of eq. 25 eliminated, with g as last assembled (at ``pos``), over the
+    strain and contact constraints; plus lam_s.c + (mu/2)|c|^2 for the seams' equalities."""
     total = 0.0
     for n in range(nv):
         total += 0.5 * mass[n] * (pos[n] - x_hat[n]).norm_sqr()
+        for j in ti.static(range(CONTACT_SLOTS)):
+            t = ti.max(0.0, contact_g(contact, pos, n, j) + lam_c[n, j] / mu)
+            total += 0.5 * mu * t * t - 0.5 * lam_c[n, j] * lam_c[n, j] / mu
+    for k in range(ns):
+        cs = stitch_g(stitch, pos, k)
+        total += lam_s[k].dot(cs) + 0.5 * mu * cs.norm_sqr()
     for f in range(nf):
         for c in range(K):
             t = ti.max(0.0, g[f, c] + lam[f, c] / mu)
@@ -159,29 +218,42 @@ def merit(K, nv, nf, mu, pos: T, x_hat: T, mass: T, lam: T, g: T):
 
 
 @ti.func
-def residual(K, nv, nf, mu, x: T, x_hat: T, mass: T, pinned: T, face_verts: T, lam: T, g: T,
-             grad: T, r: T):
+def residual(K, nv, nf, ns, mu, x: T, x_hat: T, mass: T, pinned: T, face_verts: T,
+             lam: T, g: T, grad: T, contact: T, lam_c: T, stitch: T, lam_s: T, r: T):
     """r = -grad L_A = -M (x - x_hat) - sum max(0, lam + mu g) grad g; zero at pins."""
     for n in range(nv):
         r[n] = -mass[n] * (x[n] - x_hat[n])
+        for j in ti.static(range(CONTACT_SLOTS)):
+            s = lam_c[n, j] + mu * contact_g(contact, x, n, j)
+            if s > 0.0:
+                r[n] += s * contact_normal(contact, n, j)      # grad (d - n.x) = -n
     for f in range(nf):
         ids = face_verts[f]
         for c in range(K):
             s = lam[f, c] + mu * g[f, c]
             if s > 0.0:
                 scatter(r, ids, grad[f, c], -s)
+    for k in range(ns):
+        force = lam_s[k] + mu * stitch_g(stitch, x, k)
+        r[stitch[k][0]] -= force
+        r[stitch[k][1]] += force
     for n in range(nv):
         if pinned[n] == 1:
             r[n] = ti.Vector([0.0, 0.0, 0.0])
 
 
 @ti.func
-def build_preconditioner(K, nv, nf, mu, margin, use_twist, mass: T, pinned: T,
+def build_preconditioner(K, nv, nf, ns, mu, margin, use_twist, mass: T, pinned: T,
                          face_verts: T, rest_area: T, lam: T, g: T,
-                         grad: T, cm: T, what: T, kappa: T, twist: T, P_inv: T):
+                         grad: T, cm: T, what: T, kappa: T, twist: T, x: T, contact: T,
+                         lam_c: T, stitch: T, lam_s: T, c_scale, P_inv: T):
     """3x3 block Jacobi of the projected-Newton matrix (see apply_hessian)."""
     for n in range(nv):
         P_inv[n] = mass[n] * ti.Matrix.identity(float, 3)
+        for j in ti.static(range(CONTACT_SLOTS)):
+            if lam_c[n, j] + mu * (contact_g(contact, x, n, j) + margin * c_scale) > 0.0:
+                cn = contact_normal(contact, n, j)
+                P_inv[n] += mu * cn.outer_product(cn)
     for f in range(nf):
         ids = face_verts[f]
         near = mu * margin * ti.sqrt(rest_area[f])
@@ -199,6 +271,9 @@ def build_preconditioner(K, nv, nf, mu, margin, use_twist, mass: T, pinned: T,
                     for n in ti.static(range(3)):
                         tn = ti.Vector([tw[3 * n], tw[3 * n + 1], tw[3 * n + 2]])
                         P_inv[ids[n]] += s * tn.outer_product(tn)
+    for k in range(ns):
+        P_inv[stitch[k][0]] += mu * ti.Matrix.identity(float, 3)
+        P_inv[stitch[k][1]] += mu * ti.Matrix.identity(float, 3)
     for n in range(nv):
         if pinned[n] == 1:
             P_inv[n] = ti.Matrix.identity(float, 3)
@@ -207,9 +282,10 @@ def build_preconditioner(K, nv, nf, mu, margin, use_twist, mass: T, pinned: T,
 
 
 @ti.func
-def apply_hessian(K, nv, nf, mu, margin, use_twist, mass: T, pinned: T, face_verts: T,
-                  rest_area: T, lam: T, g: T, grad: T,
-                  cm: T, what: T, kappa: T, twist: T, p: T, Ap: T):
+def apply_hessian(K, nv, nf, ns, mu, margin, use_twist, mass: T, pinned: T,
+                  face_verts: T, rest_area: T, lam: T, g: T, grad: T,
+                  cm: T, what: T, kappa: T, twist: T, x: T, contact: T, lam_c: T, stitch: T,
+                  lam_s: T, c_scale, p: T, Ap: T):
     """Ap = (M + sum_near [mu grad g grad g^T] + sum_active (lam + mu g) curvature(g)) p, the
     projected-Newton matrix applied without forming it. "Near" includes constraints within
     ``margin`` (strain) of activating: a Newton step that ignores them runs straight into
@@ -218,6 +294,10 @@ def apply_hessian(K, nv, nf, mu, margin, use_twist, mass: T, pinned: T, face_ver
     same projection needs 6 instead of > 40 rounds."""
     for n in range(nv):
         Ap[n] = mass[n] * p[n]
+        for j in ti.static(range(CONTACT_SLOTS)):
+            if lam_c[n, j] + mu * (contact_g(contact, x, n, j) + margin * c_scale) > 0.0:
+                cn = contact_normal(contact, n, j)
+                Ap[n] += mu * cn.dot(p[n]) * cn
     for f in range(nf):
         ids = face_verts[f]
         pf = ti.Vector([0.0] * 9)
@@ -240,22 +320,29 @@ def apply_hessian(K, nv, nf, mu, margin, use_twist, mass: T, pinned: T, face_ver
                     if use_twist:
                         tw = twist[f, c]
                         scatter(Ap, ids, tw, s * tw.dot(pf))
+    for k in range(ns):
+        t = mu * (p[stitch[k][0]] - p[stitch[k][1]])
+        Ap[stitch[k][0]] += t
+        Ap[stitch[k][1]] -= t
     for n in range(nv):
         if pinned[n] == 1:
             Ap[n] = ti.Vector([0.0, 0.0, 0.0])
 
 
 @ti.func
-def pcg_direction(K, nv, nf, mu, max_cg, rtol, margin, use_twist, x: T, x_hat: T, mass: T,
-                  pinned: T, face_verts: T, rest_area: T, lam: T, g: T, grad: T, cm: T,
-                  what: T, kappa: T, twist: T, b: T, d: T, r: T, z: T, p: T, Ap: T, P_inv: T):
+def pcg_direction(K, nv, nf, ns, mu, max_cg, rtol, margin, use_twist, x: T, x_hat: T,
+                  mass: T, pinned: T, face_verts: T, rest_area: T, lam: T, g: T, grad: T,
+                  cm: T, what: T, kappa: T, twist: T, contact: T, lam_c: T, stitch: T,
+                  lam_s: T, c_scale, b: T, d: T, r: T, z: T, p: T, Ap: T, P_inv: T):
     """Projected-Newton direction: solve H d = -grad L_A by PCG (block Jacobi) from d = 0 to
     |r| <= rtol |grad L_A| (an inexact Newton step: measured on the hanging scene, rtol = 0.1
     needs as many Newton steps as 1e-3 with about half the CG iterations). Leaves
     b = -grad L_A; returns (slope grad L_A . d, CG iterations)."""
-    residual(K, nv, nf, mu, x, x_hat, mass, pinned, face_verts, lam, g, grad, r)
-    build_preconditioner(K, nv, nf, mu, margin, use_twist, mass, pinned, face_verts,
-                         rest_area, lam, g, grad, cm, what, kappa, twist, P_inv)
+    residual(K, nv, nf, ns, mu, x, x_hat, mass, pinned, face_verts, lam, g, grad,
+             contact, lam_c, stitch, lam_s, r)
+    build_preconditioner(K, nv, nf, ns, mu, margin, use_twist, mass, pinned, face_verts,
+                         rest_area, lam, g, grad, cm, what, kappa, twist, x, contact, lam_c,
+                         stitch, lam_s, c_scale, P_inv)
     r0 = ti.sqrt(dot(r, r, nv))
     for n in range(nv):
         b[n] = r[n]
@@ -265,8 +352,9 @@ def pcg_direction(K, nv, nf, mu, max_cg, rtol, margin, use_twist, x: T, x_hat: T
     rz = dot(r, z, nv)
     it = 0
     while it < max_cg and ti.sqrt(dot(r, r, nv)) > rtol * r0:
-        apply_hessian(K, nv, nf, mu, margin, use_twist, mass, pinned, face_verts, rest_area,
-                      lam, g, grad, cm, what, kappa, twist, p, Ap)
+        apply_hessian(K, nv, nf, ns, mu, margin, use_twist, mass, pinned, face_verts,
+                      rest_area, lam, g, grad, cm, what, kappa, twist, x, contact, lam_c,
+                      stitch, lam_s, c_scale, p, Ap)
         pAp = dot(p, Ap, nv)
         if pAp <= 0.0:
             break
@@ -295,13 +383,28 @@ def violation_of(K, nf, rest_area: T, g: T):
     return viol
 
 
+@ti.func
+def vertex_violation(nv, ns, pos: T, contact: T, stitch: T, c_scale):
+    """Largest contact or seam violation in strain-like units (metres / c_scale, the typical
+    edge)."""
+    viol = 0.0
+    for n in range(nv):
+        for j in ti.static(range(CONTACT_SLOTS)):
+            viol = ti.max(viol, contact_g(contact, pos, n, j) / c_scale)
+    for k in range(ns):
+        viol = ti.max(viol, stitch_g(stitch, pos, k).norm() / c_scale)
+    return viol
+
+
 @ti.kernel
-def solve_al(method: ti.template(), K: int, nv: int, nf: int, mu0: float, mu_grow: float,
+def solve_al(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu0: float,
+             mu_grow: float,
              mu_max: float, max_rounds: int, max_newton: int, max_cg: int, rtol: float,
              tol: float, step_tol: float, adaptive: int, params: A, x: A, x_hat: A,
              x_trial: A, mass: A, pinned: A, face_verts: A, Dm_inv: A, grain: A,
-             rest_area: A, lam: A, g: A, grad: A, cm: A, what: A, kappa: A, twist: A, b: A,
-             d: A, r: A, z: A, p: A, Ap: A, P_inv: A, stats: A):
+             rest_area: A, lam: A, g: A, grad: A, cm: A, what: A, kappa: A, twist: A,
+             contact: A, lam_c: A, stitch: A, lam_s: A, b: A, d: A, r: A, z: A, p: A, Ap: A,
+             P_inv: A, stats: A):
     """The whole AL projection (METHOD 4) in one launch (measured: with one launch per
     phase, Python's argument handling cost as much as the solve): rounds of inexact
     minimisation of L_A by projected Newton + PCG with a backtracking (Armijo) line search,
@@ -315,6 +418,7 @@ def solve_al(method: ti.template(), K: int, nv: int, nf: int, mu0: float, mu_gro
     for _ in range(1):
         use_twist = params[P_SVD_DELTA] > 0.0 and K == 4
         margin = params[P_MARGIN]
+        c_scale = params[P_CONTACT_SCALE]
         mu = mu0
         rounds, newton, cg_total = 0, 0, 0
         viol, comp = 0.0, 0.0
@@ -330,15 +434,16 @@ def solve_al(method: ti.template(), K: int, nv: int, nf: int, mu0: float, mu_gro
                 slope, cg_it = 0.0, 0
                 L0 = 0.0
                 if first == 0:
-                    slope, cg_it = pcg_direction(K, nv, nf, mu, max_cg, rtol, margin,
+                    slope, cg_it = pcg_direction(K, nv, nf, ns, mu, max_cg, rtol, margin,
                                                  use_twist, x, x_hat, mass, pinned,
                                                  face_verts, rest_area, lam, g, grad, cm,
-                                                 what, kappa, twist, b, d, r, z, p, Ap,
-                                                 P_inv)
+                                                 what, kappa, twist, contact, lam_c, stitch,
+                                                 lam_s, c_scale, b, d, r, z, p, Ap, P_inv)
                     cg_total += cg_it
                     newton += 1
                     inner += 1
-                    L0 = merit(K, nv, nf, mu, x, x_hat, mass, lam, g)
+                    L0 = merit(K, nv, nf, ns, mu, x, x_hat, mass, lam, g, contact,
+                               lam_c, stitch, lam_s)
                 if first == 0 and not slope < 0.0:
                     break
                 alpha, step, tries = 1.0, 0.0, 0
@@ -354,7 +459,8 @@ def solve_al(method: ti.template(), K: int, nv: int, nf: int, mu0: float, mu_gro
                                  params, g, grad, cm, what, kappa, twist)
                     if a == 0.0:
                         break
-                    L = merit(K, nv, nf, mu, x_trial, x_hat, mass, lam, g)
+                    L = merit(K, nv, nf, ns, mu, x_trial, x_hat, mass, lam, g, contact,
+                              lam_c, stitch, lam_s)
                     if L <= L0 + 1e-4 * a * slope:
                         for n in range(nv):
                             step = ti.max(step, (x_trial[n] - x[n]).norm())
@@ -364,7 +470,9 @@ def solve_al(method: ti.template(), K: int, nv: int, nf: int, mu0: float, mu_gro
                     tries += 1
                 if first == 1:
                     first = 0
-                    viol = violation_of(K, nf, rest_area, g)
+                    viol = ti.max(violation_of(K, nf, rest_area, g),
+                                  vertex_violation(nv, ns, x, contact, stitch, c_scale))
+                    stats[ST_START_VIOL] = viol
                     if viol < tol:
                         converged = 2       # feasible as given: nothing to do
                         break
@@ -388,6 +496,21 @@ def solve_al(method: ti.template(), K: int, nv: int, nf: int, mu0: float, mu_gro
                     viol = ti.max(viol, g[f, c] / sqa)
                     comp = ti.max(comp, ti.abs(new - lam[f, c]) / (mu * sqa))
                     lam[f, c] = new
+            for n in range(nv):
+                for j in ti.static(range(CONTACT_SLOTS)):
+                    gc = contact_g(contact, x, n, j)
+                    new = ti.min(ti.max(0.0, lam_c[n, j] + mu * gc), mu_max * c_scale)
+                    viol = ti.max(viol, gc / c_scale)
+                    comp = ti.max(comp, ti.abs(new - lam_c[n, j]) / (mu * c_scale))
+                    lam_c[n, j] = new
+            for k in range(ns):
+                cs = stitch_g(stitch, x, k)
+                new = lam_s[k] + mu * cs               # equality: either sign
+                cap = mu_max * c_scale
+                if new.norm() > cap:
+                    new *= cap / new.norm()
+                viol = ti.max(viol, cs.norm() / c_scale)
+                lam_s[k] = new
             rounds += 1
             if viol < tol and comp < tol:
                 converged = 1
@@ -420,12 +543,22 @@ def begin_solve(nv: int, x: A, x_hat: A, x_start: A, stats: A):
 
 
 @ti.kernel
-def finish_solve(nv: int, h: float, x: A, x_start: A, v: A):
-    """v += dx / h (METHOD 4): the projection's correction becomes a velocity change."""
+def copy_vectors(n: int, src: A, dst: A):
+    for i in range(n):
+        dst[i] = src[i]
+
+
+@ti.kernel
+def finish_solve(nv: int, h: float, cap: float, x: A, x_start: A, v: A):
+    """v += dx / h (METHOD 4): the projection's correction becomes a velocity change, of at
+    most ``cap`` (m/s) per vertex when cap > 0."""
     ti.loop_config(serialize=True)
     for n in range(nv):
         if h > 0.0:
-            v[n] += (x[n] - x_start[n]) / h
+            dv = (x[n] - x_start[n]) / h
+            if cap > 0.0 and dv.norm() > cap:
+                dv *= cap / dv.norm()
+            v[n] += dv
 
 
 # ---- the per-triangle projection baseline (PBD style) ------------------------------------
@@ -468,9 +601,11 @@ def project_face(method: ti.template(), f, jacobi, x: T, face_verts: T, Dm_inv: 
 @ti.kernel
 def pbd_solve(method: ti.template(), jacobi: int, nv: int, nf: int, tol: float,
               max_iters: int, omega: float, x: A, face_verts: A, Dm_inv: A, grain: A,
-              rest_area: A, params: A, mass: A, pinned: A, acc: A, cnt: A, stats: A):
+              rest_area: A, params: A, mass: A, pinned: A, contact: A, ns: int, stitch: A,
+              acc: A, cnt: A, stats: A):
     """Jacobi (averaged, relaxed by omega) or Gauss-Seidel (in place, serial order) sweeps of
-    per-triangle projections until the worst violation seen in a sweep is below tol."""
+    per-triangle projections, each followed by projecting every vertex onto its contact
+    half-space, until the worst violation seen in a sweep is below tol."""
     ti.loop_config(serialize=True)
     for _ in range(1):
         it = 0
@@ -484,12 +619,27 @@ def pbd_solve(method: ti.template(), jacobi: int, nv: int, nf: int, tol: float,
                 viol = ti.max(viol, project_face(method, f, jacobi, x, face_verts, Dm_inv,
                                                  grain, rest_area, params, mass, pinned, acc,
                                                  cnt))
-            if viol < tol:
-                break
-            it += 1
             if jacobi:
                 for n in range(nv):
                     if cnt[n] > 0.0:
                         x[n] += omega * acc[n] / cnt[n]
+            for k in range(ns):
+                cs = stitch_g(stitch, x, k)
+                a, b = stitch[k][0], stitch[k][1]
+                wa = 0.0 if pinned[a] == 1 else 1.0 / mass[a]
+                wb = 0.0 if pinned[b] == 1 else 1.0 / mass[b]
+                if wa + wb > 0.0:
+                    x[a] -= wa / (wa + wb) * cs
+                    x[b] += wb / (wa + wb) * cs
+                    viol = ti.max(viol, cs.norm() / params[P_CONTACT_SCALE])
+            for n in range(nv):
+                for j in ti.static(range(CONTACT_SLOTS)):
+                    gc = contact_g(contact, x, n, j)
+                    if gc > 0.0 and pinned[n] == 0:
+                        x[n] += gc * contact_normal(contact, n, j)
+                        viol = ti.max(viol, gc / params[P_CONTACT_SCALE])
+            if viol < tol:
+                break
+            it += 1
         stats[ST_ITERS] = it
 
