@@ -1,23 +1,41 @@
-"""Speed against error for the hanging scene (and drape): every run is a point (ms per frame,
+"""Speed against error for the hanging scene (or drape): every run is a point (ms per frame,
 error), for method x solver x iteration budget x substeps x resolution.
 
-    python -m benchmarks.speed_vs_error --out results/speed           # the full sweep
-    python -m benchmarks.speed_vs_error --quick --out results/quick   # under two minutes
+    python -m benchmarks.speed_vs_error --out docs/speed            # the full sweep
+    python -m benchmarks.speed_vs_error --quick --out results/quick  # under two minutes
 
-Errors (definitions in cloth/metrics.py):
-  band error      largest and area-weighted RMS violation of the method's own constraints and of
-                  the warp/weft bands, at the final frame (strain units);
-  solution error  RMS distance of the final positions at fixed material points from a converged
-                  reference run of the same method (small step, many iterations, same
-                  resolution), divided by the cloth's diagonal;
-The reference is checked: halving its step and doubling its iterations must move it by less
-than a tenth of the smallest solution error reported (written to the results).
+Errors (strain measures from cloth/metrics.py):
+  band error      the active method's own constraint violation g / sqrt(a) (strain units, 0
+                  inside the band): largest over the faces (``band_max``) and area-weighted RMS
+                  (``band_rms``), each averaged over the frames of the run; plus the warp and
+                  weft band violations at the last frame;
+  solution error  RMS distance of the positions at 15 x 15 fixed material points (barycentric
+                  lookup in material space) from a converged reference run of the same method
+                  and resolution, divided by the cloth's diagonal, at simulated time
+                  ``compare_frames`` / fps. The reference uses ``ref_substeps`` substeps, AL with
+                  ``ref_iters`` rounds and tolerance ``ref_tol``.
+Reference check (issue 7): the same reference with half the step and twice the iterations must
+move by less than a tenth of the smallest solution error measured against it. It is recorded
+for every reference and compare frame (``reference_checks``); the sheet buckles as it falls, so
+runs diverge with time, and the check is what says up to which frame the errors mean anything.
+
+Timing: ms per frame is the wall time of ``Simulator.step_frame`` (every stage, plus the
+per-frame bookkeeping), median over all timed frames of ``repeats`` runs, with the 10th and
+90th percentiles as the spread; one untimed warm-up frame per configuration keeps kernel
+compilation out. One Simulator per resolution is compiled once and restarted for every run
+(``restart``): a new one costs seconds of kernel compilation, a run of these scenes well under a
+second.
+
 Writes speed_vs_error.md, speed_vs_error.json, pareto_band.png, pareto_solution.png.
 """
 import argparse
+import copy
+import hashlib
 import itertools
 import json
 import os
+import platform
+import subprocess
 import sys
 import time
 
@@ -26,32 +44,105 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 FULL = dict(methods=["svd", "warp-weft", "mapping"], solvers=["al", "jacobi"],
-            iters=[5, 20, 80], substeps=[1, 2], resolutions=[13, 25, 45], frames=90)
+            # Budgets per solver: an AL round (several Newton steps with PCG) does far more work
+            # than a Jacobi sweep, so the two get different ranges of the same axis.
+            iters={"al": [2, 8, 32], "jacobi": [20, 200, 2000]},
+            substeps=[1, 2], resolutions=[9, 13, 21], frames=30, repeats=2,
+            compare_frames=[5, 10], ref_substeps=64, ref_iters=100, ref_tol=1e-7)
 QUICK = dict(methods=["svd", "warp-weft", "mapping"], solvers=["al", "jacobi"],
-             iters=[4, 40], substeps=[1], resolutions=[9, 13], frames=45)
+             iters={"al": [2, 32], "jacobi": [20, 2000]},
+             substeps=[1], resolutions=[9, 13], frames=10, repeats=1,
+             compare_frames=[5], ref_substeps=32, ref_iters=100, ref_tol=1e-7)
+SAMPLES = 15        # material points per side for the solution error
 
 
-def simulate(scene, overrides, frames):
-    """Run a scene; returns (final (x, uv, faces), final metrics row, ms per frame list)."""
+# ---- one Simulator per mesh, restarted between runs -------------------------------------------
+def restart(sim, setup, cfg):
+    """Put ``sim`` into the initial state of ``setup`` (same mesh topology as the one it was
+    built with and equal still obstacles, no stitches / remeshing) with the settings of ``cfg``: state, pins,
+    material, time step, dynamics and strain-limiting settings, clock. Everything a run
+    carries over (the CG warm start, the AL multipliers) is reset, so a run after other runs
+    repeats a run on a fresh Simulator (tests/test_benchmarks.py checks it bit for bit).
+
+    This reaches into the Simulator's attributes; a ``Simulator.restart`` in cloth/ would be
+    the clean home for it."""
+    s_cfg, st_cfg = cfg["sim"], cfg.get("strain", {"method": "none"})
+    sim.cfg, sim.setup = cfg, setup
+    sim.model.material = setup.material          # load() recomputes the masses from it
+    sim.model.load(setup.mesh)
+    sim._pin_rest = setup.mesh.pin_target.copy()
+    ds = sim.dynamics.settings                   # the object the dynamics reads each step
+    ds.gravity = tuple(s_cfg["gravity"])
+    ds.cg_tol, ds.cg_max_iters = float(s_cfg["cg_tol"]), int(s_cfg["cg_iters"])
+    sim.dynamics.on_mesh_changed()               # forgets the CG warm start
+    sim.substeps = int(s_cfg["substeps"])
+    sim.h = 1.0 / (s_cfg["fps"] * sim.substeps)
+    sim.frame, sim.time = 0, 0.0
+    if st_cfg["method"] != "none":
+        sim.set_method(st_cfg["method"])         # builds the limiter if the sim had none
+        lim = sim.strain
+        lim.solver, lim.tol, lim.max_iters = st_cfg["solver"], float(st_cfg["tol"]), \
+            int(st_cfg["iters"])
+        lim._explicit_bias = bool(st_cfg["bias"])
+        lim.set_bands(warp=st_cfg["warp"], weft=st_cfg["weft"],
+                      bias=st_cfg["bias"] if st_cfg["bias"] else None)
+        lim.on_mesh_changed()                    # multipliers back to zero
+    elif sim.strain is not None:
+        sim.set_method("none")
+    sim._relax_initial_state()
+    sim.last_good = sim.model.mesh_arrays()
+    return sim
+
+
+class SimulatorPool:
+    """Compiled Simulators keyed by scene, mesh and still obstacles; ``get`` restarts a
+    matching one or builds a new one. Set-ups with moving obstacles, stitches,
+    self-collision or remeshing always get a new Simulator (their extra solvers hold state
+    that ``restart`` does not reset)."""
+
+    def __init__(self):
+        self.sims = {}
+        self.built = 0
+
+    @staticmethod
+    def obstacle_key(obstacles):
+        """Type and parameters of still obstacles (the collider keeps no per-vertex state, so
+        equal still obstacles can stay); None when one moves along a scripted path."""
+        key = []
+        for o in obstacles:
+            if o.path is not None:
+                return None
+            key.append((type(o).__name__, repr(sorted(
+                (k, np.asarray(v).tolist() if isinstance(v, np.ndarray) else v)
+                for k, v in vars(o).items() if isinstance(v, (int, float, str, np.ndarray))))))
+        return tuple(key)
+
+    def reusable(self, setup, cfg):
+        return (self.obstacle_key(setup.obstacles) is not None and setup.stitches is None
+                and not setup.self_collision and not cfg.get("remesh", {}).get("enabled", False))
+
+    def get(self, scene, setup, cfg):
+        from cloth.simulator import Simulator
+        key = (scene, hashlib.sha1(setup.mesh.faces.tobytes()).hexdigest(), len(setup.mesh.uv),
+               self.obstacle_key(setup.obstacles), cfg.get("collision", {}).get("thickness"))
+        if self.reusable(setup, cfg) and key in self.sims:
+            sim = self.sims[key]
+            setup.obstacles = sim.setup.obstacles     # equal ones, already compiled
+            return restart(sim, setup, cfg)
+        sim = Simulator(setup, cfg)
+        self.built += 1
+        if self.reusable(setup, cfg):
+            self.sims[key] = sim
+        return sim
+
+
+def configure(scene, overrides):
+    """(module, cfg, setup) of a scene with override dicts applied."""
     import scenes
-    from cloth.simulator import Simulator
     from scenes.common import resolve
     module = scenes.get(scene)
-    cfg = resolve(module.DEFAULTS, [overrides])
-    sim = Simulator(module.build(cfg), cfg)
-    times = []
-    for k in range(frames):
-        t0 = time.perf_counter()
-        sim.step_frame()
-        if k:                                   # frame 0 includes compilation
-            times.append(1000 * (time.perf_counter() - t0))
-    m = sim.model
-    row = sim.metrics_row()
-    own = sim.strain.constraint_values() if sim.strain is not None else np.zeros((m.n_faces, 1))
-    from cloth import metrics
-    own_v = np.max(np.maximum(own, 0.0), axis=1)
-    row["own_violation_rms"] = metrics.weighted_rms(own_v, m.rest_area)
-    return (m.positions(), m.uv.copy(), m.faces.copy()), row, times
+    cfg = resolve(module.DEFAULTS, overrides if isinstance(overrides, list) else [overrides])
+    return module, cfg, module.build(cfg)
 
 
 def overrides_for(method, solver, iters, substeps, res, tol=1e-4):
@@ -59,109 +150,252 @@ def overrides_for(method, solver, iters, substeps, res, tol=1e-4):
             "strain": {"method": method, "solver": solver, "iters": iters, "tol": tol}}
 
 
-def sweep(grid, scene="hanging", log=print):
+def snapshot(sim):
+    m = sim.model
+    return (m.positions(), m.uv.copy(), m.faces.copy())
+
+
+def run(pool, scene, overrides, frames, snap_frames=(), warmup=False):
+    """One run. Returns dict: ``ms`` (wall ms of each frame), ``rows`` (metrics rows),
+    ``snaps`` {frame: (x, uv, faces)} at ``snap_frames``, ``unconverged`` (substeps whose
+    strain solve stopped on its budget; the last substep of each frame is sampled)."""
+    _, cfg, setup = configure(scene, overrides)
+    if warmup:                                   # compile this configuration's kernels
+        pool.get(scene, setup, cfg).step_frame()
+        _, cfg, setup = configure(scene, overrides)
+    sim = pool.get(scene, setup, cfg)
+    out = {"ms": [], "rows": [], "snaps": {}, "unconverged": 0}
+    for k in range(1, frames + 1):
+        t0 = time.perf_counter()
+        sim.step_frame()
+        out["ms"].append(1000.0 * (time.perf_counter() - t0))
+        out["rows"].append(sim.metrics_row())
+        if sim.strain is not None and sim.stage("strain_limit").enabled:
+            out["unconverged"] += int(not sim.strain.last_converged)
+        if k in snap_frames:
+            out["snaps"][k] = snapshot(sim)
+    out["faces"] = sim.model.n_faces
+    return out
+
+
+# ---- the sweep ---------------------------------------------------------------------------------
+def sweep(grid, scene="hanging", log=print, pool=None):
+    """Runs the grid; returns (results: list of dicts, checks: list of dicts)."""
     from cloth import metrics
-    frames = grid["frames"]
-    results, references, checks = [], {}, {}
-    for method, res in itertools.product(grid["methods"], grid["resolutions"]):
-        # Converged reference for this method and resolution, and its self-check.
-        ref_sub, ref_it = 4 * max(grid["substeps"]), 8 * max(grid["iters"])
-        ref, _, _ = simulate(scene, overrides_for(method, "al", ref_it, ref_sub, res, 1e-7), frames)
-        chk, _, _ = simulate(scene, overrides_for(method, "al", 2 * ref_it, 2 * ref_sub, res, 1e-7),
-                             frames)
-        points = metrics.material_sample_points(ref[1], 15)
-        references[(method, res)] = (ref, points)
-        checks[f"{method}/{res}"] = metrics.solution_error(chk, ref, points)
-        log(f"reference {method} res {res}: self-check {checks[f'{method}/{res}']:.2e}")
-        for solver, iters, sub in itertools.product(grid["solvers"], grid["iters"],
-                                                    grid["substeps"]):
-            final, row, times = simulate(scene, overrides_for(method, solver, iters, sub, res),
-                                         frames)
-            r = dict(method=method, solver=solver, iters=iters, substeps=sub, resolution=res,
-                     faces=int(len(final[2])),
-                     ms_median=float(np.median(times)),
-                     ms_p10=float(np.percentile(times, 10)),
-                     ms_p90=float(np.percentile(times, 90)),
-                     own_violation_max=row["own_violation_max"],
-                     own_violation_rms=row["own_violation_rms"],
-                     warp_violation_max=row["warp_violation_max"],
-                     weft_violation_max=row["weft_violation_max"],
-                     solution_error=metrics.solution_error(final, ref, points),
-                     nan=row["nan"])
-            results.append(r)
-            log(f"{method:9s} {solver:6s} iters {iters:3d} sub {sub} res {res:3d}: "
-                f"{r['ms_median']:7.1f} ms/frame  viol {r['own_violation_max']:.2e}  "
-                f"sol {r['solution_error']:.2e}")
+    pool = pool or SimulatorPool()
+    cf = sorted(grid["compare_frames"])
+    results, checks = [], []
+    for res, method in itertools.product(grid["resolutions"], grid["methods"]):
+        # Converged reference for this method and resolution, and its check run.
+        t0 = time.perf_counter()
+        rs, ri, rt = grid["ref_substeps"], grid["ref_iters"], grid["ref_tol"]
+        ref = run(pool, scene, overrides_for(method, "al", ri, rs, res, rt), cf[-1], cf)
+        chk = run(pool, scene, overrides_for(method, "al", 2 * ri, 2 * rs, res, rt), cf[-1], cf)
+        points = metrics.material_sample_points(ref["snaps"][cf[0]][1], SAMPLES)
+        check = {"method": method, "resolution": res, "seconds": time.perf_counter() - t0,
+                 "unconverged_substeps": ref["unconverged"] + chk["unconverged"]}
+        for f in cf:
+            check[f"change_f{f}"] = metrics.solution_error(chk["snaps"][f], ref["snaps"][f], points)
+        checks.append(check)
+        log(f"reference {method} res {res}: change on halving the step "
+            + ", ".join(f"{check[f'change_f{f}']:.2e} (frame {f})" for f in cf)
+            + f"  [{check['seconds']:.0f} s]")
+        for solver, sub in itertools.product(grid["solvers"], grid["substeps"]):
+            for iters in grid["iters"][solver]:
+                ov = overrides_for(method, solver, iters, sub, res)
+                reps = [run(pool, scene, ov, grid["frames"], cf, warmup=(k == 0))
+                        for k in range(grid["repeats"])]
+                ms = np.concatenate([r["ms"] for r in reps])
+                last = reps[0]
+                rows = last["rows"]
+                r = dict(method=method, solver=solver, iters=iters, substeps=sub, resolution=res,
+                         faces=int(last["faces"]),
+                         ms_median=float(np.median(ms)), ms_p10=float(np.percentile(ms, 10)),
+                         ms_p90=float(np.percentile(ms, 90)),
+                         ms_strain=float(np.median([w["ms_strain_limit"] for w in rows])),
+                         band_max=float(np.mean([w["own_violation_max"] for w in rows])),
+                         band_rms=float(np.mean([w["own_violation_rms"] for w in rows])),
+                         band_max_end=float(rows[-1]["own_violation_max"]),
+                         warp_violation_end=float(rows[-1]["warp_violation_max"]),
+                         weft_violation_end=float(rows[-1]["weft_violation_max"]),
+                         sl_iterations=float(np.mean([w["sl_iterations"] for w in rows])),
+                         unconverged_frames=int(last["unconverged"]),
+                         finite=bool(all(w["nan"] == 0 for w in rows)),
+                         # Repeats of one configuration must agree exactly (determinism).
+                         repeats_identical=bool(all(
+                             np.array_equal(q["snaps"][cf[-1]][0], last["snaps"][cf[-1]][0])
+                             for q in reps)))
+                for f in cf:
+                    r[f"solution_error_f{f}"] = metrics.solution_error(
+                        last["snaps"][f], ref["snaps"][f], points)
+                results.append(r)
+                log(f"{method:9s} {solver:6s} iters {iters:4d} sub {sub} res {res:3d}: "
+                    f"{r['ms_median']:7.1f} ms/frame  band {r['band_max']:.2e}  "
+                    f"sol {r[f'solution_error_f{cf[0]}']:.2e}")
+    for c in checks:
+        # The smallest error this reference had to resolve, and the verdict, per frame.
+        mine = [r for r in results if r["method"] == c["method"] and
+                r["resolution"] == c["resolution"]]
+        for f in cf:
+            smallest = min(r[f"solution_error_f{f}"] for r in mine) if mine else float("nan")
+            c[f"smallest_f{f}"] = smallest
+            c[f"converged_f{f}"] = bool(c[f"change_f{f}"] < 0.1 * smallest)
     return results, checks
 
 
-def write_outputs(results, checks, out, grid, scene):
+# ---- output ------------------------------------------------------------------------------------
+def machine():
+    model = platform.processor() or "unknown CPU"
+    try:
+        out = subprocess.run(["lscpu"], capture_output=True, text=True).stdout
+        model = next(l.split(":", 1)[1].strip() for l in out.splitlines()
+                     if l.startswith("Model name"))
+    except (OSError, StopIteration):
+        pass
+    import taichi as ti
+    version = ".".join(str(v) for v in ti.__version__)
+    return (f"{os.cpu_count()}-core CPU ({model}), Taichi {version} cpu backend, f64, "
+            f"Python {platform.python_version()}")
+
+
+def commit():
+    """The git commit of the code measured (LOOM_COMMIT overrides it, for runs from an
+    exported copy of a commit)."""
+    if os.environ.get("LOOM_COMMIT"):
+        return os.environ["LOOM_COMMIT"]
+    try:
+        root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+        out = subprocess.run(["git", "-C", root, "rev-parse", "--short", "HEAD"],
+                             capture_output=True, text=True).stdout.strip()
+        dirty = subprocess.run(["git", "-C", root, "status", "--porcelain", "cloth", "scenes"],
+                               capture_output=True, text=True).stdout.strip()
+        return (out + (" (cloth/ or scenes/ modified)" if dirty else "")) or "unknown"
+    except OSError:
+        return "unknown"
+
+
+def fmt(v):
+    if isinstance(v, bool):
+        return "yes" if v else "NO"
+    if isinstance(v, float):
+        return f"{v:.3g}"
+    return str(v)
+
+
+def write_outputs(results, checks, out, grid, scene, command, seconds):
     os.makedirs(out, exist_ok=True)
-    smallest = min((r["solution_error"] for r in results if r["solution_error"] > 0), default=0.0)
-    ref_ok = all(v < 0.1 * smallest for v in checks.values()) if smallest > 0 else True
+    cf = sorted(grid["compare_frames"])
+    fps = 30.0
     with open(os.path.join(out, "speed_vs_error.json"), "w") as fh:
-        json.dump({"scene": scene, "grid": grid, "results": results,
-                   "reference_self_check": checks, "smallest_solution_error": smallest,
-                   "reference_converged": ref_ok}, fh, indent=1)
-    cols = ["method", "solver", "iters", "substeps", "resolution", "faces", "ms_median", "ms_p10",
-            "ms_p90", "own_violation_max", "own_violation_rms", "warp_violation_max",
-            "weft_violation_max", "solution_error"]
+        json.dump({"scene": scene, "grid": grid, "command": command, "machine": machine(),
+                   "commit": commit(), "seconds": seconds, "results": results,
+                   "reference_checks": checks}, fh, indent=1)
     lines = [f"# Speed against error: {scene}", "",
-             f"Machine: {os.cpu_count()} CPU cores, Taichi cpu backend, f64. Final frame after "
-             f"{grid['frames']} frames at 30 fps. ms per frame: median (p10-p90) over frames.", "",
-             f"Reference self-check (halve step, double iterations), largest: "
-             f"{max(checks.values()):.2e}; smallest solution error reported: {smallest:.2e}; "
-             f"converged enough: {'yes' if ref_ok else 'NO'}.", "",
-             "| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+             f"Command: `{command}` ({seconds:.0f} s). Machine: {machine()}; commit "
+             f"{commit()}. Other jobs shared the two cores while this ran, so times carry "
+             "noise of tens of percent; compare them within one table.", "",
+             f"Each run: {grid['frames']} frames at {fps:.0f} fps from the scene's start; ms per "
+             f"frame = median (p10-p90) over the timed frames of {grid['repeats']} repeat(s). "
+             "band = the method's own violation (strain), largest over faces (max) or "
+             "area-weighted RMS, averaged over the frames. sol fN = solution error at frame N "
+             f"against the reference ({grid['ref_substeps']} substeps, AL {grid['ref_iters']} "
+             f"rounds, tol {grid['ref_tol']:g}), RMS over {SAMPLES}x{SAMPLES} material points "
+             "/ cloth diagonal. Budgets: AL rounds or Jacobi sweeps per substep "
+             "(stopping earlier at a violation of 1e-4).", "",
+             "## Reference check", "",
+             "Halving the reference step and doubling its iterations changes it by `change`; "
+             "the reference is converged where that is under a tenth of the smallest solution "
+             "error measured against it.", "",
+             "| method | resolution | " + " | ".join(
+                 f"change f{f} | smallest f{f} | converged f{f}" for f in cf) + " |",
+             "|---|---|" + "---|---|---|" * len(cf)]
+    for c in checks:
+        lines.append(f"| {c['method']} | {c['resolution']} | " + " | ".join(
+            f"{fmt(c[f'change_f{f}'])} | {fmt(c[f'smallest_f{f}'])} | {fmt(c[f'converged_f{f}'])}"
+            for f in cf) + " |")
+    cols = ["method", "solver", "iters", "substeps", "resolution", "faces", "ms_median",
+            "ms_p10", "ms_p90", "band_max", "band_rms", "warp_violation_end",
+            "weft_violation_end", "unconverged_frames"] + [f"solution_error_f{f}" for f in cf]
+    heads = ["method", "solver", "budget", "sub", "res", "faces", "ms/frame", "p10", "p90",
+             "band max", "band rms", "warp viol end", "weft viol end", "frames unconv."] + \
+        [f"sol f{f}" for f in cf]
+    lines += ["", "## Runs", "", "| " + " | ".join(heads) + " |", "|" + "---|" * len(heads)]
     for r in results:
-        lines.append("| " + " | ".join(f"{r[c]:.3g}" if isinstance(r[c], float) else str(r[c])
-                                       for c in cols) + " |")
+        lines.append("| " + " | ".join(fmt(r[c]) for c in cols) + " |")
+    lines += ["", "Plots: `pareto_band.png` (ms per frame against band max), "
+              f"`pareto_solution.png` (against the solution error at frame {cf[0]})."]
     with open(os.path.join(out, "speed_vs_error.md"), "w") as fh:
         fh.write("\n".join(lines) + "\n")
-    plot(results, out)
+    plot(results, out, grid, scene)
 
 
-def plot(results, out):
+def plot(results, out, grid, scene):
+    """One panel per resolution; colour = method, marker/line = solver, dashes = substeps;
+    lines join the iteration budgets of one (method, solver, substeps), labels give the budget."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    markers = {"svd": "o", "warp-weft": "s", "mapping": "^"}
-    colors = {"al": "tab:blue", "jacobi": "tab:red"}
-    for key, name, label in (("own_violation_max", "pareto_band.png", "own band violation, max (strain)"),
-                             ("solution_error", "pareto_solution.png", "solution error / cloth size")):
-        fig, ax = plt.subplots(figsize=(6.4, 4.4))
-        for r in results:
-            ax.scatter(r["ms_median"], max(r[key], 1e-12), marker=markers[r["method"]],
-                       color=colors[r["solver"]], s=14 + 2 * r["resolution"], alpha=0.75)
-        for m, mk in markers.items():
-            ax.scatter([], [], marker=mk, color="gray", label=m)
-        for s, c in colors.items():
-            ax.scatter([], [], marker="o", color=c, label=f"solver {s}")
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlabel("ms per frame (median)")
-        ax.set_ylabel(label)
-        ax.set_title("hanging: speed against error (marker size = resolution)")
-        ax.legend(fontsize=8)
-        ax.grid(True, which="both", alpha=0.3)
+    from matplotlib.lines import Line2D
+    colors = {"svd": "tab:blue", "warp-weft": "tab:orange", "mapping": "tab:green"}
+    markers = {"al": "o", "jacobi": "x"}
+    dashes = {1: "-", 2: "--", 4: ":"}
+    cf = sorted(grid["compare_frames"])[0]
+    res_list = sorted({r["resolution"] for r in results})
+    for key, name, label in (
+            ("band_max", "pareto_band.png", "band error: own violation, max over faces\n"
+             "(strain, mean over frames)"),
+            (f"solution_error_f{cf}", "pareto_solution.png",
+             f"solution error at frame {cf}\n(RMS distance / cloth diagonal)")):
+        fig, axes = plt.subplots(1, len(res_list), figsize=(4.6 * len(res_list) + 0.8, 4.4),
+                                 sharey=True, squeeze=False)
+        for ax, res in zip(axes[0], res_list):
+            rows = [r for r in results if r["resolution"] == res]
+            groups = sorted({(r["method"], r["solver"], r["substeps"]) for r in rows})
+            for m, s, sub in groups:
+                pts = sorted((r["iters"], r["ms_median"], max(r[key], 1e-9)) for r in rows
+                             if (r["method"], r["solver"], r["substeps"]) == (m, s, sub))
+                xs, ys = [p[1] for p in pts], [p[2] for p in pts]
+                ax.plot(xs, ys, dashes.get(sub, "-."), color=colors[m], marker=markers[s],
+                        ms=6, lw=1.2, alpha=0.85)
+                for it, x, y in pts:
+                    ax.annotate(str(it), (x, y), textcoords="offset points", xytext=(4, 3),
+                                fontsize=6.5, color=colors[m])
+            ax.set_xscale("log")
+            ax.set_yscale("log")
+            ax.set_title(f"{scene}, resolution {res} ({rows[0]['faces']} triangles)", fontsize=10)
+            ax.set_xlabel("ms per frame (median, log)")
+            ax.grid(True, which="both", alpha=0.3)
+        axes[0][0].set_ylabel(label + " (log)")
+        handles = [Line2D([], [], color=c, lw=2, label=m) for m, c in colors.items()]
+        handles += [Line2D([], [], color="gray", marker=mk, ls="", label=f"solver {s}")
+                    for s, mk in markers.items()]
+        handles += [Line2D([], [], color="gray", ls=dashes.get(sub, "-."),
+                           label=f"{sub} substep{'s' if sub > 1 else ''}")
+                    for sub in sorted({r["substeps"] for r in results})]
+        axes[0][-1].legend(handles=handles, fontsize=8, loc="best",
+                           title="numbers: iteration budget", title_fontsize=7.5)
+        fig.suptitle("Speed against error (down and left is better)", fontsize=11)
         fig.tight_layout()
         fig.savefig(os.path.join(out, name), dpi=110)
         plt.close(fig)
 
 
-def main():
+def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=os.path.join("results", "speed"))
     ap.add_argument("--quick", action="store_true", help="a small sweep, under two minutes")
-    ap.add_argument("--scene", default="hanging")
-    args = ap.parse_args()
+    ap.add_argument("--scene", default="hanging", help="hanging or drape")
+    args = ap.parse_args(argv)
     from cloth import backend
     backend.init("cpu", "f64")
-    grid = QUICK if args.quick else FULL
+    grid = copy.deepcopy(QUICK if args.quick else FULL)
+    command = "python -m benchmarks.speed_vs_error " + " ".join(argv if argv is not None
+                                                                 else sys.argv[1:])
     t0 = time.perf_counter()
     results, checks = sweep(grid, args.scene)
-    write_outputs(results, checks, args.out, grid, args.scene)
-    print(f"wrote {args.out}/ in {time.perf_counter() - t0:.0f} s")
+    seconds = time.perf_counter() - t0
+    write_outputs(results, checks, args.out, grid, args.scene, command, seconds)
+    print(f"wrote {args.out}/ in {seconds:.0f} s")
 
 
 if __name__ == "__main__":

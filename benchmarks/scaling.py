@@ -1,0 +1,409 @@
+"""Scaling: ms per frame of each stage and peak memory against triangle count, with the fitted
+exponent k of cost ~ N^k per stage.
+
+    python -m benchmarks.scaling --out docs/speed            # ~500 to ~100k triangles
+    python -m benchmarks.scaling --quick --out results/scale  # ~500 to ~8k, a few minutes
+
+Each size runs in its own child process (so its peak memory is its own):
+  dynamics              the hanging scene (soft cloth, one 1/30 s substep per frame, CG to
+                        1e-4), no strain limiting;
+  strain_limit:METHOD   the same scene with the method on from the start (augmented
+                        Lagrangian, the default budget of 50 rounds, warp +-1 % / weft +-5 %);
+  collision             the same scene with a still sphere touching the sheet, the ground
+                        plane and self-collision: ``collision`` is the obstacle pass (SDF and
+                        continuous sampling per vertex), ``self_collision`` the spatial-hash
+                        pass;
+  remesh                ``cloth.remesh.remesh`` on the moving analytic sheet of the remesher's
+                        own benchmark (``cloth.remesh._bench_shape``, 'hanging'), with
+                        size_max 1.8 x the grid spacing so the count stays near N.
+Every run starts from the scene's start; frame 1 is untimed (it compiles the kernels), then
+the median over the next --frames frames (frames 2 to 4 by default: the start of the sheet's
+fall, the same simulated time at every size). Memory: ``ru_maxrss`` (peak resident set) of
+the child, which below ~8k triangles is mostly Python, Taichi and kernel compilation (a child
+on an 8-triangle sheet is measured for comparison), and the bytes of every Taichi field and
+ndarray the simulator holds (model, dynamics, strain work arrays, collider). A stage whose predicted time per frame at the next size (extrapolated
+with the exponent of the last two sizes) exceeds --budget seconds is skipped, and the table
+says so.
+"""
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+from benchmarks.speed_vs_error import commit, machine  # noqa: E402
+
+METHODS = ("svd", "warp-weft", "mapping")
+STAGES = ("dynamics", "collision", "self_collision", "remesh") + tuple(
+    f"strain_limit:{m}" for m in METHODS)
+# Vertices per side: 2 (n - 1)^2 triangles, from 512 to 100352.
+FULL = [17, 33, 46, 65, 91, 129, 225]
+QUICK = [17, 33, 65]
+
+
+# ---- child: one size -------------------------------------------------------------------------
+def field_bytes(root):
+    """Bytes of every Taichi field / ndarray reachable from ``root`` through attributes of
+    objects defined in cloth/ (each counted once)."""
+    from taichi.lang._ndarray import Ndarray
+    from taichi.lang.field import Field
+    seen, total, stack = set(), 0, [root]
+    while stack:
+        obj = stack.pop()
+        if id(obj) in seen:
+            continue
+        seen.add(id(obj))
+        if isinstance(obj, (Field, Ndarray)):
+            total += obj.to_numpy().nbytes
+            continue
+        if isinstance(obj, (list, tuple)):
+            stack.extend(obj)
+        elif type(obj).__module__.startswith("cloth") and hasattr(obj, "__dict__"):
+            stack.extend(vars(obj).values())
+    return total
+
+
+def timed_frames(sim, stage_names, frames, extra=None):
+    """Step ``frames`` frames; the median ms per frame of each named stage (plus ``extra``:
+    name -> f(sim) read after each frame)."""
+    rows = {n: [] for n in stage_names}
+    extra = extra or {}
+    rows.update({n: [] for n in extra})
+    for _ in range(frames):
+        sim.step_frame()
+        for n in stage_names:
+            rows[n].append(sim.stage(n).ms)
+        for n, f in extra.items():
+            rows[n].append(f(sim))
+    return {n: float(np.median(v)) for n, v in rows.items()}
+
+
+def child(res, methods, frames):
+    """Measure one size; returns a dict (printed as JSON by the child process). One Simulator
+    serves every stage (compiling a second one would cost as much as the measurements at the
+    small sizes): it is restarted from the scene's start for each strain method and for the
+    collision run (``speed_vs_error.restart``)."""
+    from cloth import backend
+    backend.init("cpu", "f64")
+    import scenes
+    from benchmarks.speed_vs_error import restart
+    from cloth import remesh
+    from cloth.collision import Plane, Sphere
+    from cloth.model import MeshArrays
+    from cloth.sheet import make_sheet
+    from cloth.simulator import Simulator
+    from scenes.common import resolve
+    out = {"resolution": res, "ms": {}, "info": {}}
+    module = scenes.get("hanging")
+
+    def config(method="none"):
+        cfg = resolve(module.DEFAULTS, [{"cloth": {"resolution": res},
+                                         "strain": {"method": method}}])
+        return cfg, module.build(cfg)
+
+    t0 = time.perf_counter()
+    cfg, setup = config()
+    sim = Simulator(setup, cfg)
+    out["faces"] = int(sim.model.n_faces)
+    sim.step_frame()                                      # compiles the dynamics
+    out["info"]["first_frame_s"] = time.perf_counter() - t0
+    r = timed_frames(sim, ["dynamics"], frames,
+                     {"cg_iterations": lambda s: s.dynamics.last_cg_iters})
+    out["ms"]["dynamics"] = r["dynamics"]
+    out["info"]["cg_iterations"] = r["cg_iterations"]
+    for m in methods:
+        cfg, setup = config(m)
+        restart(sim, setup, cfg)
+        sim.step_frame()                                  # frame 1, untimed (compiles if cold)
+        r = timed_frames(sim, ["strain_limit"], frames,
+                         {"rounds": lambda s: s.strain.last_iterations,
+                          "converged": lambda s: float(s.strain.last_converged)})
+        out["ms"][f"strain_limit:{m}"] = r["strain_limit"]
+        out["info"][f"rounds:{m}"] = r["rounds"]
+        out["info"][f"converged:{m}"] = r["converged"]
+    # Collision: a still sphere just touching the sheet's middle from behind, the ground, and
+    # self-collision, added to the same Simulator (its private _make_collider builds the
+    # Collider the way a scene with obstacles gets it).
+    cfg, setup = config()
+    cfg["collision"] = {"thickness": 0.005}
+    top = cfg["cloth"]["top"]
+    setup.obstacles = [Sphere(center=(0.0, top - 0.5, -0.124), radius=0.12, mu=0.3),
+                       Plane(point=(0.0, 0.0, 0.0), normal=(0.0, 1.0, 0.0), mu=0.3)]
+    setup.self_collision = True
+    restart(sim, setup, cfg)
+    sim._make_collider()
+    sim.stage("collision").enabled = True
+    sim.step_frame()                                      # compiles the collider
+    r = timed_frames(sim, [], frames, {"collision": lambda s: s.collider.last_ms_obstacles,
+                                       "self_collision": lambda s: s.collider.last_ms_self})
+    out["ms"].update(collision=r["collision"], self_collision=r["self_collision"])
+    if sim.strain is None:
+        # Allocate the strain limiter's work arrays (nothing runs) so that every size counts
+        # the same fields, also where every method was skipped.
+        sim.set_method("mapping")
+        sim.set_method("none")
+    out["field_bytes"] = field_bytes(sim)
+    del sim
+    # Remeshing: the remesher's own moving test sheet at this resolution.
+    size_max = 1.8 / (res - 1)
+    params = remesh.RemeshParams(size_min=size_max / 5, size_max=size_max)
+    uv, faces = make_sheet(1.0, 1.0, res, res, pattern="alternating")
+    mesh = MeshArrays(uv=uv, x=np.c_[uv, np.zeros(len(uv))], faces=faces)
+    times, counts = [], []
+    for frame in range(frames + 3):                       # 3 frames to settle the count
+        mesh.x, mesh.v = remesh._bench_shape(mesh.uv, "hanging", 0.1 * frame)
+        t1 = time.perf_counter()
+        mesh, _, st = remesh.remesh(mesh, params)
+        if frame >= 3:
+            times.append(1000.0 * (time.perf_counter() - t1))
+            counts.append(st["faces_out"])
+    out["ms"]["remesh"] = float(np.median(times))
+    out["info"]["remesh_faces"] = float(np.median(counts))
+    out["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    return out
+
+
+# ---- parent: the sweep over sizes --------------------------------------------------------------
+def run_child(res, methods, frames, timeout):
+    cmd = [sys.executable, "-m", "benchmarks.scaling", "--child", str(res), "--frames",
+           str(frames), "--methods", *methods]
+    t0 = time.perf_counter()
+    try:
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout,
+                              cwd=os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    except subprocess.TimeoutExpired:
+        return {"resolution": res, "error": f"timed out after {timeout} s"}
+    if proc.returncode != 0:
+        return {"resolution": res, "error": proc.stderr.strip().splitlines()[-1:]}
+    line = [l for l in proc.stdout.splitlines() if l.startswith("{")][-1]
+    out = json.loads(line)
+    out["wall_s"] = time.perf_counter() - t0
+    return out
+
+
+def predict(points, n_next):
+    """ms at n_next from the last two (N, ms) points (exponent 1.5 with one point)."""
+    if not points:
+        return 0.0
+    if len(points) == 1:
+        (n0, t0), k = points[0], 1.5
+    else:
+        (n1, t1), (n0, t0) = points[-2], points[-1]
+        k = max(np.log(t0 / t1) / np.log(n0 / n1), 1.0) if t1 > 0 and t0 > 0 else 1.5
+    return t0 * (n_next / n0) ** k
+
+
+def stage_n(row, stage):
+    """The triangle count a stage's time belongs to (the remesher's output varies a little)."""
+    return row["info"]["remesh_faces"] if stage == "remesh" else row["faces"]
+
+
+def fit_exponent(ns, ms):
+    """Least-squares slope of log(ms) against log(N), or nan with fewer than 2 points."""
+    ns, ms = np.asarray(ns, float), np.asarray(ms, float)
+    ok = (ms > 0) & np.isfinite(ms)
+    if ok.sum() < 2:
+        return float("nan")
+    return float(np.polyfit(np.log(ns[ok]), np.log(ms[ok]), 1)[0])
+
+
+def sweep(resolutions, frames, budget_s, timeout, log=print):
+    base = run_child(3, list(METHODS), 2, timeout)
+    log(f"baseline (8 triangles): peak RSS {base.get('peak_rss_mb', float('nan')):.0f} MB")
+    rows, skipped = [], []
+    history = {s: [] for s in STAGES}
+    for res in resolutions:
+        n = 2 * (res - 1) ** 2
+        # Every timed frame runs the dynamics, so a size whose dynamics alone is predicted
+        # over budget ends the sweep; a strain method over budget is left out at this size.
+        p = predict(history["dynamics"], n)
+        if p > 1000 * budget_s:
+            skipped.append(("all", n, p))
+            break
+        methods = []
+        for m in METHODS:
+            p = predict(history[f"strain_limit:{m}"], n)
+            if p > 1000 * budget_s:
+                skipped.append((f"strain_limit:{m}", n, p))
+            else:
+                methods.append(m)
+        r = run_child(res, methods, frames, timeout)
+        if "error" in r:
+            log(f"{n} triangles: {r['error']}")
+            rows.append(r)
+            break
+        r["faces"] = r.get("faces", n)
+        for s, v in r["ms"].items():
+            history[s].append((stage_n(r, s), v))
+        rows.append(r)
+        log(f"{r['faces']:6d} triangles: " + ", ".join(f"{s} {v:.1f}" for s, v in r["ms"].items())
+            + f" ms/frame; peak RSS {r['peak_rss_mb']:.0f} MB; child {r['wall_s']:.0f} s")
+    return base, rows, skipped
+
+
+def write_outputs(base, rows, skipped, out, command, seconds, budget_s):
+    os.makedirs(out, exist_ok=True)
+    good = [r for r in rows if "error" not in r]
+    fits = {}
+    for s in STAGES + ("peak_rss", "field_bytes"):
+        pts = []
+        for r in good:
+            if s in r["ms"]:
+                pts.append((stage_n(r, s), r["ms"][s]))
+            elif s == "peak_rss":
+                pts.append((r["faces"], r["peak_rss_mb"]))
+            elif s == "field_bytes":
+                pts.append((r["faces"], r["field_bytes"]))
+        big = [p for p in pts if p[0] >= 8000]
+        fits[s] = {"k_all": fit_exponent(*zip(*pts)) if len(pts) > 1 else float("nan"),
+                   "k_8k": fit_exponent(*zip(*big)) if len(big) > 1 else float("nan"),
+                   "n_points": len(pts), "largest": int(max((p[0] for p in pts), default=0))}
+    with open(os.path.join(out, "scaling.json"), "w") as fh:
+        json.dump({"command": command, "machine": machine(), "commit": commit(),
+                   "seconds": seconds, "budget": budget_s, "baseline": base, "rows": rows,
+                   "fits": fits,
+                   "skipped": skipped}, fh, indent=1)
+    names = {"dynamics": "dynamics", "collision": "collision (obstacles)",
+             "self_collision": "self-collision", "remesh": "remesh",
+             **{f"strain_limit:{m}": f"strain limit {m}" for m in METHODS}}
+    lines = ["# Scaling with triangle count", "",
+             f"Command: `{command}` ({seconds:.0f} s). Machine: {machine()}; commit "
+             f"{commit()}. Other jobs shared the two cores while this ran: times carry noise of "
+             "tens of percent.", "",
+             "Hanging soft sheet, one 1/30 s substep per frame; ms per frame of each stage, "
+             "median over the timed frames (see `benchmarks/scaling.py` for the set-up of each "
+             "stage; remesh runs on its own test sheet, whose triangle count after remeshing is "
+             "in brackets and is the N of its fit). `CG iters`: the dynamics' CG iterations per "
+             "step (capped at 500). Peak RSS is the child process's `ru_maxrss` (one process "
+             "per size): up to about 8k triangles it is set by Python, Taichi and LLVM compiling "
+             f"the kernels (the same run on 8 triangles peaks at "
+             f"{base.get('peak_rss_mb', float('nan')):.0f} MB, and the figure varies by some "
+             "100 MB with what had to be compiled), so its exponent means something only over "
+             "the larger sizes. `Taichi MB` counts the bytes of the fields and ndarrays the "
+             "simulator holds, spare capacity included (model, dynamics, strain work arrays, "
+             "collider).", "",
+             "| triangles | " + " | ".join(names[s] for s in STAGES) +
+             " | CG iters | peak RSS MB | Taichi MB |",
+             "|---" * (len(STAGES) + 4) + "|"]
+    for r in good:
+        cells = [f"{r['ms'][s]:.3g}" if s in r["ms"] else "skipped" for s in STAGES]
+        cells[STAGES.index("remesh")] += f" ({r['info']['remesh_faces']:.0f})"
+        lines.append(f"| {r['faces']} | " + " | ".join(cells) +
+                     f" | {r['info'].get('cg_iterations', float('nan')):.0f}"
+                     f" | {r['peak_rss_mb']:.0f}"
+                     f" | {r['field_bytes'] / 2**20:.1f} |")
+    lines += ["", "Fitted exponent k of cost ~ N^k (least squares in log-log), over every "
+              "measured size and over sizes of 8k triangles and more:", "",
+              "| stage | k (all sizes) | k (>= 8k) | sizes | largest N |", "|---|---|---|---|---|"]
+    for s in STAGES:
+        f = fits[s]
+        lines.append(f"| {names[s]} | {f['k_all']:.2f} | {f['k_8k']:.2f} | {f['n_points']} | "
+                     f"{f['largest']} |")
+    for s, label in (("peak_rss", "peak RSS"), ("field_bytes", "Taichi field bytes")):
+        f = fits[s]
+        lines.append(f"| {label} | {f['k_all']:.2f} | {f['k_8k']:.2f} | {f['n_points']} | "
+                     f"{f['largest']} |")
+    if skipped:
+        lines += ["", "Skipped (predicted time per frame above the --budget of "
+                  f"{budget_s:g} s, from the exponent of the two sizes before):", ""]
+        for s, n, p in skipped:
+            what = "every stage (the dynamics runs in every frame)" if s == "all" else names[s]
+            lines.append(f"- {what} at {n} triangles: predicted {p / 1000:.0f} s per frame"
+                         if np.isfinite(p) else f"- {what} at {n} triangles: failed")
+    for r in rows:
+        if "error" in r:
+            lines.append(f"- resolution {r['resolution']}: {r['error']}")
+    strain_rounds = [(r["faces"], {m: r["info"].get(f"rounds:{m}") for m in METHODS})
+                     for r in good]
+    lines += ["", "AL rounds per substep (median) by size: " + "; ".join(
+        f"{n}: " + ", ".join(f"{m} {v:.0f}" for m, v in d.items() if v is not None)
+        for n, d in strain_rounds if any(v is not None for v in d.values())) + ".",
+        "", "Plot: `scaling.png`."]
+    with open(os.path.join(out, "scaling.md"), "w") as fh:
+        fh.write("\n".join(lines) + "\n")
+    plot(good, base, fits, out, names)
+
+
+def plot(rows, base, fits, out, names):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, (ax, axm) = plt.subplots(1, 2, figsize=(12, 4.8), gridspec_kw={"width_ratios": [3, 2]})
+    styles = {"dynamics": ("k", "o"), "collision": ("tab:gray", "s"),
+              "self_collision": ("tab:brown", "D"), "remesh": ("tab:purple", "v"),
+              "strain_limit:svd": ("tab:blue", "^"), "strain_limit:warp-weft": ("tab:orange", "^"),
+              "strain_limit:mapping": ("tab:green", "^")}
+    for s in STAGES:
+        pts = [(stage_n(r, s), r["ms"][s]) for r in rows if s in r["ms"]]
+        if not pts:
+            continue
+        c, mk = styles[s]
+        ax.plot(*zip(*pts), color=c, marker=mk, lw=1.3,
+                label=f"{names[s]} (k = {fits[s]['k_all']:.2f})")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    lo, hi = ax.get_ylim()
+    ax.set_ylim(lo, hi * 30)                       # headroom: the legend sits above the lines
+    ax.set_xlabel("triangles (log)")
+    ax.set_ylabel("ms per frame (one substep; log)")
+    ax.set_title("Cost of each stage against mesh size")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7.5, loc="upper left", ncol=2)
+    n = [r["faces"] for r in rows]
+    axm.plot(n, [r["peak_rss_mb"] for r in rows], "o-", color="tab:red",
+             label=f"peak RSS of the process (k = {fits['peak_rss']['k_8k']:.2f} above 8k)")
+    axm.plot(n, [r["field_bytes"] / 2**20 for r in rows], "s--", color="tab:blue",
+             label=f"Taichi fields + ndarrays (k = {fits['field_bytes']['k_all']:.2f})")
+    axm.set_xscale("log")
+    axm.set_yscale("log")
+    axm.set_xlabel("triangles (log)")
+    axm.set_ylabel("MB (log)")
+    axm.set_title(f"Memory (8 triangles: peak RSS {base.get('peak_rss_mb', float('nan')):.0f} MB)")
+    axm.grid(True, which="both", alpha=0.3)
+    axm.legend(fontsize=8, loc="upper left")
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, "scaling.png"), dpi=110)
+    plt.close(fig)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default=os.path.join("results", "scaling"))
+    ap.add_argument("--quick", action="store_true", help="~500 to ~8k triangles")
+    ap.add_argument("--frames", type=int, default=None, help="timed frames per stage")
+    ap.add_argument("--budget", type=float, default=40.0,
+                    help="skip a stage predicted slower than this many seconds per frame")
+    ap.add_argument("--timeout", type=float, default=1800.0, help="seconds per size")
+    ap.add_argument("--child", type=int, help=argparse.SUPPRESS)
+    ap.add_argument("--methods", nargs="*", default=list(METHODS), help=argparse.SUPPRESS)
+    ap.add_argument("--replot", action="store_true",
+                    help="rewrite scaling.md and scaling.png from OUT/scaling.json")
+    args = ap.parse_args(argv)
+    if args.replot:
+        d = json.load(open(os.path.join(args.out, "scaling.json")))
+        write_outputs(d["baseline"], d["rows"], [tuple(x) for x in d["skipped"]], args.out,
+                      d["command"], d["seconds"], d.get("budget", args.budget))
+        return 0
+    if args.child:
+        print(json.dumps(child(args.child, args.methods, args.frames or 3)))
+        return 0
+    argv = sys.argv[1:] if argv is None else argv
+    frames = args.frames or (2 if args.quick else 3)
+    t0 = time.perf_counter()
+    base, rows, skipped = sweep(QUICK if args.quick else FULL, frames, args.budget,
+                                args.timeout)
+    seconds = time.perf_counter() - t0
+    write_outputs(base, rows, skipped, args.out, "python -m benchmarks.scaling " + " ".join(argv),
+                  seconds, args.budget)
+    print(f"wrote {args.out}/scaling.md in {seconds:.0f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,169 @@
+"""The speed-against-error sweep and the stability suite, small enough for CI.
+
+Everything runs in this process on shared, compiled Simulators (``SimulatorPool``): a new
+Simulator costs seconds of kernel compilation, a run of these small scenes a fraction of one.
+The sweep uses a reduced grid of ``benchmarks.speed_vs_error``; the stability cases are exactly
+the ``--fast`` cases of ``benchmarks.stability``.
+"""
+import json
+import os
+import re
+
+import numpy as np
+import pytest
+
+from benchmarks import stability
+from benchmarks.speed_vs_error import (SimulatorPool, overrides_for, run, sweep,
+                                       write_outputs)
+
+# Two resolutions a factor 4 apart in triangles; 13 is also the stability cases' mesh, so
+# its Simulator is compiled once for both. svd is left to the documented sweep (and the
+# scene tests): here it would add its runs and a Jacobi kernel to compile.
+GRID = dict(methods=["warp-weft", "mapping"], solvers=["al", "jacobi"],
+            iters={"al": [2, 32], "jacobi": [10, 1000]}, substeps=[1], resolutions=[7, 13],
+            frames=6, repeats=2, compare_frames=[4], ref_substeps=8, ref_iters=60,
+            ref_tol=1e-7)
+CF = GRID["compare_frames"][0]
+
+
+@pytest.fixture(scope="module")
+def pool():
+    return SimulatorPool()
+
+
+def test_restarted_simulator_repeats_a_fresh_run(pool):
+    """A run on a restarted Simulator, after a run with other settings, is bit for bit the
+    run of a new Simulator: the sweep's numbers do not depend on what ran before."""
+    a = overrides_for("mapping", "al", 8, 1, 7)
+    b = overrides_for("warp-weft", "jacobi", 50, 2, 7)
+    b["material"] = {"density": 0.3, "k_bend": 1e-4}
+    b["strain"].update(warp=[-0.02, 0.03], bias=[-0.1, 0.1])
+    own = SimulatorPool()
+    first = run(own, "hanging", a, 5, snap_frames=(5,))
+    other = run(own, "hanging", b, 5, snap_frames=(5,))
+    again = run(own, "hanging", a, 5, snap_frames=(5,))
+    assert own.built == 1                                   # one Simulator served all three
+    assert not np.array_equal(other["snaps"][5][0], first["snaps"][5][0])
+    assert np.array_equal(again["snaps"][5][0], first["snaps"][5][0])
+    assert [r["own_violation_max"] for r in again["rows"]] == \
+        [r["own_violation_max"] for r in first["rows"]]
+    pool.sims.update(own.sims)                              # hand it on, compiled
+
+
+@pytest.fixture(scope="module")
+def swept(pool, tmp_path_factory):
+    out = str(tmp_path_factory.mktemp("speed"))
+    results, checks = sweep(GRID, "hanging", log=lambda *a: None, pool=pool)
+    write_outputs(results, checks, out, GRID, "hanging", "tests/test_benchmarks.py", 0.0)
+    return out, results, checks
+
+
+def test_sweep_files_have_the_expected_shape(swept):
+    out, results, checks = swept
+    for name in ("speed_vs_error.md", "speed_vs_error.json", "pareto_band.png",
+                 "pareto_solution.png"):
+        assert os.path.getsize(os.path.join(out, name)) > 500, name
+    data = json.load(open(os.path.join(out, "speed_vs_error.json")))
+    n_runs = len(GRID["methods"]) * len(GRID["resolutions"]) * len(GRID["substeps"]) * \
+        sum(len(v) for v in GRID["iters"].values())
+    assert len(data["results"]) == n_runs
+    assert len(data["reference_checks"]) == len(GRID["methods"]) * len(GRID["resolutions"])
+    md = open(os.path.join(out, "speed_vs_error.md")).read()
+    rows = re.findall(r"^\| (svd|warp-weft|mapping) \| (al|jacobi) \|", md, re.M)
+    assert len(rows) == n_runs                                   # one table row per run
+    with open(os.path.join(out, "pareto_band.png"), "rb") as fh:
+        assert fh.read(8) == b"\x89PNG\r\n\x1a\n"
+
+
+def test_sweep_values_are_sane(swept):
+    _, results, checks = swept
+    for r in results:
+        assert r["finite"] and r["repeats_identical"], r
+        for key in ("ms_median", "ms_p10", "ms_p90", "band_max", "band_rms",
+                    f"solution_error_f{CF}"):
+            assert np.isfinite(r[key]) and r[key] >= 0, (key, r)
+        assert r["ms_p10"] <= r["ms_median"] <= r["ms_p90"]
+        assert r["faces"] == 2 * (r["resolution"] - 1) ** 2
+    for c in checks:
+        assert np.isfinite(c[f"change_f{CF}"]) and c[f"change_f{CF}"] > 0
+
+
+def _by(results, **fixed):
+    return [r for r in results if all(r[k] == v for k, v in fixed.items())]
+
+
+def test_band_error_falls_with_the_iteration_budget(swept):
+    _, results, _ = swept
+    for r in _by(results, iters=2) + _by(results, iters=10):
+        lo, hi = GRID["iters"][r["solver"]]
+        more = _by(results, method=r["method"], solver=r["solver"], substeps=r["substeps"],
+                   resolution=r["resolution"], iters=hi)[0]
+        assert more["band_max"] < 0.5 * r["band_max"], (r, more)
+        if r["solver"] == "al":
+            assert more["band_max"] < 1e-4                  # the AL reaches its tolerance
+
+
+def test_jacobi_solution_error_falls_with_the_iteration_budget(swept):
+    # (With one AL round or more the solution error is the time step's; see the docs.)
+    _, results, _ = swept
+    for r in _by(results, solver="jacobi", iters=10):
+        more = _by(results, method=r["method"], solver="jacobi", substeps=r["substeps"],
+                   resolution=r["resolution"], iters=1000)[0]
+        assert more[f"solution_error_f{CF}"] < r[f"solution_error_f{CF}"], (r, more)
+
+
+def test_time_grows_with_resolution(swept):
+    _, results, _ = swept
+    small, large = GRID["resolutions"]
+    for method in GRID["methods"]:
+        for solver in GRID["solvers"]:
+            hi = GRID["iters"][solver][-1]
+            for sub in GRID["substeps"]:
+                a = _by(results, method=method, solver=solver, iters=hi, substeps=sub,
+                        resolution=small)[0]
+                b = _by(results, method=method, solver=solver, iters=hi, substeps=sub,
+                        resolution=large)[0]
+                assert b["ms_median"] > a["ms_median"], (a, b)
+
+
+def test_reference_is_closer_to_its_refinement_than_any_run(swept):
+    """The issue asks for a tenth of the smallest error (docs/speed records that verdict for
+    the real sweep); on these 4-frame runs the reference must at least beat every run."""
+    _, results, checks = swept
+    for c in checks:
+        mine = _by(results, method=c["method"], resolution=c["resolution"])
+        assert c[f"change_f{CF}"] < min(r[f"solution_error_f{CF}"] for r in mine), c
+
+
+# ---- stability: the --fast cases ------------------------------------------------------------
+FAST = [c for c in stability.cases() if c.fast]
+KNOWN = {}      # case name -> reason, for a known failure (strict xfail)
+
+
+@pytest.fixture(scope="module")
+def stability_results(pool, tmp_path_factory):
+    out = str(tmp_path_factory.mktemp("stability"))
+    results = stability.run_cases(FAST, pool, log=lambda *a: None)
+    stability.write_report(results, out, "tests/test_benchmarks.py", 0.0)
+    return out, {r["case"]: r for r in results}
+
+
+def test_stability_report_lists_every_fast_case(stability_results):
+    out, by_name = stability_results
+    md = open(os.path.join(out, "stability.md")).read()
+    data = json.load(open(os.path.join(out, "stability.json")))
+    assert [r["case"] for r in data["results"]] == [c.name for c in FAST]
+    for c in FAST:
+        assert f"| {c.name} | " in md
+    assert len(FAST) >= 7
+
+
+@pytest.mark.parametrize("name", [
+    pytest.param(c.name, marks=pytest.mark.xfail(strict=True, reason=KNOWN[c.name]))
+    if c.name in KNOWN else c.name for c in FAST])
+def test_stability_case_passes(stability_results, name):
+    r = stability_results[1][name]
+    assert r["finite"], r.get("error")
+    for key in ("ke_peak", "violation_peak", "violation_end"):
+        assert np.isfinite(r[key])
+    assert r["passed"], r["why"]
