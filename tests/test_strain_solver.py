@@ -269,3 +269,22 @@ def test_contact_half_spaces_hold_with_the_limits():
     set_positions(model, x0)
     limiter.project(H)
     assert model.positions()[:, 2].min() < -0.01
+
+
+def test_multipliers_follow_faces_through_a_remesh_scaled_by_area():
+    """face_state / set_face_state: the per-face multipliers a remesh carries to the faces
+    cut from each face, scaled by sqrt(new area / old area) (the force a multiplier exerts
+    grows like sqrt(area))."""
+    model = stretched_sheet()
+    limiter = StrainLimiter(model, method="warp-weft")
+    limiter.project(H)
+    state = limiter.face_state()
+    assert state["lam"].shape[0] == model.n_faces and state["lam"].max() > 0
+    limiter.on_mesh_changed()                       # what the Simulator does after a remesh
+    assert limiter._ws.lam.to_numpy().max() == 0
+    shrunk = dict(state, area=4.0 * state["area"])  # as if each face had been 4x larger
+    limiter.set_face_state(shrunk)
+    lam = limiter._ws.lam.to_numpy()[: model.n_faces]
+    np.testing.assert_allclose(lam, 0.5 * state["lam"], rtol=1e-12)
+    with pytest.raises(StrainLimitError, match="rows"):
+        limiter.set_face_state({"lam": state["lam"][:-1], "area": state["area"][:-1]})
