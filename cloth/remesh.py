@@ -11,7 +11,8 @@ Host-side numpy/Python: ``remesh(mesh, params)`` returns a new ``MeshArrays``. O
 2. Operations, each one local, checked, and either applied whole or not at all:
    split edges too long in the metric (longest first), flip to the anisotropic Delaunay
    triangulation, collapse edges whose removal makes no edge too long and inverts nothing,
-   flip again.
+   flip again. Collapses keep a hysteresis margin below the split threshold, except for
+   edges too short to be half of a recent split (see ``_collapse_limit``).
 3. Transfer. A split puts the new vertex at the edge's material midpoint and gives it the
    midpoint of x, v (exact linear interpolation in material space); flips and collapses never
    move a vertex, so existing vertices keep uv, x, v, pins exactly. New faces inherit grain and
@@ -56,8 +57,10 @@ class RemeshParams:
         regions about to buckle are refined before the wrinkles form.
     refine_obstacle: largest change of obstacle distance across an edge, as a fraction of the
         distance (plus ``size_min``): refines where the cloth approaches or leaves an obstacle.
-    collapse_margin: hysteresis; a collapse may create edges up to ``1 - collapse_margin`` in
-        metric length, so a just-split edge is not collapsed again next frame.
+    collapse_margin: hysteresis, so a just-split edge is not collapsed again next frame: a
+        collapse may create edges up to ``1 - collapse_margin`` in metric length; an edge
+        shorter than ``(1 - collapse_margin) / 2`` (it cannot be half of a recent split) may
+        create edges up to 1, the split threshold (``_collapse_limit``).
     """
     size_min: float = 0.015
     size_max: float = 0.08
@@ -478,7 +481,7 @@ class _Work:
 
     def collapse(self, a, b):
         """Remove vertex a by merging it into b, if that keeps the mesh manifold, keeps the
-        boundary, creates no edge longer than 1 - collapse_margin in the metric, no triangle
+        boundary, creates no edge longer than ``_collapse_limit`` in the metric, no triangle
         worse than aspect_min, and inverts no triangle in material or world space."""
         if a == b or self.keep[a] or not self.alive[a]:
             return False
@@ -492,7 +495,7 @@ class _Work:
         opp = {t for f in fs for t in self.faces[f]} - {a, b}
         if na & self.neighbours(b) != opp:
             return False
-        limit = (1.0 - self.p.collapse_margin) ** 2
+        limit = _collapse_limit(self.p, self.metric_len2(a, b))
         for n in na - opp - {b}:
             if self.metric_len2(b, n) > limit:
                 return False
@@ -573,13 +576,21 @@ def _flip_wanted_np(uv, Mv, a, b, c, d):
 def _flip_phase(w, max_rounds=8):
     """Flip interior edges that fail the anisotropic Delaunay test (found for the whole mesh
     at once), then recheck the four edges around each flip; the margin in the test makes this
-    terminate on co-circular grids."""
+    terminate on co-circular grids.
+
+    A flip never brings back an edge this phase has flipped away. With one fixed metric that
+    cannot happen anyway (a Delaunay flip sequence never re-creates an edge it removed), but
+    each quad is judged in the metric averaged over its own four vertices, so a ring of
+    nearly co-circular vertices can cycle through its triangulations: in the drape scene five
+    edges of a pentagon were flipped ~2600 times each in one call, until the budget ran out.
+    Refusing re-created edges makes every phase finite; the budget stays as a backstop."""
     faces, ev, ef, eo, uv, Mv, _ = w.snapshot()
     inner = np.flatnonzero(ef[:, 1] >= 0)
     a, b, c, d = ev[inner, 0], ev[inner, 1], eo[inner, 0], eo[inner, 1]
     bad = _flip_wanted_np(uv, Mv, a, b, c, d)
     queue = list(zip(a[bad].tolist(), b[bad].tolist()))
     budget = max_rounds * (len(queue) + 1) + len(faces)
+    removed = set()                  # edges (low, high) flipped away in this phase
     while queue and budget > 0:
         a, b = queue.pop()
         budget -= 1
@@ -587,15 +598,38 @@ def _flip_phase(w, max_rounds=8):
         if quad is None:
             continue
         c, d = quad[2], quad[3]
+        if (min(c, d), max(c, d)) in removed:
+            continue
         if w.flip_wanted(a, b, c, d) and w.flip(a, b):
+            removed.add((min(a, b), max(a, b)))
             queue.extend(((a, c), (c, b), (b, d), (d, a)))
 
 
+def _collapse_limit(params, own2):
+    """Largest squared metric length of the edges that collapsing an edge of squared metric
+    length ``own2`` may create (``own2`` a float or an array).
+
+    The margin below the split threshold 1 is a hysteresis against split/collapse cycles: the
+    halves of an edge split because it was longer than 1 are each at least 1/2 long, and
+    collapsing one would re-create the split edge. Keeping every collapse under 1 - margin
+    stops that, but it also caps coarsening: greedy collapses jam with the edges spread over
+    roughly half to all of the limit, so a flat sheet stalled at a mean edge of about
+    0.6 x size_max. An edge shorter than (1 - margin) / 2, though, cannot be such a half unless
+    the metric has coarsened by more than the margin since the split, the same condition the
+    margin asks for; so collapsing it may create edges up to the split threshold itself (never
+    longer, or the next split pass would undo it)."""
+    keep = (1.0 - params.collapse_margin) ** 2
+    if np.ndim(own2) == 0:                   # one edge, from _Work.collapse
+        return 1.0 if own2 <= 0.25 * keep else keep
+    return np.where(own2 <= 0.25 * keep, 1.0, keep)
+
+
 def _collapse_candidates(w, only=None):
-    """Directed edges (a -> b) worth trying, shortest first: a removable, the edge itself
-    shorter than the collapse limit (a longer edge would leave longer ones behind) and every
-    new edge (b, n) to a's other neighbours n short enough. Computed for all edges at once;
-    the exact check is redone per collapse since earlier collapses change the neighbourhoods.
+    """Directed edges (a -> b) worth trying, in sweep order (below): a removable, the edge
+    itself shorter than the collapse limit (a longer edge would leave longer ones behind) and
+    every new edge (b, n) to a's other neighbours n short enough (``_collapse_limit`` of the
+    collapsed edge's length). Computed for all edges at once; the exact check is redone per
+    collapse since earlier collapses change the neighbourhoods.
     ``only``: optional vertex mask restricting which vertices a are tried."""
     _, ev, _, eo, uv, Mv, keep = w.snapshot()
     limit = (1.0 - w.p.collapse_margin) ** 2
@@ -623,8 +657,15 @@ def _collapse_candidates(w, only=None):
     l2 = _edge_len2(uv, Mv, bp, n)
     # Edges (b, n) that exist already (n == b, or n opposite the edge) are not new.
     l2[(n == bp) | (n == op[:, 0]) | (n == op[:, 1])] = 0.0
-    sel = np.flatnonzero(np.maximum.reduceat(l2, first) <= limit)
-    sel = sel[np.argsort(own[cand][sel], kind="stable")]
+    sel = np.flatnonzero(np.maximum.reduceat(l2, first) <= _collapse_limit(w.p, own[cand]))
+    # Order: a sweep across the sheet (by u, then v), and for each vertex a its shortest edge
+    # first. Greedy collapses jam once every remaining one would create a too-long edge; made
+    # in no spatial order (shortest-first is that on a near-uniform mesh) they jam early, with
+    # gaps of anything between half and all of the limit. Sweeping, each collapse is made next
+    # to the ones before it, which packs the vertices closer to the limit (as in 1D, where a
+    # left-to-right sweep leaves every gap at the limit): a flat sheet's mean edge ends 3-9 %
+    # longer than with shortest-first (tests/test_remesh.py, flat sheet).
+    sel = sel[np.lexsort((own[cand][sel], uv[a[sel], 1], uv[a[sel], 0]))]
     return list(zip(a[sel].tolist(), b[sel].tolist()))
 
 
@@ -756,11 +797,15 @@ def _bench_shape(uv, kind, t):
     return x, np.zeros_like(x)
 
 
-def _bench(frames=6, verbose=False):
+def _bench(frames=6, verbose=False, quiet=False):
     """Grids of ~1k, ~5k, ~20k faces with size_max 1.8 x the grid spacing (flat parts then
-    neither split nor coarsen), 4 frames to settle, then the mean over ``frames`` frames."""
+    neither split nor coarsen), 4 frames to settle, then the mean over ``frames`` frames.
+    Prints a table (unless ``quiet``) and returns its rows as dicts."""
     from cloth.sheet import make_sheet
-    print("kind     faces   ms/remesh  (sizing)  cpu ms   splits/flips/collapses per frame")
+    keys = ("faces_out", "ms", "ms_sizing", "ms_cpu", "splits", "flips", "collapses")
+    if not quiet:
+        print("kind     faces   ms/remesh  (sizing)  cpu ms   splits/flips/collapses per frame")
+    table = []
     for kind in ("hanging", "fold"):
         for n in (23, 51, 101):
             size_max = 1.8 / (n - 1)
@@ -774,11 +819,13 @@ def _bench(frames=6, verbose=False):
                 if verbose:
                     print(frame, st)
                 if frame >= 4:
-                    rows.append([st[k] for k in ("faces_out", "ms", "ms_sizing", "ms_cpu",
-                                                 "splits", "flips", "collapses")])
+                    rows.append([st[k] for k in keys])
             r = np.mean(rows, axis=0)
-            print(f"{kind:8s} {r[0]:6.0f}   {r[1]:8.1f}  ({r[2]:5.1f})  {r[3]:6.1f}    "
-                  f"{r[4]:.0f}/{r[5]:.0f}/{r[6]:.0f}")
+            table.append(dict(zip(("faces",) + keys[1:], r), kind=kind))
+            if not quiet:
+                print(f"{kind:8s} {r[0]:6.0f}   {r[1]:8.1f}  ({r[2]:5.1f})  {r[3]:6.1f}    "
+                      f"{r[4]:.0f}/{r[5]:.0f}/{r[6]:.0f}")
+    return table
 
 
 if __name__ == "__main__":

@@ -173,6 +173,26 @@ def test_flip_keeps_mesh_valid_and_refuses_bad_flips(rng):
     assert not any(w.flip(int(a), int(b)) for a, b in be)
 
 
+def test_flip_phase_does_not_cycle_on_a_nearly_cocircular_ring():
+    # Five nearly co-circular points with slightly different metrics: each quad is judged in
+    # its own averaged metric, and without a guard the triangulations of the pentagon cycled
+    # (here until the budget ran out, 17 flips; ~2600 per edge in a drape frame). A flip
+    # phase never re-creates an edge it removed, so at most the 5 diagonals are flipped.
+    from cloth.remesh import _flip_phase
+    uv = np.array([[1.0055, -0.0554], [0.3395, 0.9458], [-0.8002, 0.5812],
+                   [-0.8169, -0.5765], [0.3077, -0.9358]])
+    m00, m01, m11 = np.array([[1.025, 0.027, 1.028], [1.353, -0.363, 1.477],
+                              [1.103, 0.170, 1.284], [1.104, 0.014, 1.123],
+                              [1.253, -0.218, 1.192]]).T
+    Mv = np.stack([np.stack([m00, m01], 1), np.stack([m01, m11], 1)], 1)
+    m = MeshArrays(uv=uv, x=np.c_[uv, np.zeros(5)], faces=np.array([[0, 1, 2], [0, 2, 3],
+                                                                   [0, 3, 4]]))
+    w = _Work(m, Mv, np.zeros(5, bool), RemeshParams())
+    _flip_phase(w)
+    assert 0 < w.n_flip <= 5
+    check_valid(exported(w, m), signed_material_areas(m.uv, m.faces).sum())
+
+
 def test_flip_refused_when_quad_not_convex():
     # Quad a, d, b, c is not convex at b: the flipped face (d, b, c) would be clockwise.
     uv = np.array([[0, 0], [1, 0], [1.5, 0.1], [0.5, -1.0]])
@@ -314,21 +334,94 @@ def test_velocity_and_compression_refine_their_band(criterion):
     assert du[across & near].mean() < 0.7 * du[across & far].mean()
 
 
-def test_flat_sheet_coarsens_toward_size_max():
-    m = sheet(41)                                 # edges of 0.025 m, size_max 0.08 m
+def metric_edge_lengths(mesh, params):
+    """Edge lengths in the sizing metric the remesher itself computes for this mesh."""
+    from cloth.remesh import _edge_len2
+    fM, area = face_sizing(mesh, params)
+    Mv = vertex_sizing(fM, area, mesh.faces, len(mesh.uv), params)
+    ev, _, _ = build_edges(mesh.faces)
+    M3 = np.stack([Mv[:, 0, 0], Mv[:, 0, 1], Mv[:, 1, 1]], axis=1)
+    return np.sqrt(_edge_len2(mesh.uv, M3, ev[:, 0], ev[:, 1]))
+
+
+@pytest.mark.parametrize("pattern", ["regular", "alternating"])
+def test_flat_sheet_coarsens_toward_size_max(pattern):
+    m = sheet(41, pattern=pattern)                # edges of 0.025 m, size_max 0.08 m
     params = RemeshParams()
-    l0 = edge_lengths_near(m, lambda uv: np.zeros(len(uv)), 1, -1)[0]
+    area0, blen0 = signed_material_areas(m.uv, m.faces).sum(), boundary_length(m)
     f0 = len(m.faces)
     for _ in range(4):
         m, _, st = remesh(m, params)
-        check_valid(m)
-    ev, _, _ = build_edges(m.faces)
-    length = np.linalg.norm(m.uv[ev[:, 1]] - m.uv[ev[:, 0]], axis=1)
-    # Collapse-only coarsening stops once every collapse would make an edge longer than
-    # (1 - collapse_margin) size_max: from a 0.025 m grid that is about a 0.05 m grid.
-    assert len(m.faces) < 0.4 * f0
-    assert length.mean() > 1.5 * l0 and length.mean() > 0.5 * params.size_max
-    assert length.max() <= params.size_max * (1 - params.collapse_margin)
+        check_valid(m, area0, blen0)
+    # At rest the mesh has settled: another call changes nothing (no split/collapse cycle).
+    m, _, st = remesh(m, params)
+    assert st["splits"] == st["collapses"] == 0, st
+    # Flat, so the metric is size_max everywhere; edges close to it, none longer. Collapses
+    # keeping the full 0.2 margin stall at a mean of ~0.6 (they may create edges up to 0.8
+    # and jam at about 3/4 of that); edges too short to be halves of a split may create edges
+    # up to 1, and a sweep order packs the collapses.
+    length = metric_edge_lengths(m, params)
+    assert np.allclose(length, np.linalg.norm(
+        np.diff(m.uv[build_edges(m.faces)[0]], axis=1)[:, 0], axis=1) / params.size_max)
+    assert length.mean() >= 0.75, length.mean()
+    assert length.max() <= 1.0 + 1e-12
+    assert len(m.faces) < 0.25 * f0
+
+
+def test_refined_sheet_coarsens_back_once_flat(rng):
+    # Refined to ~3k faces by folds and noise, then laid flat: the graded mesh coarsens
+    # back toward size_max (the full margin on every collapse left it at a mean of 0.59).
+    m = sheet(21, pattern="alternating")
+    params = RemeshParams(size_min=0.04, size_max=0.16)
+    area0, blen0 = signed_material_areas(m.uv, m.faces).sum(), boundary_length(m)
+    for at in (0.35, 0.65):
+        m.x = fold_x(m.uv, 1.5, at) + 0.003 * rng.standard_normal(m.x.shape)
+        m, _, _ = remesh(m, params)
+    assert len(m.faces) > 2000
+    m.x = np.c_[m.uv, np.zeros(len(m.uv))]
+    m.v[:] = 0.0
+    for _ in range(4):
+        m, _, st = remesh(m, params)
+        check_valid(m, area0, blen0)
+    assert st["splits"] == st["collapses"] == 0, st
+    length = metric_edge_lengths(m, params)
+    assert length.mean() >= 0.7, length.mean()
+    assert length.max() <= 1.0 + 1e-12
+
+
+def test_collapse_margin_applies_to_all_but_short_edges():
+    # sheet(5): spacing 0.25. Collapsing vertex 6 (0.25, 0.25) onto 7 (0.25, 0.5) creates
+    # edges from 7 of at most |(0.25, 0.5)| = 0.559 (to vertex 0); the edge itself is 0.25.
+    far, own = np.hypot(0.25, 0.5), 0.25
+    p = RemeshParams()                            # collapse_margin 0.2
+    # Uniform metric size s: in it the collapsed edge is own / s long, the new ones far / s.
+    # s = 0.6: edge 0.42, not short (> (1 - 0.2) / 2 = 0.4): new edges of 0.93 exceed 0.8.
+    assert own / 0.6 > 0.4 and 0.8 < far / 0.6 < 1.0
+    assert not work_on(sheet(5), p, size=0.6).collapse(6, 7)
+    # s = 0.65: edge 0.385, short: new edges may reach 1 (0.86 here).
+    assert own / 0.65 <= 0.4 and 0.8 < far / 0.65 < 1.0
+    assert work_on(sheet(5), p, size=0.65).collapse(6, 7)
+    # Never past 1: s = 0.55 makes the new edge 1.02 (the edge itself, 0.45, is not short
+    # anyway), and with no margin at all the limit is 1 too.
+    assert not work_on(sheet(5), RemeshParams(collapse_margin=0.0), size=0.55).collapse(6, 7)
+    assert work_on(sheet(5), RemeshParams(collapse_margin=0.0), size=0.56).collapse(6, 7)
+
+
+def test_split_halves_are_not_collapsed_back_until_the_metric_coarsens_by_the_margin():
+    # Edges of 0.25 in a metric of size 0.24 (length 1.04) are split; if the metric then
+    # coarsens by less than the margin (size 0.28: old edges 0.89, halves 0.45), no half is
+    # collapsed: each would re-create a 0.89 edge, past 1 - margin = 0.8.
+    m = sheet(5)
+    w = work_on(m, size=0.24)
+    mid, _ = w.split(6, 7)
+    out = exported(w, m)
+    new = int(np.flatnonzero(np.all(np.isclose(out.uv, w.uv[mid]), axis=1))[0])
+    a = int(np.flatnonzero(np.all(np.isclose(out.uv, [0.25, 0.25]), axis=1))[0])
+    b = int(np.flatnonzero(np.all(np.isclose(out.uv, [0.25, 0.5]), axis=1))[0])
+    w2 = work_on(out, size=0.28)
+    assert not w2.collapse(new, a) and not w2.collapse(new, b)
+    # Coarsened by more than the margin (size 0.33: halves 0.38 are short), they go.
+    assert work_on(out, size=0.33).collapse(new, a)
 
 
 def test_affine_fields_are_reproduced_exactly(rng):
