@@ -72,16 +72,21 @@ class CapsuleUnion(Obstacle):
         return np.asarray(m.vertices), np.asarray(m.faces)
 
     @ti.func
+    def _offset(self, k, p):
+        """p minus the nearest point of primitive k's segment."""
+        a, b = self.fa[k], self.fb[k]
+        ab = b - a
+        t = 0.0
+        L2 = ab.dot(ab)
+        if L2 > 1e-20:
+            t = ti.math.clamp((p - a).dot(ab) / L2, 0.0, 1.0)
+        return p - (a + t * ab)
+
+    @ti.func
     def sdf_local(self, p):
         best = 1e30
         for k in range(self.n):
-            a, b = self.fa[k], self.fb[k]
-            ab = b - a
-            t = 0.0
-            L2 = ab.dot(ab)
-            if L2 > 1e-20:
-                t = ti.math.clamp((p - a).dot(ab) / L2, 0.0, 1.0)
-            best = ti.min(best, (p - (a + t * ab)).norm() - self.fr[k])
+            best = ti.min(best, self._offset(k, p).norm() - self.fr[k])
         return best
 
     @ti.func
@@ -91,13 +96,7 @@ class CapsuleUnion(Obstacle):
         n1 = ti.Vector([0.0, 0.0, 1.0])
         n2 = ti.Vector([0.0, 0.0, 1.0])
         for k in range(self.n):
-            a, b = self.fa[k], self.fb[k]
-            ab = b - a
-            t = 0.0
-            L2 = ab.dot(ab)
-            if L2 > 1e-20:
-                t = ti.math.clamp((p - a).dot(ab) / L2, 0.0, 1.0)
-            off = p - (a + t * ab)
+            off = self._offset(k, p)
             dist = off.norm()
             d = dist - self.fr[k]
             nk = off / dist if dist > 1e-12 else ti.Vector([0.0, 0.0, 1.0])
