@@ -144,12 +144,14 @@ class Simulator:
         raise KeyError(name)
 
     def _make_strain_limiter(self, strain):
-        from .strain.solver import StrainLimiter   # imported here: scenes may not limit strain
+        # imported here: scenes may not limit strain
+        from .strain.constraints import MAPPING_ISO
+        from .strain.solver import StrainLimiter
         self.strain = StrainLimiter(
             self.model, method=strain["method"], warp=tuple(strain["warp"]),
             weft=tuple(strain["weft"]), bias=tuple(strain["bias"]) if strain["bias"] else None,
             solver=strain["solver"], tol=strain["tol"], max_iters=strain["iters"],
-            stitches=self.dynamics.stitches_np)
+            mapping_iso=strain.get("isotropy", MAPPING_ISO), stitches=self.dynamics.stitches_np)
         self._enable_strain_limit(strain["method"] != "none")
 
     def _enable_strain_limit(self, on):

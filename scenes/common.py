@@ -41,6 +41,10 @@ COMMON_DEFAULTS = {
         "solver": "al",           # al (augmented Lagrangian) | jacobi (baseline)
         "iters": 50,              # outer-iteration budget per substep
         "tol": 1e-4,              # largest violation accepted, in strain
+        # mapping only: width (in eta1^2 - eta2^2) of the closure of its feasible set at
+        # isotropy, where the paper's constraint depends on an arbitrary principal frame;
+        # 0 = the paper's constraint exactly (see constraints.MAPPING_ISO).
+        "isotropy": 0.01,
     },
     # Adaptive remeshing in material space, once per frame (Narain et al. 2012); lengths in m.
     "remesh": dict(enabled=False, **asdict(RemeshParams())),

@@ -1,4 +1,6 @@
 """Every registered scene runs headless for a few frames and passes its check_final()."""
+import csv
+
 import numpy as np
 import pytest
 
@@ -19,13 +21,17 @@ def test_scene_runs_and_passes_its_check(name, tmp_path):
     assert ok, message
     row = sim.metrics_row()
     assert row["nan"] == 0
-    if sim.strain is not None and sim.stage("strain_limit").enabled and name != "tshirt":
-        assert row["own_violation_max"] < 1e-3
+    if sim.strain is not None and sim.stage("strain_limit").enabled:
+        # Every frame's limits, from the run's own metrics.csv. On tshirt (mapping) the
+        # projection failed to converge at frame 3 before the isotropy closure
+        # (constraints.MAPPING_ISO): violation 6.5e-3 after 50 rounds.
+        with open(tmp_path / "metrics.csv") as fh:
+            rows = list(csv.DictReader(fh))
+        assert len(rows) == 5                 # the start and 4 frames
+        assert max(float(r["own_violation_max"]) for r in rows) < 2 * sim.strain.tol
     if name == "tshirt":
         # Contacts and seams are in the projection: sewn (seams closed to mm), no kick (the
-        # 0.2 kg shirt stays far below 1 J). Known gap (issue 5 note): a few projections per
-        # second end unconverged while the shirt drops onto the shoulders (frame 3 here), so
-        # its limits are not asserted every frame yet.
+        # 0.2 kg shirt stays far below 1 J).
         st = np.asarray(sim.dynamics.stitches_np)
         x = sim.model.positions()
         assert np.linalg.norm(x[st[:, 0]] - x[st[:, 1]], axis=1).max() < 0.01

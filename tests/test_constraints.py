@@ -120,14 +120,14 @@ def random_triangles(rng, n):
     return cases
 
 
-def finite_difference(method, x, Dm_inv, area, grain, bands, h=1e-6):
+def finite_difference(method, x, Dm_inv, area, grain, bands, h=1e-6, **kw):
     """Central differences of all constraints w.r.t. the 9 coordinates, one batched call."""
     xs = np.repeat(x[None], 18, axis=0).reshape(18, 9)
     for m in range(9):
         xs[2 * m, m] += h
         xs[2 * m + 1, m] -= h
     g, _ = C.evaluate(method, xs.reshape(18, 3, 3), np.repeat(Dm_inv[None], 18, 0),
-                      np.repeat(grain[None], 18, 0), np.full(18, area), *bands)
+                      np.repeat(grain[None], 18, 0), np.full(18, area), *bands, **kw)
     return ((g[0::2] - g[1::2]) / (2 * h)).T        # (K, 9)
 
 
@@ -139,6 +139,47 @@ def test_gradients_match_finite_differences(method, rng):
         fd = finite_difference(method, x, Dm_inv, area, grain, bands)
         scale = max(np.abs(fd).max(), 1e-12)
         assert np.abs(grad - fd).max() / scale < 1e-6
+
+
+@pytest.mark.parametrize("iso", [C.MAPPING_ISO, 0.1])
+def test_mapping_closure_gradients_match_finite_differences(iso, rng):
+    """The isotropy closure (c~ blended towards 1/sqrt 2) has an exact gradient; iso = 0.1 is
+    wide enough that the weight's own derivative matters on these triangles."""
+    bands = ((-0.02, 0.03), (-0.04, 0.05), (1.37, 1.46))
+    for x, Dm_inv, area, grain in random_triangles(rng, 25):
+        _, grad = evaluate_one("mapping", x, Dm_inv, area, *bands, grain=grain, iso=iso)
+        fd = finite_difference("mapping", x, Dm_inv, area, grain, bands, iso=iso)
+        scale = max(np.abs(fd).max(), 1e-12)
+        assert np.abs(grad - fd).max() / scale < 1e-6
+
+
+def test_mapping_closure_is_continuous_at_isotropy():
+    """With the closure, an isotropic stretch eta has c~ = 1/sqrt 2 for every pair whatever
+    frame round-off picks, and nearby states approach that value; without it (iso = 0) the
+    value depends on the arbitrary frame. Far from isotropy (D >> iso) the closure is the
+    paper's constraint up to (eta - 1) iso / (sqrt 2 D) (the most, where c = 0:
+    c~^2 - c^2 = (1 - w)(1/2 - c^2), 1 - w <= (iso / D)^2)."""
+    uv = np.array([[0.0, 0.0], [0.04, 0.0], [0.01, 0.035]])
+    Dm_inv, area = triangle_arrays(uv, np.zeros((3, 3)))
+    R, _ = np.linalg.qr(np.random.default_rng(7).normal(size=(3, 3)))
+    bands = ((-0.01, 0.01), (-0.05, 0.05), (1.37, 1.46))
+    iso, eta = C.MAPPING_ISO, 1.03
+    sqa = np.sqrt(area)
+    expected_upper = np.array([0.03 / np.sqrt(2) - 0.01] * 2 + [0.03 / np.sqrt(2) - 0.05] * 2)
+    for turn in np.linspace(0.0, np.pi / 2, 7):      # the material frame of the stretch
+        rot = np.array([[np.cos(turn), -np.sin(turn)], [np.sin(turn), np.cos(turn)]])
+        for aniso in (0.0, 1e-9, 1e-7):
+            F = R[:, :2] @ rot @ np.diag([eta + aniso, eta]) @ rot.T
+            g, grad = evaluate_one("mapping", uv @ F.T, Dm_inv, area, *bands, iso=iso)
+            assert np.all(np.isfinite(grad))
+            np.testing.assert_allclose(g[0::2] / sqa, expected_upper, atol=1e-6)
+    # Far from isotropy: the paper's value, to (eta - 1) iso / (sqrt 2 D).
+    F = R[:, :2] @ np.diag([1.08, 1.0])
+    D = 1.08 ** 2 - 1.0
+    g_closed, _ = evaluate_one("mapping", uv @ F.T, Dm_inv, area, *bands, iso=iso)
+    g_paper, _ = evaluate_one("mapping", uv @ F.T, Dm_inv, area, *bands, iso=0.0)
+    assert np.abs(g_closed - g_paper).max() / sqa <= 0.08 * iso / (np.sqrt(2) * D)
+    assert np.abs(g_closed - g_paper).max() / sqa > 0.0
 
 
 def test_warp_weft_uses_the_grain():

@@ -54,7 +54,8 @@ def kkt_residuals(model, limiter, x_hat):
     faces, K = model.faces, C.N_CONSTRAINTS[limiter.method]
     Dm_inv = model.face_Dm_inv.to_numpy()[: model.n_faces]
     g, grad = C.evaluate(limiter.method, x[faces], Dm_inv, model.grain, model.rest_area,
-                         limiter.warp, limiter.weft, limiter.shear_band(), by_alignment=True)
+                         limiter.warp, limiter.weft, limiter.shear_band(), by_alignment=True,
+                         iso=limiter.mapping_iso)
     lam = limiter._ws.lam.to_numpy()[: model.n_faces, :K]
     force = model.mass[:, None] * (x - x_hat)
     np.add.at(force, faces.reshape(-1), np.einsum("fk,fkm->fm", lam, grad).reshape(-1, 3))
@@ -74,7 +75,10 @@ def test_kkt_conditions_on_a_small_mesh(method):
     solutions near eta1 = eta2 were feasible and complementary but not stationary.)"""
     model = stretched_sheet(n=3, warp=0.06, weft=-0.02, noise=0.02, seed=3)
     x_hat = model.positions()
-    limiter = StrainLimiter(model, method=method, tol=1e-9, max_iters=200, max_newton=10,
+    # 40 Newton steps per round: the mapping family's isotropy closure bends the constraint
+    # where Newton's model does not see it (measured here: 10 steps left the stationarity at
+    # 1.4e-2 with the default closure, 40 reach 7e-8; with the paper's exact constraint 10 do).
+    limiter = StrainLimiter(model, method=method, tol=1e-9, max_iters=200, max_newton=40,
                             max_cg=200, cg_rtol=1e-10, adaptive_margin=True)
     limiter.project(H)
     assert limiter.last_converged

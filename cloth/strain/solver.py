@@ -18,7 +18,7 @@ import time
 import numpy as np
 
 from .. import metrics
-from .constraints import MAPPING_DELTA, METHOD_IDS, N_CONSTRAINTS, SVD_DELTA
+from .constraints import MAPPING_DELTA, MAPPING_ISO, METHOD_IDS, N_CONSTRAINTS, SVD_DELTA
 from . import workspace as W
 from .workspace import (ST_CG, ST_CONVERGED, ST_ITERS, ST_NEWTON, ST_START_VIOL, ST_VIOL,
                         Workspace)
@@ -70,7 +70,9 @@ class StrainLimiter:
     solves converge only linearly near the solution, so tight solves (the KKT test) use it;
     on 1k-triangle projections it was not better than the fixed margin, so it is off by
     default. ``svd_delta`` (attribute, default ``constraints.SVD_DELTA``; 0 disables) is the
-    regularisation of the svd family's principal-frame curvature.
+    regularisation of the svd family's principal-frame curvature. ``mapping_iso`` (default
+    ``constraints.MAPPING_ISO``; 0 = the paper's constraint) closes the mapping family's
+    feasible set at isotropy.
 
     Measured on the hanging scene (about 1k triangles, one substep per frame): the whole AL
     solve runs as one kernel launch (with one launch per phase, Python's handling of the
@@ -85,7 +87,8 @@ class StrainLimiter:
     def __init__(self, model, method="mapping", warp=(-0.01, 0.01), weft=(-0.05, 0.05),
                  bias=None, solver="al", tol=1e-4, max_iters=None, max_newton=5,
                  max_cg=50, cg_rtol=0.1, mu_scale=1e2, mu_grow=4.0, mu_max_scale=1e6,
-                 mapping_delta=MAPPING_DELTA, jacobi_omega=1.0, active_margin=1e-2,
+                 mapping_delta=MAPPING_DELTA, mapping_iso=MAPPING_ISO, jacobi_omega=1.0,
+                 active_margin=1e-2,
                  adaptive_margin=False, stitches=None):
         if solver not in SOLVERS:
             raise StrainLimitError(f"unknown strain-limiting solver '{solver}': use one of "
@@ -104,6 +107,9 @@ class StrainLimiter:
         if not mapping_delta > 0:
             raise StrainLimitError(f"mapping_delta must be > 0 (got {mapping_delta}); "
                                    f"use {MAPPING_DELTA}")
+        if not mapping_iso >= 0:
+            raise StrainLimitError(f"mapping_iso must be >= 0 (got {mapping_iso}); 0 is the "
+                                   "paper's constraint")
         if not 0 < jacobi_omega <= 2:
             raise StrainLimitError(f"jacobi_omega must be in (0, 2] (got {jacobi_omega})")
         self.model = model
@@ -113,6 +119,7 @@ class StrainLimiter:
         self.max_newton, self.max_cg, self.cg_rtol = int(max_newton), int(max_cg), cg_rtol
         self.mu_scale, self.mu_grow, self.mu_max_scale = mu_scale, mu_grow, mu_max_scale
         self.mapping_delta = float(mapping_delta)
+        self.mapping_iso = float(mapping_iso)
         self.svd_delta = SVD_DELTA
         self.jacobi_omega = float(jacobi_omega)
         self.active_margin = float(active_margin)
@@ -172,6 +179,7 @@ class StrainLimiter:
         params[W.P_MARGIN] = self.active_margin
         params[W.P_DELTA] = self.mapping_delta
         params[W.P_SVD_DELTA] = self.svd_delta
+        params[W.P_ISO] = self.mapping_iso
         # Contact violations are metres; divided by the typical edge they read like strains.
         m = self.model
         params[W.P_CONTACT_SCALE] = self._edge_scale()

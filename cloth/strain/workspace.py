@@ -27,7 +27,8 @@ T = ti.template()               # how a ti.func takes an array (by reference)
 ST_ITERS, ST_VIOL, ST_CONVERGED, ST_CG, ST_NEWTON, ST_COMP, ST_START_VIOL = range(7)
 # Indices into the ``params`` array.
 P_WARP, P_WEFT, P_SHEAR, P_MARGIN, P_DELTA, P_SVD_DELTA, P_CONTACT_SCALE = 0, 2, 4, 6, 7, 8, 9
-N_PARAMS = 10
+P_ISO = 10
+N_PARAMS = 11
 # A vertex without a contact half-space: n = 0 and d far below any position, so d - n.x never
 # comes near activating.
 NO_CONTACT = -1e30
@@ -116,7 +117,8 @@ def eval_face(method: ti.template(), f, pos: T, face_verts: T, Dm_inv: T, grain:
     shear = ti.Vector([params[P_SHEAR], params[P_SHEAR + 1]])
     delta = params[P_SVD_DELTA] if ti.static(method == 0) else params[P_DELTA]
     return face_constraints(method, pos[ids[0]], pos[ids[1]], pos[ids[2]], Dm_inv[f],
-                            grain[f], ti.sqrt(rest_area[f]), warp, weft, shear, delta, True)
+                            grain[f], ti.sqrt(rest_area[f]), warp, weft, shear, delta,
+                            params[P_ISO], True)
 
 
 @ti.func
