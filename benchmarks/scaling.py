@@ -88,11 +88,10 @@ def child(res, methods, frames):
     """Measure one size; returns a dict (printed as JSON by the child process). One Simulator
     serves every stage (compiling a second one would cost as much as the measurements at the
     small sizes): it is restarted from the scene's start for each strain method and for the
-    collision run (``speed_vs_error.restart``)."""
+    collision run (``Simulator.restart``)."""
     from cloth import backend
     backend.init("cpu", "f64")
     import scenes
-    from benchmarks.speed_vs_error import restart
     from cloth import remesh
     from cloth.collision import Plane, Sphere
     from cloth.model import MeshArrays
@@ -119,7 +118,7 @@ def child(res, methods, frames):
     out["info"]["cg_iterations"] = r["cg_iterations"]
     for m in methods:
         cfg, setup = config(m)
-        restart(sim, setup, cfg)
+        sim.restart(setup, cfg)
         sim.step_frame()                                  # frame 1, untimed (compiles if cold)
         r = timed_frames(sim, ["strain_limit"], frames,
                          {"rounds": lambda s: s.strain.last_iterations,
@@ -133,10 +132,10 @@ def child(res, methods, frames):
     cfg, setup = config()
     cfg["collision"] = {"thickness": 0.005}
     top = cfg["cloth"]["top"]
+    sim.restart(setup, cfg)
     setup.obstacles = [Sphere(center=(0.0, top - 0.5, -0.124), radius=0.12, mu=0.3),
                        Plane(point=(0.0, 0.0, 0.0), normal=(0.0, 1.0, 0.0), mu=0.3)]
-    setup.self_collision = True
-    restart(sim, setup, cfg)
+    setup.self_collision = True                           # sim.setup is this object
     sim._make_collider()
     sim.stage("collision").enabled = True
     sim.step_frame()                                      # compiles the collider

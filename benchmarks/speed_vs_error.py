@@ -23,7 +23,7 @@ Timing: ms per frame is the wall time of ``Simulator.step_frame`` (every stage, 
 per-frame bookkeeping), median over all timed frames of ``repeats`` runs, with the 10th and
 90th percentiles as the spread; one untimed warm-up frame per configuration keeps kernel
 compilation out. One Simulator per resolution is compiled once and restarted for every run
-(``restart``): a new one costs seconds of kernel compilation, a run of these scenes well under a
+(``Simulator.restart``): a new one costs seconds of kernel compilation, a run of these scenes well under a
 second.
 
 Writes speed_vs_error.md, speed_vs_error.json, pareto_band.png, pareto_solution.png.
@@ -57,48 +57,10 @@ SAMPLES = 15        # material points per side for the solution error
 
 
 # ---- one Simulator per mesh, restarted between runs -------------------------------------------
-def restart(sim, setup, cfg):
-    """Put ``sim`` into the initial state of ``setup`` (same mesh topology as the one it was
-    built with and equal still obstacles, no stitches / remeshing) with the settings of ``cfg``: state, pins,
-    material, time step, dynamics and strain-limiting settings, clock. Everything a run
-    carries over (the CG warm start, the AL multipliers) is reset, so a run after other runs
-    repeats a run on a fresh Simulator (tests/test_benchmarks.py checks it bit for bit).
-
-    This reaches into the Simulator's attributes; a ``Simulator.restart`` in cloth/ would be
-    the clean home for it."""
-    s_cfg, st_cfg = cfg["sim"], cfg.get("strain", {"method": "none"})
-    sim.cfg, sim.setup = cfg, setup
-    sim.model.material = setup.material          # load() recomputes the masses from it
-    sim.model.load(setup.mesh)
-    sim._pin_rest = setup.mesh.pin_target.copy()
-    ds = sim.dynamics.settings                   # the object the dynamics reads each step
-    ds.gravity = tuple(s_cfg["gravity"])
-    ds.cg_tol, ds.cg_max_iters = float(s_cfg["cg_tol"]), int(s_cfg["cg_iters"])
-    sim.dynamics.on_mesh_changed()               # forgets the CG warm start
-    sim.substeps = int(s_cfg["substeps"])
-    sim.h = 1.0 / (s_cfg["fps"] * sim.substeps)
-    sim.frame, sim.time = 0, 0.0
-    if st_cfg["method"] != "none":
-        sim.set_method(st_cfg["method"])         # builds the limiter if the sim had none
-        lim = sim.strain
-        lim.solver, lim.tol, lim.max_iters = st_cfg["solver"], float(st_cfg["tol"]), \
-            int(st_cfg["iters"])
-        lim._explicit_bias = bool(st_cfg["bias"])
-        lim.set_bands(warp=st_cfg["warp"], weft=st_cfg["weft"],
-                      bias=st_cfg["bias"] if st_cfg["bias"] else None)
-        lim.on_mesh_changed()                    # multipliers back to zero
-    elif sim.strain is not None:
-        sim.set_method("none")
-    sim._relax_initial_state()
-    sim.last_good = sim.model.mesh_arrays()
-    return sim
-
-
 class SimulatorPool:
     """Compiled Simulators keyed by scene, mesh and still obstacles; ``get`` restarts a
     matching one or builds a new one. Set-ups with moving obstacles, stitches,
-    self-collision or remeshing always get a new Simulator (their extra solvers hold state
-    that ``restart`` does not reset)."""
+    self-collision or remeshing always get a new Simulator (``Simulator.can_restart``)."""
 
     def __init__(self):
         self.sims = {}
@@ -128,7 +90,7 @@ class SimulatorPool:
         if self.reusable(setup, cfg) and key in self.sims:
             sim = self.sims[key]
             setup.obstacles = sim.setup.obstacles     # equal ones, already compiled
-            return restart(sim, setup, cfg)
+            return sim.restart(setup, cfg)
         sim = Simulator(setup, cfg)
         self.built += 1
         if self.reusable(setup, cfg):

@@ -151,3 +151,17 @@ def solution_error(run, reference, points):
 def gravitational_energy(x, mass, gravity):
     """-sum m g.x (J): potential energy of the masses in a uniform field ``gravity``."""
     return -float(np.sum(mass * (np.asarray(x) @ np.asarray(gravity))))
+
+
+def energy_drift(total_energy, scale):
+    """Energy gained where none may enter (issue 7's error (c)): the largest rise of the total
+    mechanical energy (kinetic + elastic + gravitational) above its lowest earlier value,
+    max_t (E_t - min_{s <= t} E_s), divided by ``scale`` (J; the benchmarks use the cloth's
+    weight times its size, m |g| L). For a scene whose pins and obstacles stand still and
+    without wind, backward Euler, damping and strain limiting only remove energy, so any rise
+    is numerical error: 0 is exact, a value near 1 means the cloth gained the energy of a fall
+    through its own size. (The loss itself is not an error: it is the integrator's damping.)"""
+    e = np.asarray(total_energy, dtype=np.float64)
+    if e.size == 0:
+        return 0.0
+    return float(np.max(e - np.minimum.accumulate(e)) / scale)

@@ -103,6 +103,56 @@ class Simulator:
         self.last_good = self.model.mesh_arrays()
         self.remesh_stats = {}
 
+    def can_restart(self, setup: SceneSetup, cfg: dict):
+        """Whether ``restart`` may reuse this Simulator for ``setup``: the same mesh topology,
+        no stitches, self-collision, moving obstacles or remeshing (their solvers hold state
+        that ``restart`` does not reset; obstacles must be equal, which the caller knows)."""
+        m = self.model
+        return (len(setup.mesh.uv) == m.n_verts and len(setup.mesh.faces) == m.n_faces
+                and np.array_equal(setup.mesh.faces, m.faces) and setup.stitches is None
+                and self.setup.stitches is None and not setup.self_collision
+                and all(o.path is None for o in setup.obstacles)
+                and not cfg.get("remesh", {}).get("enabled", False) and self.remesher is None)
+
+    def restart(self, setup: SceneSetup, cfg: dict):
+        """Start again from ``setup``'s initial state with the settings of ``cfg`` without
+        compiling anything: state, pins, material, time step, dynamics and strain-limiting
+        settings, clock. Everything a run carries over (the CG warm start, the AL multipliers)
+        is reset, so a restarted run repeats a run on a fresh Simulator bit for bit
+        (tests/test_benchmarks.py). The obstacles stay those this Simulator was built with.
+        Raises ValueError where ``can_restart`` is False."""
+        if not self.can_restart(setup, cfg):
+            raise ValueError("restart needs the same mesh and no stitches, self-collision, "
+                             "moving obstacles or remeshing: build a new Simulator")
+        s_cfg, st_cfg = cfg["sim"], cfg.get("strain", {"method": "none"})
+        self.cfg, self.setup = cfg, setup
+        self.model.material = setup.material          # load() recomputes the masses from it
+        self.model.load(setup.mesh)
+        self._pin_rest = setup.mesh.pin_target.copy()
+        ds = self.dynamics.settings                   # the object the dynamics reads each step
+        ds.gravity = tuple(s_cfg["gravity"])
+        ds.cg_tol, ds.cg_max_iters = float(s_cfg["cg_tol"]), int(s_cfg["cg_iters"])
+        self.dynamics.on_mesh_changed()               # forgets the CG warm start
+        self.substeps = int(s_cfg["substeps"])
+        self.h = 1.0 / (s_cfg["fps"] * self.substeps)
+        self.frame, self.time = 0, 0.0
+        if st_cfg["method"] != "none":
+            self.set_method(st_cfg["method"])         # builds the limiter if there was none
+            lim = self.strain
+            lim.solver, lim.tol, lim.max_iters = st_cfg["solver"], float(st_cfg["tol"]), \
+                int(st_cfg["iters"])
+            lim.mapping_iso = float(st_cfg.get("isotropy", lim.mapping_iso))
+            lim._explicit_bias = bool(st_cfg["bias"])
+            lim.set_bands(warp=st_cfg["warp"], weft=st_cfg["weft"],
+                          bias=st_cfg["bias"] if st_cfg["bias"] else None)
+            lim.on_mesh_changed()                     # multipliers back to zero
+        elif self.strain is not None:
+            self.set_method("none")
+        self._relax_initial_state()
+        self.last_good = self.model.mesh_arrays()
+        self.remesh_stats = {}
+        return self
+
     @staticmethod
     def _capacity_factor(mesh, cfg, cap_faces=200_000):
         """Spare room in the fields. With remeshing, room for the finest mesh the sizing
@@ -344,6 +394,10 @@ class Simulator:
         for s in self.stages:
             row[f"ms_{s.name}"] = s.ms
         row["kinetic_energy"] = metrics.kinetic_energy(v, m.mass)
+        # Kinetic + elastic + gravitational (J): what metrics.energy_drift reads.
+        row["total_energy"] = (row["kinetic_energy"] + self.dynamics.energy()
+                               + metrics.gravitational_energy(x, m.mass,
+                                                              self.cfg["sim"]["gravity"]))
         for name in ("warp", "weft"):
             row[f"{name}_strain_max"], row[f"{name}_strain_rms"] = metrics.summarize(st[name], area)
         row["nan"] = int(not (np.all(np.isfinite(x)) and np.all(np.isfinite(v))))
