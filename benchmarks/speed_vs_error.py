@@ -9,6 +9,9 @@ Errors (strain measures from cloth/metrics.py):
                   inside the band): largest over the faces (``band_max``) and area-weighted RMS
                   (``band_rms``), each averaged over the frames of the run; plus the warp and
                   weft band violations at the last frame;
+  energy drift    the largest rise of the total energy (kinetic + elastic + gravitational)
+                  above its running minimum, over m |g| L (``cloth.metrics.energy_drift``): no
+                  energy enters the scene, so any rise is numerical;
   solution error  RMS distance of the positions at 15 x 15 fixed material points (barycentric
                   lookup in material space) from a converged reference run of the same method
                   and resolution, divided by the cloth's diagonal, at simulated time
@@ -126,12 +129,18 @@ def run(pool, scene, overrides, frames, snap_frames=(), warmup=False):
         pool.get(scene, setup, cfg).step_frame()
         _, cfg, setup = configure(scene, overrides)
     sim = pool.get(scene, setup, cfg)
-    out = {"ms": [], "rows": [], "snaps": {}, "unconverged": 0}
+    out = {"ms": [], "rows": [], "snaps": {}, "unconverged": 0,
+           "energy": [sim.metrics_row()["total_energy"]]}
+    m = sim.model
+    # Energy drift scale: the cloth's weight times its size (the energy of a fall through it).
+    gravity = np.linalg.norm(cfg["sim"]["gravity"])
+    out["energy_scale"] = float(m.mass.sum() * gravity * np.linalg.norm(np.ptp(m.uv, axis=0)))
     for k in range(1, frames + 1):
         t0 = time.perf_counter()
         sim.step_frame()
         out["ms"].append(1000.0 * (time.perf_counter() - t0))
         out["rows"].append(sim.metrics_row())
+        out["energy"].append(out["rows"][-1]["total_energy"])
         if sim.strain is not None and sim.stage("strain_limit").enabled:
             out["unconverged"] += int(not sim.strain.last_converged)
         if k in snap_frames:
@@ -182,6 +191,8 @@ def sweep(grid, scene="hanging", log=print, pool=None):
                          weft_violation_end=float(rows[-1]["weft_violation_max"]),
                          sl_iterations=float(np.mean([w["sl_iterations"] for w in rows])),
                          unconverged_frames=int(last["unconverged"]),
+                         energy_drift=metrics.energy_drift(last["energy"],
+                                                           last["energy_scale"]),
                          finite=bool(all(w["nan"] == 0 for w in rows)),
                          # Repeats of one configuration must agree exactly (determinism).
                          repeats_identical=bool(all(
@@ -259,7 +270,9 @@ def write_outputs(results, checks, out, grid, scene, command, seconds):
              f"Each run: {grid['frames']} frames at {fps:.0f} fps from the scene's start; ms per "
              f"frame = median (p10-p90) over the timed frames of {grid['repeats']} repeat(s). "
              "band = the method's own violation (strain), largest over faces (max) or "
-             "area-weighted RMS, averaged over the frames. sol fN = solution error at frame N "
+             "area-weighted RMS, averaged over the frames. energy drift = largest rise of the "
+             "total energy above its running minimum / (m g L) (cloth.metrics.energy_drift; no "
+             "energy enters this scene). sol fN = solution error at frame N "
              f"against the reference ({grid['ref_substeps']} substeps, AL {grid['ref_iters']} "
              f"rounds, tol {grid['ref_tol']:g}), RMS over {SAMPLES}x{SAMPLES} material points "
              "/ cloth diagonal. Budgets: AL rounds or Jacobi sweeps per substep "
@@ -277,10 +290,11 @@ def write_outputs(results, checks, out, grid, scene, command, seconds):
             for f in cf) + " |")
     cols = ["method", "solver", "iters", "substeps", "resolution", "faces", "ms_median",
             "ms_p10", "ms_p90", "band_max", "band_rms", "warp_violation_end",
-            "weft_violation_end", "unconverged_frames"] + [f"solution_error_f{f}" for f in cf]
+            "weft_violation_end", "unconverged_frames", "energy_drift"] + \
+        [f"solution_error_f{f}" for f in cf]
     heads = ["method", "solver", "budget", "sub", "res", "faces", "ms/frame", "p10", "p90",
-             "band max", "band rms", "warp viol end", "weft viol end", "frames unconv."] + \
-        [f"sol f{f}" for f in cf]
+             "band max", "band rms", "warp viol end", "weft viol end", "frames unconv.",
+             "energy drift"] + [f"sol f{f}" for f in cf]
     lines += ["", "## Runs", "", "| " + " | ".join(heads) + " |", "|" + "---|" * len(heads)]
     for r in results:
         lines.append("| " + " | ".join(fmt(r[c]) for c in cols) + " |")

@@ -79,7 +79,7 @@ def test_sweep_values_are_sane(swept):
     _, results, checks = swept
     for r in results:
         assert r["finite"] and r["repeats_identical"], r
-        for key in ("ms_median", "ms_p10", "ms_p90", "band_max", "band_rms",
+        for key in ("ms_median", "ms_p10", "ms_p90", "band_max", "band_rms", "energy_drift",
                     f"solution_error_f{CF}"):
             assert np.isfinite(r[key]) and r[key] >= 0, (key, r)
         assert r["ms_p10"] <= r["ms_median"] <= r["ms_p90"]
