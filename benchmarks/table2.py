@@ -31,6 +31,20 @@ def chest_measures(sim):
     return out
 
 
+STAGES = ("dynamics", "collision", "strain_limit", "collision_final")
+
+
+def record_stage_ms(sim, out):
+    """Collect each stage's ms of every frame into ``out[stage]`` (wraps sim.step_frame)."""
+    step = sim.step_frame
+
+    def step_and_record():
+        step()
+        for s in sim.stages:
+            out.setdefault(s.name, []).append(s.ms)
+    sim.step_frame = step_and_record
+
+
 def perturb(sim, seed, size=1e-6):
     """Move the free vertices by ``size`` metres at random: the wrinkles of a settled shirt are
     chaotic in their start (two runs that differed in the order of self-collision impulses
@@ -83,7 +97,9 @@ def table2(args):
     for method, band in RUNS:
         ov = {"sim": {"frames": frames},
               "strain": {"method": method, "warp": [-band, band], "weft": [-band, band]}}
-        sim, ms, late_viol = settle(module, [ov], frames)
+        stage_ms = {}
+        sim, ms, late_viol = settle(module, [ov], frames,
+                                    prepare=lambda s: record_stage_ms(s, stage_ms))
         energies = [chest_measures(sim)["curvature_energy"]]
         for seed in range(1, seeds):
             other, _, _ = settle(module, [ov], frames, prepare=lambda s, k=seed: perturb(s, k))
@@ -94,6 +110,8 @@ def table2(args):
         r.update({f"chest_{k}": v for k, v in chest_measures(sim).items()})
         r.update(method=method, band=band, ms_per_frame=ms, late_violation=late_viol,
                  faces=sim.model.n_faces)
+        for stage in STAGES:       # median ms per frame of each stage, first frame left out
+            r[f"ms_{stage}"] = float(np.median(stage_ms.get(stage, [0.0, 0.0])[1:]))
         ok, msg = sim.setup.check_final(sim)
         r["check"] = "ok" if ok else msg
         rows.append(r)
@@ -109,7 +127,8 @@ def table2(args):
             ("own_violation_max", "own viol. max"), ("chest_curvature_energy", "chest curv. energy"),
             ("chest_mean_abs_dihedral", "chest mean |dihedral| (rad)"),
             ("curvature_energy", "whole-shirt curv. energy"), ("kinetic_energy", "KE (J)"),
-            ("ms_per_frame", "ms/frame"), ("check", "check_final")]
+            ("ms_per_frame", "ms/frame")] + [(f"ms_{st}", f"ms {st}") for st in STAGES] + \
+        [("check", "check_final")]
     import subprocess
     try:
         rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
