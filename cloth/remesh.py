@@ -61,6 +61,12 @@ class RemeshParams:
         collapse may create edges up to ``1 - collapse_margin`` in metric length; an edge
         shorter than ``(1 - collapse_margin) / 2`` (it cannot be half of a recent split) may
         create edges up to 1, the split threshold (``_collapse_limit``).
+    warm_multipliers: carry the strain solver's per-face multipliers to the faces a remesh
+        makes (``face_data``, scaled by sqrt of the area ratio) so the projection after the
+        remesh starts warm. Off: measured on hanging with mapping (docs/remesh/remesh_ops.md
+        section 3, 40 frames), the warm re-projection took 8 / 9.5 / 23 AL rounds (median /
+        mean / max) against 6 / 6.3 / 8 from zero multipliers, and the next substep's
+        projection was no faster (14 / 36 against 15 / 21).
     """
     size_min: float = 0.015
     size_max: float = 0.08
@@ -71,6 +77,7 @@ class RemeshParams:
     refine_obstacle: float = 0.25
     collapse_margin: float = 0.2
     collapse_rounds: int = 2
+    warm_multipliers: bool = False
 
     def validate(self):
         if not self.size_min > 0:

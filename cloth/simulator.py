@@ -259,7 +259,8 @@ class Simulator:
         remesh, params = self.remesher
         mesh = self.model.mesh_arrays()
         obstacle_distance = self._obstacle_distance if self.setup.obstacles else None
-        face_data = self.strain.face_state() if self.strain is not None else None
+        face_data = self.strain.face_state() if self.strain is not None and \
+            params.warm_multipliers else None
         # Pins and seam vertices are frozen: never removed or moved, seams never split.
         frozen = mesh.pinned.copy()
         stitches = self.dynamics.stitches_np
@@ -280,8 +281,8 @@ class Simulator:
         if self.strain is not None:
             self.strain.set_stitches(self.dynamics.stitches_np)
             self.strain.on_mesh_changed()
-            if new_face_data:
-                self.strain.set_face_state(new_face_data)   # warm multipliers (issue #4)
+            if new_face_data:           # only with remesh.warm_multipliers (off: slower)
+                self.strain.set_face_state(new_face_data)
         if self.collider is not None:
             self.collider.on_mesh_changed()
         # Flips and collapses change some triangles' deformation; project once more so the
