@@ -63,10 +63,13 @@ class RemeshParams:
         create edges up to 1, the split threshold (``_collapse_limit``).
     warm_multipliers: carry the strain solver's per-face multipliers to the faces a remesh
         makes (``face_data``, scaled by sqrt of the area ratio) so the projection after the
-        remesh starts warm. Off: measured on hanging with mapping (docs/remesh/remesh_ops.md
-        section 3, 40 frames), the warm re-projection took 8 / 9.5 / 23 AL rounds (median /
-        mean / max) against 6 / 6.3 / 8 from zero multipliers, and the next substep's
-        projection was no faster (14 / 36 against 15 / 21).
+        remesh starts warm. Off: measured on hanging (docs/remesh/remesh_ops.md section 3, 30
+        frames), the warm re-projection took 8 / 9.4 / 23 AL rounds (median / mean / max)
+        against 6 / 6.4 / 8 from zero multipliers with mapping (5 / 5.2 / 7 against 8 / 8.9 /
+        14 with warp-weft). That projection is the substep's second, on cloth already
+        projected, so the substep's multipliers are the wrong start (as for the re-projection
+        after collision_final). Warm multipliers do help warp-weft's next substep (16 against
+        22 rounds); mapping's not (14 against 15).
     """
     size_min: float = 0.015
     size_max: float = 0.08
