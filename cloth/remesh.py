@@ -65,8 +65,8 @@ class RemeshParams:
         makes (``face_data``, scaled by sqrt of the area ratio) so the projection after the
         remesh starts warm. Off: measured on hanging (docs/remesh/remesh_ops.md section 3, 30
         frames), the warm re-projection took 8 / 9.4 / 23 AL rounds (median / mean / max)
-        against 6 / 6.4 / 8 from zero multipliers with mapping (5 / 5.2 / 7 against 8 / 8.9 /
-        14 with warp-weft). That projection is the substep's second, on cloth already
+        against 6 / 6.4 / 8 from zero multipliers with mapping (8 / 8.9 / 14 against 5 / 5.2 /
+        7 with warp-weft). That projection is the substep's second, on cloth already
         projected, so the substep's multipliers are the wrong start (as for the re-projection
         after collision_final). Warm multipliers do help warp-weft's next substep (16 against
         22 rounds); mapping's not (14 against 15).
