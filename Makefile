@@ -22,7 +22,7 @@ demo: $(STAMP) vulkan
 	$(PY) main.py $(ARGS)
 
 test: $(STAMP) vulkan
-	$(PY) -m pytest $(ARGS)
+	$(PY) -m pytest -n auto $(ARGS)
 
 clean:
 	rm -rf $(VENV) out
