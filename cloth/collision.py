@@ -597,7 +597,7 @@ class Collider:
                         out[i] = 1
 
     # -- contacts as constraints of the strain projection -----------------------------------
-    def contact_planes(self, t, out, reach=None):
+    def contact_planes(self, t, out, reach=None, mu_out=None):
         """Write each free vertex's contact half-space at time t into ``out`` (a Taichi ndarray
         of vec4 per vertex, ``StrainLimiter.contact_planes``): for the vertex's nearest
         obstacle within ``reach`` (m, at least ``thickness``) of the thickened surface, the
@@ -615,21 +615,30 @@ class Collider:
         removes (``test_obstacle_contacts_keep_the_strain_limits`` in tests/test_all_scenes.py)."""
         reach = self.thickness if reach is None else max(float(reach), self.thickness)
         n = self.model.n_verts
-        self._clear_planes(n, out)
+        if mu_out is None:
+            mu_out = self._mu_scratch(n)
+        self._clear_planes(n, out, mu_out)
         for o in self.obstacles:
             c, R = o.pose(t)
             self._planes(o, self.model.state.x, self.model.vert_pinned, n, self.thickness,
-                         reach, ti.Matrix(R), ti.Vector(c), out)
+                         reach, float(o.mu), ti.Matrix(R), ti.Vector(c), out, mu_out)
+
+    def _mu_scratch(self, n):
+        if getattr(self, "_mu_tmp", None) is None or self._mu_tmp.shape[0] < n:
+            self._mu_tmp = ti.ndarray(float, max(n, 1))
+        return self._mu_tmp
 
     @ti.kernel
-    def _clear_planes(self, n: ti.i32, out: ti.types.ndarray()):
+    def _clear_planes(self, n: ti.i32, out: ti.types.ndarray(), mu_out: ti.types.ndarray()):
         for i in range(n):
+            mu_out[i] = 0.0
             for j in ti.static(range(2)):
                 out[i, j] = ti.Vector([0.0, 0.0, 0.0, -1e30])
 
     @ti.kernel
     def _planes(self, o: ti.template(), x: ti.template(), pinned: ti.template(), n: ti.i32,
-                th: float, reach: float, R: mat3, c: vec3, out: ti.types.ndarray()):
+                th: float, reach: float, mu: float, R: mat3, c: vec3,
+                out: ti.types.ndarray(), mu_out: ti.types.ndarray()):
         for i in range(n):
             if pinned[i] == 0:
                 xi = x[i]
@@ -647,6 +656,7 @@ class Collider:
                         if gap < gap0:
                             out[i, 1] = p0
                             out[i, 0] = plane
+                            mu_out[i] = mu          # friction of the nearest contact
                         elif gap < gap1:
                             out[i, 1] = plane
 

@@ -219,7 +219,8 @@ class Simulator:
             # (measured on drape at 10 cm edges: with a 5 mm reach the final obstacle pass had
             # to push by 8.6 mm, undoing the limits by 1.5e-2; with 5 cm it pushed nothing).
             self.collider.contact_planes(t, self.strain.contact_planes,
-                                         reach=0.5 * self._contact_scale())
+                                         reach=0.5 * self._contact_scale(),
+                                         mu_out=self.strain.contact_friction)
         self.strain.project(h, contacts=with_contacts, warm=warm)
 
     def _make_collider(self):

@@ -275,6 +275,50 @@ def test_contact_half_spaces_hold_with_the_limits():
     assert model.positions()[:, 2].min() < -0.01
 
 
+@pytest.mark.parametrize("mu", [1.0, 0.25])
+def test_friction_in_the_projection_follows_coulomb(mu):
+    """A sheet on the plane z = 0 whose dynamics pushed every vertex 2 mm into the plane and
+    1 mm sideways (bands wide open: only the contact acts). The contact's normal impulse per
+    unit mass is the 2 mm; Coulomb lets friction cancel up to mu x 2 mm of the slide. mu = 1:
+    the sheet sticks where it started; mu = 0.25: it slides 1 - 0.5 = 0.5 mm. (Without
+    friction in the projection, contact vertices slid freely along obstacles: the drape
+    sheet drifted off its sphere in 2.5 s.)"""
+    from tests.helpers import set_velocities
+    uv, faces = make_sheet(0.2, 0.2, 4, 4)
+    x_prev = np.c_[uv, np.zeros(len(uv))]
+    model = ClothModel(MeshArrays(uv=uv, x=x_prev, faces=faces), Material())
+    slide, push = 1e-3, 2e-3
+    x_hat = x_prev + [slide, 0.0, -push]
+    set_positions(model, x_hat)
+    set_velocities(model, (x_hat - x_prev) / H)          # x_prev = x_hat - h v
+    # Default tolerance; positions are checked to 2 tol x edge (about 1e-5 m here, against
+    # slides of 0.5 and 1 mm). (Known gap: asked for 1e-9, the sticking case does not
+    # converge, the sliding one does; see the closing note of issue 5.)
+    limiter = StrainLimiter(model, method="warp-weft", warp=(-0.5, 0.5), weft=(-0.5, 0.5),
+                            bias=(-0.5, 0.5), max_iters=200)
+    atol = 2 * limiter.tol * limiter._edge_scale()
+    planes = np.zeros((model.v_cap, 2, 4))
+    planes[:, :, 3] = -1e30
+    planes[:, 0] = [0.0, 0.0, 1.0, 0.0]
+    limiter.contact_planes.from_numpy(planes)
+    limiter.contact_friction.from_numpy(np.full(model.v_cap, mu))
+    limiter.project(H, contacts=True)
+    assert limiter.last_converged
+    x = model.positions()
+    np.testing.assert_allclose(x[:, 2], 0.0, atol=atol)
+    expected = max(slide - mu * push, 0.0)
+    np.testing.assert_allclose(x[:, 0] - x_prev[:, 0], expected, atol=atol)
+    np.testing.assert_allclose(x[:, 1], x_prev[:, 1], atol=atol)
+    # Switched off, the projection keeps the whole slide.
+    limiter.friction = False
+    set_positions(model, x_hat)
+    set_velocities(model, (x_hat - x_prev) / H)
+    limiter.on_mesh_changed()
+    limiter.contact_planes.from_numpy(planes)
+    limiter.project(H, contacts=True)
+    np.testing.assert_allclose(model.positions()[:, 0] - x_prev[:, 0], slide, atol=1e-8)
+
+
 def test_multipliers_follow_faces_through_a_remesh_scaled_by_area():
     """face_state / set_face_state: the per-face multipliers a remesh carries to the faces
     cut from each face, scaled by sqrt(new area / old area) (the force a multiplier exerts

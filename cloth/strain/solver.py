@@ -120,6 +120,8 @@ class StrainLimiter:
         self.mu_scale, self.mu_grow, self.mu_max_scale = mu_scale, mu_grow, mu_max_scale
         self.mapping_delta = float(mapping_delta)
         self.mapping_iso = float(mapping_iso)
+        # Coulomb friction at contacts inside the projection (coefficients from the collider).
+        self.friction = True
         self.svd_delta = SVD_DELTA
         self.jacobi_omega = float(jacobi_omega)
         self.active_margin = float(active_margin)
@@ -214,6 +216,8 @@ class StrainLimiter:
             self._ws = ws = Workspace(m.f_cap, m.v_cap)
         ws.lam.fill(0.0)
         ws.lam_c.fill(0.0)                     # vertices are renumbered too
+        ws.lam_t.fill(0.0)
+        ws.contact_mu.fill(0.0)
         self.set_stitches(self._stitches)
         W.clear_contacts(m.v_cap, ws.contact)
         self._upload_params()                  # the contact scale follows the mesh
@@ -265,6 +269,13 @@ class StrainLimiter:
         self._sync_mesh()
         return self._ws.contact
 
+    @property
+    def contact_friction(self):
+        """Per-vertex Coulomb coefficient of the contact in slot 0 of ``contact_planes``
+        (a Taichi ndarray, filled by ``Collider.contact_planes`` with the planes)."""
+        self._sync_mesh()
+        return self._ws.contact_mu
+
     def project(self, h, contacts=False, warm=True):
         """Project model.state.x (holding x_hat on entry) onto the strain limits in place and
         add the correction to the velocities (v += dx / h; h <= 0 leaves v alone). With
@@ -298,17 +309,20 @@ class StrainLimiter:
             W.clear_contacts(nv, ws.contact)
         W.field_to_array(m.state.x, ws.x, nv)
         W.field_to_array(m.state.v, ws.v, nv)
+        # Friction holds contact vertices against sliding over the substep (from x - h v).
+        W.set_friction(nv, float(h), int(contacts and h > 0 and self.friction), ws.x, ws.v,
+                       ws.contact_mu, ws.fric)
         W.begin_solve(nv, ws.x, ws.x_hat, ws.x_start, ws.stats)
         self.last_reverted = False
         if self.solver == "al":
             saved = None
             if not warm:
-                saved = [a.to_numpy() for a in (ws.lam, ws.lam_c, ws.lam_s)]
-                for a in (ws.lam, ws.lam_c, ws.lam_s):
+                saved = [a.to_numpy() for a in (ws.lam, ws.lam_c, ws.lam_s, ws.lam_t)]
+                for a in (ws.lam, ws.lam_c, ws.lam_s, ws.lam_t):
                     a.fill(0.0)
             rounds, newton, converged = self._solve_al(mid, K)
             if saved is not None:
-                for a, val in zip((ws.lam, ws.lam_c, ws.lam_s), saved):
+                for a, val in zip((ws.lam, ws.lam_c, ws.lam_s, ws.lam_t), saved):
                     a.from_numpy(val)
             stats = ws.stats.to_numpy()
             if not converged and stats[ST_VIOL] > max(stats[ST_START_VIOL], self.tol):
@@ -370,7 +384,8 @@ class StrainLimiter:
                    int(self.adaptive_margin), ws.params, ws.x, ws.x_hat, ws.x_trial, ws.mass,
                    ws.pinned, ws.face_verts, ws.Dm_inv, ws.grain, ws.rest_area, ws.lam, ws.g,
                    ws.grad, ws.cm, ws.what, ws.kappa, ws.twist, ws.contact, ws.lam_c,
-                   ws.stitch, ws.lam_s, ws.b, ws.d, ws.r, ws.z, ws.p, ws.Ap, ws.P_inv,
+                   ws.stitch, ws.lam_s, ws.fric, ws.lam_t, ws.b, ws.d, ws.r, ws.z, ws.p,
+                   ws.Ap, ws.P_inv,
                    ws.stats)
         stats = ws.stats.to_numpy()
         return int(stats[ST_ITERS]), int(stats[ST_NEWTON]), bool(stats[ST_CONVERGED] > 0)

@@ -58,6 +58,12 @@ class Workspace:
         # cannot undo the limits afterwards (issue #5).
         self.contact = ti.ndarray(ti.types.vector(4, float), (V, CONTACT_SLOTS))
         self.lam_c = ti.ndarray(float, (V, CONTACT_SLOTS))
+        # Coulomb friction at contacts (see ``friction_state``): the obstacle's friction
+        # coefficient per vertex (filled with the planes), the substep's start position and
+        # coefficient as (x_prev, mu), and the tangential multipliers (warm-started).
+        self.contact_mu = ti.ndarray(float, V)
+        self.fric = ti.ndarray(ti.types.vector(4, float), V)
+        self.lam_t = ti.ndarray(vec3, V)
         # Constraint data at the current iterate (see constraints.py for the meaning).
         self.g = ti.ndarray(float, (F, K))
         self.grad = ti.ndarray(vec9, (F, K))
@@ -198,8 +204,37 @@ def stitch_g(stitch: T, pos: T, s):
 
 
 @ti.func
+def friction_state(n, mu, x: T, contact: T, lam_c: T, fric: T, lam_t: T):
+    """Coulomb friction of vertex n against its nearest contact plane, as an AL term: the
+    tangential displacement over the substep c_t = P (x - x_prev) (P = I - n n^T) is held at
+    zero by a multiplier inside the disc of radius mu_f (lam_c1 + lam_c2) (the cone: the
+    normal multipliers are the normal impulses, times h). Returns (P, y, radius) with
+    y = P (lam_t + mu c_t); the friction force is -clamp(y, radius) (sticking inside the
+    disc, sliding on its rim). radius = 0 where there is no contact or no friction."""
+    f = fric[n]
+    radius = 0.0
+    P = ti.Matrix.identity(float, 3)
+    y = ti.Vector([0.0, 0.0, 0.0])
+    if f[3] > 0.0 and contact[n, 0][3] > 0.5 * NO_CONTACT:
+        cn = contact_normal(contact, n, 0)
+        P = ti.Matrix.identity(float, 3) - cn.outer_product(cn)
+        radius = f[3] * (lam_c[n, 0] + lam_c[n, 1])
+        y = P @ (lam_t[n] + mu * (x[n] - ti.Vector([f[0], f[1], f[2]])))
+    return P, y, radius
+
+
+@ti.func
+def clamp_disc(y, radius):
+    out = y
+    ny = y.norm()
+    if ny > radius:
+        out = y * (radius / ny) if ny > 0.0 else y
+    return out
+
+
+@ti.func
 def merit(K, nv, nf, ns, mu, pos: T, x_hat: T, mass: T, lam: T, g: T, contact: T,
-          lam_c: T, stitch: T, lam_s: T):
+          lam_c: T, stitch: T, lam_s: T, fric: T, lam_t: T):
     """L_A = 1/2 sum m |x - x_hat|^2 + sum (mu/2) max(0, g + lam/mu)^2 - lam^2/(2 mu), the
     slack variables of eq. 25 eliminated, with g as last assembled (at ``pos``), over the
     strain and contact constraints; plus lam_s.c + (mu/2)|c|^2 for the seams' equalities."""
@@ -212,6 +247,16 @@ def merit(K, nv, nf, ns, mu, pos: T, x_hat: T, mass: T, lam: T, g: T, contact: T
     for k in range(ns):
         cs = stitch_g(stitch, pos, k)
         total += lam_s[k].dot(cs) + 0.5 * mu * cs.norm_sqr()
+    for n in range(nv):
+        # Friction: max over the disc of lam'.c_t - |lam' - lam_t|^2 / (2 mu), up to a
+        # constant; its gradient is clamp(y, radius).
+        _P, y, radius = friction_state(n, mu, pos, contact, lam_c, fric, lam_t)
+        if radius > 0.0:
+            ny = y.norm()
+            if ny <= radius:
+                total += 0.5 * ny * ny / mu
+            else:
+                total += (radius * ny - 0.5 * radius * radius) / mu
     for f in range(nf):
         for c in range(K):
             t = ti.max(0.0, g[f, c] + lam[f, c] / mu)
@@ -221,7 +266,8 @@ def merit(K, nv, nf, ns, mu, pos: T, x_hat: T, mass: T, lam: T, g: T, contact: T
 
 @ti.func
 def residual(K, nv, nf, ns, mu, x: T, x_hat: T, mass: T, pinned: T, face_verts: T,
-             lam: T, g: T, grad: T, contact: T, lam_c: T, stitch: T, lam_s: T, r: T):
+             lam: T, g: T, grad: T, contact: T, lam_c: T, stitch: T, lam_s: T, fric: T,
+             lam_t: T, r: T):
     """r = -grad L_A = -M (x - x_hat) - sum max(0, lam + mu g) grad g; zero at pins."""
     for n in range(nv):
         r[n] = -mass[n] * (x[n] - x_hat[n])
@@ -240,6 +286,10 @@ def residual(K, nv, nf, ns, mu, x: T, x_hat: T, mass: T, pinned: T, face_verts: 
         r[stitch[k][0]] -= force
         r[stitch[k][1]] += force
     for n in range(nv):
+        _P, y, radius = friction_state(n, mu, x, contact, lam_c, fric, lam_t)
+        if radius > 0.0:
+            r[n] -= clamp_disc(y, radius)
+    for n in range(nv):
         if pinned[n] == 1:
             r[n] = ti.Vector([0.0, 0.0, 0.0])
 
@@ -248,7 +298,8 @@ def residual(K, nv, nf, ns, mu, x: T, x_hat: T, mass: T, pinned: T, face_verts: 
 def build_preconditioner(K, nv, nf, ns, mu, margin, use_twist, mass: T, pinned: T,
                          face_verts: T, rest_area: T, lam: T, g: T,
                          grad: T, cm: T, what: T, kappa: T, twist: T, x: T, contact: T,
-                         lam_c: T, stitch: T, lam_s: T, c_scale, P_inv: T):
+                         lam_c: T, stitch: T, lam_s: T, fric: T, lam_t: T, c_scale,
+                         P_inv: T):
     """3x3 block Jacobi of the projected-Newton matrix (see apply_hessian)."""
     for n in range(nv):
         P_inv[n] = mass[n] * ti.Matrix.identity(float, 3)
@@ -277,6 +328,10 @@ def build_preconditioner(K, nv, nf, ns, mu, margin, use_twist, mass: T, pinned: 
         P_inv[stitch[k][0]] += mu * ti.Matrix.identity(float, 3)
         P_inv[stitch[k][1]] += mu * ti.Matrix.identity(float, 3)
     for n in range(nv):
+        P, y, radius = friction_state(n, mu, x, contact, lam_c, fric, lam_t)
+        if radius > 0.0 and y.norm() <= radius:
+            P_inv[n] += mu * P
+    for n in range(nv):
         if pinned[n] == 1:
             P_inv[n] = ti.Matrix.identity(float, 3)
         else:
@@ -287,7 +342,7 @@ def build_preconditioner(K, nv, nf, ns, mu, margin, use_twist, mass: T, pinned: 
 def apply_hessian(K, nv, nf, ns, mu, margin, use_twist, mass: T, pinned: T,
                   face_verts: T, rest_area: T, lam: T, g: T, grad: T,
                   cm: T, what: T, kappa: T, twist: T, x: T, contact: T, lam_c: T, stitch: T,
-                  lam_s: T, c_scale, p: T, Ap: T):
+                  lam_s: T, fric: T, lam_t: T, c_scale, p: T, Ap: T):
     """Ap = (M + sum_near [mu grad g grad g^T] + sum_active (lam + mu g) curvature(g)) p, the
     projected-Newton matrix applied without forming it. "Near" includes constraints within
     ``margin`` (strain) of activating: a Newton step that ignores them runs straight into
@@ -327,6 +382,18 @@ def apply_hessian(K, nv, nf, ns, mu, margin, use_twist, mass: T, pinned: T,
         Ap[stitch[k][0]] += t
         Ap[stitch[k][1]] -= t
     for n in range(nv):
+        # Friction: mu P sticking; on the rim, the curvature of radius |y| (mu radius / |y|
+        # times P off the sliding direction).
+        P, y, radius = friction_state(n, mu, x, contact, lam_c, fric, lam_t)
+        if radius > 0.0:
+            ny = y.norm()
+            Pp = P @ p[n]
+            if ny <= radius:
+                Ap[n] += mu * Pp
+            else:
+                yh = y / ny
+                Ap[n] += (mu * radius / ny) * (Pp - yh * yh.dot(p[n]))
+    for n in range(nv):
         if pinned[n] == 1:
             Ap[n] = ti.Vector([0.0, 0.0, 0.0])
 
@@ -335,16 +402,17 @@ def apply_hessian(K, nv, nf, ns, mu, margin, use_twist, mass: T, pinned: T,
 def pcg_direction(K, nv, nf, ns, mu, max_cg, rtol, margin, use_twist, x: T, x_hat: T,
                   mass: T, pinned: T, face_verts: T, rest_area: T, lam: T, g: T, grad: T,
                   cm: T, what: T, kappa: T, twist: T, contact: T, lam_c: T, stitch: T,
-                  lam_s: T, c_scale, b: T, d: T, r: T, z: T, p: T, Ap: T, P_inv: T):
+                  lam_s: T, fric: T, lam_t: T, c_scale, b: T, d: T, r: T, z: T, p: T,
+                  Ap: T, P_inv: T):
     """Projected-Newton direction: solve H d = -grad L_A by PCG (block Jacobi) from d = 0 to
     |r| <= rtol |grad L_A| (an inexact Newton step: measured on the hanging scene, rtol = 0.1
     needs as many Newton steps as 1e-3 with about half the CG iterations). Leaves
     b = -grad L_A; returns (slope grad L_A . d, CG iterations)."""
     residual(K, nv, nf, ns, mu, x, x_hat, mass, pinned, face_verts, lam, g, grad,
-             contact, lam_c, stitch, lam_s, r)
+             contact, lam_c, stitch, lam_s, fric, lam_t, r)
     build_preconditioner(K, nv, nf, ns, mu, margin, use_twist, mass, pinned, face_verts,
                          rest_area, lam, g, grad, cm, what, kappa, twist, x, contact, lam_c,
-                         stitch, lam_s, c_scale, P_inv)
+                         stitch, lam_s, fric, lam_t, c_scale, P_inv)
     r0 = ti.sqrt(dot(r, r, nv))
     for n in range(nv):
         b[n] = r[n]
@@ -356,7 +424,7 @@ def pcg_direction(K, nv, nf, ns, mu, max_cg, rtol, margin, use_twist, x: T, x_ha
     while it < max_cg and ti.sqrt(dot(r, r, nv)) > rtol * r0:
         apply_hessian(K, nv, nf, ns, mu, margin, use_twist, mass, pinned, face_verts,
                       rest_area, lam, g, grad, cm, what, kappa, twist, x, contact, lam_c,
-                      stitch, lam_s, c_scale, p, Ap)
+                      stitch, lam_s, fric, lam_t, c_scale, p, Ap)
         pAp = dot(p, Ap, nv)
         if pAp <= 0.0:
             break
@@ -405,7 +473,8 @@ def solve_al(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu0: floa
              tol: float, step_tol: float, adaptive: int, params: A, x: A, x_hat: A,
              x_trial: A, mass: A, pinned: A, face_verts: A, Dm_inv: A, grain: A,
              rest_area: A, lam: A, g: A, grad: A, cm: A, what: A, kappa: A, twist: A,
-             contact: A, lam_c: A, stitch: A, lam_s: A, b: A, d: A, r: A, z: A, p: A, Ap: A,
+             contact: A, lam_c: A, stitch: A, lam_s: A, fric: A, lam_t: A, b: A, d: A, r: A,
+             z: A, p: A, Ap: A,
              P_inv: A, stats: A):
     """The whole AL projection (METHOD 4) in one launch (measured: with one launch per
     phase, Python's argument handling cost as much as the solve): rounds of inexact
@@ -440,12 +509,13 @@ def solve_al(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu0: floa
                                                  use_twist, x, x_hat, mass, pinned,
                                                  face_verts, rest_area, lam, g, grad, cm,
                                                  what, kappa, twist, contact, lam_c, stitch,
-                                                 lam_s, c_scale, b, d, r, z, p, Ap, P_inv)
+                                                 lam_s, fric, lam_t, c_scale, b, d, r, z, p,
+                                                 Ap, P_inv)
                     cg_total += cg_it
                     newton += 1
                     inner += 1
                     L0 = merit(K, nv, nf, ns, mu, x, x_hat, mass, lam, g, contact,
-                               lam_c, stitch, lam_s)
+                               lam_c, stitch, lam_s, fric, lam_t)
                 if first == 0 and not slope < 0.0:
                     break
                 alpha, step, tries = 1.0, 0.0, 0
@@ -462,7 +532,7 @@ def solve_al(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu0: floa
                     if a == 0.0:
                         break
                     L = merit(K, nv, nf, ns, mu, x_trial, x_hat, mass, lam, g, contact,
-                              lam_c, stitch, lam_s)
+                              lam_c, stitch, lam_s, fric, lam_t)
                     if L <= L0 + 1e-4 * a * slope:
                         for n in range(nv):
                             step = ti.max(step, (x_trial[n] - x[n]).norm())
@@ -513,6 +583,11 @@ def solve_al(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu0: floa
                     new *= cap / new.norm()
                 viol = ti.max(viol, cs.norm() / c_scale)
                 lam_s[k] = new
+            for n in range(nv):
+                # Friction multipliers: the trial, clamped to the cone of the new normal
+                # multipliers (zero where there is no contact).
+                _P, y, radius = friction_state(n, mu, x, contact, lam_c, fric, lam_t)
+                lam_t[n] = clamp_disc(y, radius)
             rounds += 1
             if viol < tol and comp < tol:
                 converged = 1
@@ -523,6 +598,15 @@ def solve_al(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu0: floa
         stats[ST_CG] = cg_total
         stats[ST_NEWTON] = newton
         stats[ST_COMP] = comp
+
+
+@ti.kernel
+def set_friction(nv: int, h: float, on: int, x: A, v: A, contact_mu: A, fric: A):
+    """fric = (x_prev, mu_f) per vertex, x_prev = x_hat - h v (the substep's start, before
+    dynamics); mu_f = 0 (no friction) unless ``on``."""
+    for n in range(nv):
+        xp = x[n] - h * v[n]
+        fric[n] = ti.Vector([xp[0], xp[1], xp[2], contact_mu[n] if on else 0.0])
 
 
 @ti.kernel
