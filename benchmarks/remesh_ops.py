@@ -29,8 +29,6 @@ hours (with 60 frames of each scene at the default sizes).
 import argparse
 import contextlib
 import os
-import platform
-import subprocess
 import sys
 import time
 
@@ -38,6 +36,8 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
 import numpy as np  # noqa: E402
+
+from benchmarks import speed_vs_error  # noqa: E402
 
 REMESH_ON = {"remesh": {"enabled": True}}
 SCENES = {                                   # part 1: scene -> overrides besides REMESH_ON
@@ -228,20 +228,9 @@ def warm_cold_row(name, rows):
 
 
 def machine():
-    cpu = platform.machine()
-    with contextlib.suppress(OSError), open("/proc/cpuinfo") as f:
-        cpu = next((ln.split(":", 1)[1].strip() for ln in f if ln.startswith("model name")), cpu)
+    """The sweep's machine line plus the load average when the run started."""
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    return (f"{cpu}, {os.cpu_count()} cores (load average {load:.1f} at start), "
-            f"Python {platform.python_version()}, numpy {np.__version__}, Taichi CPU f64")
-
-
-def commit():
-    git = lambda *a: subprocess.run(["git", *a], cwd=ROOT, capture_output=True,
-                                    text=True).stdout.strip()
-    head = git("rev-parse", "--short", "HEAD") or "unknown"
-    dirty = git("status", "--porcelain", "--", "cloth", "scenes")
-    return head + (" with uncommitted changes in cloth/ or scenes/" if dirty else "")
+    return f"{speed_vs_error.machine()} (load average {load:.1f} at start)"
 
 
 def write_doc(path, cmd, seconds, where, p, part1, sweep, wc):
@@ -364,7 +353,7 @@ def main(argv=None):
     p = QUICK if args.quick else FULL
     from cloth import backend
     backend.init("cpu", "f64")
-    t0, where = time.perf_counter(), (commit(), machine())
+    t0, where = time.perf_counter(), (speed_vs_error.commit(), machine())
     part1, sweep, wc = measure(p)
     argv = sys.argv[1:] if argv is None else argv
     cmd = " ".join(["python -m benchmarks.remesh_ops", *argv])

@@ -129,12 +129,8 @@ def table2(args):
             ("curvature_energy", "whole-shirt curv. energy"), ("kinetic_energy", "KE (J)"),
             ("ms_per_frame", "ms/frame")] + [(f"ms_{st}", f"ms {st}") for st in STAGES] + \
         [("check", "check_final")]
-    import subprocess
-    try:
-        rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
-                             text=True, check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        rev = "unknown"
+    from benchmarks.speed_vs_error import commit
+    rev = commit()
     lines = [f"# Paper Table 2: T-shirt at rest ({rows[0]['faces']} triangles, {frames} frames)",
              "", f"Command: `python -m benchmarks.reproduce_paper --table 2 --frames {frames} "
              f"--seeds {seeds} --out {args.out}` at commit {rev}; mapping with its isotropy closure "
