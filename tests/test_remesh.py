@@ -103,18 +103,46 @@ def test_closed_form_eigen_matches_numpy(rng):
     assert np.allclose(_compose(lam, V), M, atol=1e-12)
 
 
-def test_curvature_term_measures_a_cylinder():
+@pytest.mark.parametrize("smoothing", [0, 2])
+def test_curvature_term_measures_a_cylinder(smoothing):
     # A sheet rolled around a cylinder of radius R: the shape operator is 1/R across the axis,
-    # so the curvature metric is 1/(R refine_angle)^2 along u and 0 along v.
+    # so the curvature metric is 1/(R refine_angle)^2 along u and 0 along v. Smoothing must not
+    # change a uniform curvature away from the boundary (whose edges carry no bend); each round
+    # reaches about one more ring of triangles inwards.
     R = 0.5
     m = sheet(21, x_fn=lambda uv: np.c_[R * np.sin(uv[:, 0] / R), uv[:, 1],
                                          R * (1 - np.cos(uv[:, 0] / R))])
-    p = RemeshParams(refine_velocity=1e9, refine_compression=1e9)
+    p = RemeshParams(refine_velocity=1e9, refine_compression=1e9,
+                     curvature_smoothing=smoothing)
     fM, _ = face_sizing(m, p)
-    inner = np.all((m.uv[m.faces, 0] > 0.01) & (m.uv[m.faces, 0] < 0.99), axis=1)
+    margin = 0.01 + 0.05 * 1.5 * smoothing                 # grid spacing 0.05
+    inner = np.all((m.uv[m.faces, 0] > margin) & (m.uv[m.faces, 0] < 1 - margin), axis=1)
+    assert inner.sum() > 0.4 * len(inner)
     assert np.allclose(fM[inner, 0, 0] * (R * p.refine_angle) ** 2, 1.0, rtol=0.01)
     assert np.allclose(fM[inner, 1, 1], 0.0, atol=1e-9) and np.allclose(fM[inner, 0, 1], 0.0,
                                                                          atol=1e-9)
+
+
+def test_curvature_smoothing_cancels_triangle_wide_zigzag_creases():
+    # Heights alternating from one grid column to the next: creases of alternating sign one
+    # triangle apart, the crumpling a strain-limited soft sheet shows at the scale of its
+    # triangles. Unsmoothed, every crease asks for refinement (and a finer mesh would crumple
+    # finer); smoothed, the creases cancel. A single fold of the same sharpness keeps asking.
+    n, a = 21, 0.01
+    zig = sheet(n, x_fn=lambda uv: np.c_[uv, a * (-1.0) ** np.round(uv[:, 0] * (n - 1))])
+    raw = RemeshParams(refine_velocity=1e9, refine_compression=1e9, curvature_smoothing=0)
+    smooth = RemeshParams(refine_velocity=1e9, refine_compression=1e9)
+    assert smooth.curvature_smoothing >= 2                  # the default smooths
+    inner = np.all((zig.uv[zig.faces, 0] > 0.2) & (zig.uv[zig.faces, 0] < 0.8), axis=1)
+
+    def finest(mesh, params):                               # target edge length per face
+        fM, _ = face_sizing(mesh, params)
+        return 1 / np.sqrt(np.maximum(np.linalg.eigvalsh(fM)[:, -1], 1e-30))
+
+    assert np.median(finest(zig, raw)[inner]) < 0.5 / (n - 1)     # split every edge, twice
+    assert finest(zig, smooth)[inner].min() > 10 * raw.size_max  # asks for nothing
+    fold = sheet(n, x_fn=lambda uv: fold_x(uv, 1.5))
+    assert finest(fold, smooth).min() < smooth.size_max     # the fold still refines
 
 
 def test_flat_sheet_metric_is_coarsest():
@@ -371,8 +399,9 @@ def test_flat_sheet_coarsens_toward_size_max(pattern):
 def test_refined_sheet_coarsens_back_once_flat(rng):
     # Refined to ~3k faces by folds and noise, then laid flat: the graded mesh coarsens
     # back toward size_max (the full margin on every collapse left it at a mean of 0.59).
+    # Unsmoothed curvature, so the noise refines as much as the folds.
     m = sheet(21, pattern="alternating")
-    params = RemeshParams(size_min=0.04, size_max=0.16)
+    params = RemeshParams(size_min=0.04, size_max=0.16, curvature_smoothing=0)
     area0, blen0 = signed_material_areas(m.uv, m.faces).sum(), boundary_length(m)
     for at in (0.35, 0.65):
         m.x = fold_x(m.uv, 1.5, at) + 0.003 * rng.standard_normal(m.x.shape)
