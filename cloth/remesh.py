@@ -40,6 +40,11 @@ _COLLINEAR_EPS = 1e-10
 # Flip only when the Delaunay test fails by this margin (sine of the angle excess): a regular
 # grid is exactly co-circular everywhere and must not flip back and forth.
 _FLIP_EPS = 1e-6
+# A split may not create a triangle of quality (``_Work.quality``) below this fraction of
+# aspect_min unless the triangle it cuts is already worse. Measured on hanging, drape and the
+# t-shirt (mapping): ordinary splits never made one below 0.14 (1st percentile 0.21-0.29);
+# the chains of splits toward a seam that made slivers go down to 0.
+_SPLIT_QUALITY = 0.5
 
 
 @dataclass
@@ -381,18 +386,25 @@ class _Work:
         longest = max(ax * ax + ay * ay, bx * bx + by * by, cx * cx + cy * cy)
         return _cross2(ax, ay, bx, by) > _AREA_REL_EPS * longest
 
-    def quality(self, i, j, k):
-        """4 sqrt(3) A / sum |e|^2 measured in the face's average metric: 1 for a triangle that
-        is equilateral in the metric, 0 when degenerate."""
-        m = [sum(self.M[t][c] for t in (i, j, k)) / 3.0 for c in range(3)]
+    def _metric(self, i, j, k):
+        """The face's average metric, as (m00, m01, m11)."""
+        return [sum(self.M[t][c] for t in (i, j, k)) / 3.0 for c in range(3)]
+
+    @staticmethod
+    def _quality_uv(m, p, q, r):
+        """4 sqrt(3) A / sum |e|^2 of the triangle (p, q, r) (material points) in metric m."""
         det = max(m[0] * m[2] - m[1] * m[1], 0.0)
-        p, q, r = self.uv[i], self.uv[j], self.uv[k]
         two_area = _cross2(q[0] - p[0], q[1] - p[1], r[0] - p[0], r[1] - p[1])
         s = 0.0
         for s0, s1 in ((p, q), (q, r), (r, p)):
             du, dv = s1[0] - s0[0], s1[1] - s0[1]
             s += m[0] * du * du + 2 * m[1] * du * dv + m[2] * dv * dv
         return 2.0 * math.sqrt(3.0) * two_area * math.sqrt(det) / s if s > 0 else 0.0
+
+    def quality(self, i, j, k):
+        """4 sqrt(3) A / sum |e|^2 measured in the face's average metric: 1 for a triangle that
+        is equilateral in the metric, 0 when degenerate."""
+        return self._quality_uv(self._metric(i, j, k), self.uv[i], self.uv[j], self.uv[k])
 
     @staticmethod
     def rotate_to(tri, a):
@@ -402,7 +414,24 @@ class _Work:
 
     def split_ok(self, a, b):
         # An edge between two frozen vertices (a seam) keeps its vertex list unchanged.
-        return not (self.frozen[a] and self.frozen[b])
+        if self.frozen[a] and self.frozen[b]:
+            return False
+        # A split may not make a triangle worse than _SPLIT_QUALITY allows (nor worse than the
+        # one it cuts, if that one already was): next to an edge that cannot be split (a seam, or
+        # a boundary kink) splitting the face's shorter edges puts each new vertex halfway to
+        # that edge and, repeated, makes slivers of zero area (the t-shirt's seams did this at
+        # its first remesh, 8656 of 13688 faces).
+        mid = [0.5 * (s + t) for s, t in zip(self.uv[a], self.uv[b])]
+        for f in self.edge_faces(a, b):
+            p, q, r = self.rotate_to(self.faces[f], a)
+            if q != b:                       # the face runs b -> a
+                p, q, r = self.rotate_to(self.faces[f], b)
+            floor = min(_SPLIT_QUALITY * self.p.aspect_min, self.quality(p, q, r))
+            m = self._metric(p, q, r)
+            if min(self._quality_uv(m, self.uv[p], mid, self.uv[r]),
+                   self._quality_uv(m, mid, self.uv[q], self.uv[r])) < floor:
+                return False
+        return True
 
     # -- split -------------------------------------------------------------------------------
     def split(self, a, b):

@@ -513,6 +513,24 @@ def test_edges_between_frozen_vertices_are_not_split():
     check_valid(out)
 
 
+def test_a_seam_that_cannot_be_split_does_not_breed_slivers():
+    # A coarse seam (frozen) beside a region that asks for triangles 4x smaller: splitting
+    # the other edges of a face on the seam moves the new vertex halfway to the seam each
+    # time; unguarded, that made faces of zero area (the t-shirt's first remesh). Every
+    # face must keep a usable shape, and the interior must still refine.
+    m = sheet(6)
+    frozen = m.uv[:, 0] == 0.0
+    params = RemeshParams(size_min=0.05, size_max=0.05)
+    out, _, st = remesh(m, params, frozen_verts=frozen)
+    check_valid(out)
+    assert st["splits"] < 4 * len(m.uv) + 1000                # not stopped by the safety cap
+    w = _Work(out, np.tile(np.eye(2), (len(out.uv), 1, 1)), np.zeros(len(out.uv), bool),
+              params)
+    quality = np.array([w.quality(*f) for f in out.faces.tolist()])
+    assert quality.min() > 0.05, quality.min()
+    assert len(out.faces) > 8 * len(m.faces)
+
+
 def test_rotated_sheet_keeps_its_corners_and_boundary(rng):
     # Boundaries not aligned with the axes are collinear only to round-off: boundary
     # vertices must still be collapsed along the sides, never at the four corners.
