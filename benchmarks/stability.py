@@ -14,9 +14,10 @@ Criteria, checked after every frame:
               the case is feasible, is under ``viol_end_max`` at the last frame;
   contact     with obstacles: no vertex deeper than 1e-6 m inside the thickened obstacle at the
               end of a frame, and none left behind a moving obstacle (tunnelled);
-  f32         the f32 run ends within ``f64_distance_max`` of the same case in f64 (solution
-              error: RMS distance at material points / cloth diagonal), a bound set to the
-              f64 run's own error against a converged reference.
+  f32         at ``compare_frame`` (before the sheet buckles, see F32_FRAME) the f32 run is
+              within ``f64_distance_max`` of the same case in f64 (solution error: RMS
+              distance at material points / cloth diagonal), a bound set to the f64 run's own
+              error against a converged reference.
 """
 import argparse
 import json
@@ -30,10 +31,19 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from benchmarks.speed_vs_error import SimulatorPool, commit, configure, machine  # noqa: E402
+from benchmarks.speed_vs_error import SimulatorPool, commit, configure, machine, \
+    nudge_start  # noqa: E402
 
 GRAVITY_DROP = 2.0      # m: the pins' height above the ground in every scene used here
 SETTLE = 15             # frames over which ``ke_end_max`` averages
+SNAPSHOTS = ("_final", "_compare")    # (x, uv, faces) a case keeps: at the end, at compare_frame
+# f32 against f64 is judged at frame F32_FRAME, before the hanging sheet buckles out of its
+# plane (frames 3-4): after that 1 nm at the start moves the f64 run itself by 1e-4-1e-2 of
+# the diagonal (the "moved by 1 nm" cases measure it), so no precision could be judged there.
+# The bound is the f64 run's own error there: the smallest solution error at frame 3 of that
+# method at resolution 13 in docs/speed/speed_vs_error.md.
+F32_FRAME = 3
+F32_BOUND = {"svd": 1.0e-3, "mapping": 1.5e-3}
 
 
 @dataclass
@@ -52,6 +62,7 @@ class Case:
     precision: str = "f64"
     f64_twin: str = None             # name of the f64 case this f32 case is compared with
     f64_distance_max: float = None
+    compare_frame: int = None        # frame at which f64_distance is measured (None: the last)
     tunnel_check: bool = False
     note: str = ""
 
@@ -71,10 +82,7 @@ def _isotropic_prestretch(setup, cfg, factor=1.04):
 
 def _nudge_1nm(setup, cfg):
     """Move the free vertices by 1 nm at random (far below f32's resolution at 1 m)."""
-    noise = np.random.default_rng(11).normal(0.0, 1e-9, setup.mesh.x.shape)
-    noise[setup.mesh.pinned] = 0.0
-    setup.mesh.x = setup.mesh.x + noise
-    return setup
+    return nudge_start(setup)
 
 
 def _slivers_and_inversions(setup, cfg):
@@ -170,23 +178,24 @@ def cases():
                     note="refines from 288 to tens of thousands of triangles in 3 frames; "
                          "the strain limiting then costs minutes per frame, so 3 frames only"))
     # f32 against f64: the f32 run must stay closer to the f64 run than the f64 run is to a
-    # converged reference, i.e. under the smallest solution error at frame 10 of this method at
-    # resolution 13 in docs/speed/speed_vs_error.md (svd 1.5e-3, mapping 5.9e-3).
-    for method, bound in (("svd", 1.5e-3), ("mapping", 5.9e-3)):
+    # converged reference at frame F32_FRAME; all three still run 10 frames (finite, bounded).
+    for method, bound in F32_BOUND.items():
         twin = f"f64 baseline for the f32 comparison ({method})"
         out.append(Case(twin, "hanging", dict(hang, strain={"method": method}), frames=10,
-                        viol_end_max=1e-3))
+                        compare_frame=F32_FRAME, viol_end_max=1e-3))
         out.append(Case(f"f64 from a start moved by 1 nm ({method})", "hanging",
                         dict(hang, strain={"method": method}), frames=10, prepare=_nudge_1nm,
-                        f64_twin=twin, f64_distance_max=bound, viol_end_max=1e-3,
-                        note="the chaos floor of the f32 criterion: the buckling sheet "
-                             "amplifies any difference, so if this f64 run fails the same "
-                             "bound, the bound is below what f64 itself reproduces"))
+                        f64_twin=twin, f64_distance_max=bound, compare_frame=F32_FRAME,
+                        viol_end_max=1e-3,
+                        note=f"the chaos floor of the f32 criterion at frame {F32_FRAME}: f64 "
+                             "itself must reproduce the run that well from a start moved by "
+                             "1 nm, or the bound would be meaningless"))
         out.append(Case(f"f32 precision ({method})", "hanging",
                         dict(hang, strain={"method": method}), frames=10, precision="f32",
-                        f64_twin=twin, f64_distance_max=bound, viol_end_max=2e-3,
-                        note=f"distance to the f64 run at frame 10 must be < {bound:g}, the "
-                             "f64 run's own time-step error"))
+                        f64_twin=twin, f64_distance_max=bound, compare_frame=F32_FRAME,
+                        viol_end_max=2e-3,
+                        note=f"distance to the f64 run at frame {F32_FRAME} must be < "
+                             f"{bound:g}, the f64 run's own time-step error there"))
     return out
 
 
@@ -216,8 +225,11 @@ def run_case(case, pool=None):
         ke_peak = viol_peak = pen_peak = 0.0
         tunnelled = 0
         ke = []
-        for _ in range(case.frames):
+        for frame in range(1, case.frames + 1):
             sim.step_frame()
+            if frame == case.compare_frame:
+                m = sim.model
+                result["_compare"] = (m.positions(), m.uv.copy(), m.faces.copy())
             row = sim.metrics_row()
             ke.append(row["kinetic_energy"])
             ke_peak = max(ke_peak, row["kinetic_energy"])
@@ -300,10 +312,11 @@ def compare_precisions(results, selected):
         if c.f64_twin is None:
             continue
         r, twin = by_name.get(c.name), by_name.get(c.f64_twin)
-        if r is None or twin is None or "_final" not in r or "_final" not in twin:
+        key = "_final" if c.compare_frame is None else "_compare"
+        if r is None or twin is None or key not in r or key not in twin:
             continue
-        points = metrics.material_sample_points(twin["_final"][1], 15)
-        r["f64_distance"] = metrics.solution_error(r["_final"], twin["_final"], points)
+        points = metrics.material_sample_points(twin[key][1], 15)
+        r["f64_distance"] = metrics.solution_error(r[key], twin[key], points)
         r["passed"], r["why"] = judge(c, r)
 
 
@@ -359,8 +372,8 @@ def main(argv=None):
         res = run_cases([c for c in selected if c.precision == args.only_precision],
                         log=lambda m: None)     # the parent judges them against f64
         np.savez(os.path.join(args.out, "_f32_final.npz"),
-                 **{f"{i}_{k}": a for i, r in enumerate(res) if "_final" in r
-                    for k, a in zip("xuf", r["_final"])})
+                 **{f"{i}{key}_{k}": a for i, r in enumerate(res) for key in SNAPSHOTS
+                    if key in r for k, a in zip("xuf", r[key])})
         with open(os.path.join(args.out, "_f32.json"), "w") as fh:
             json.dump([{k: v for k, v in r.items() if not k.startswith("_")} for r in res], fh)
         return 0
@@ -377,8 +390,9 @@ def main(argv=None):
             child = json.load(open(path))
             finals = np.load(os.path.join(args.out, "_f32_final.npz"))
             for i, r in enumerate(child):
-                if f"{i}_x" in finals:
-                    r["_final"] = tuple(finals[f"{i}_{k}"] for k in "xuf")
+                for key in SNAPSHOTS:
+                    if f"{i}{key}_x" in finals:
+                        r[key] = tuple(finals[f"{i}{key}_{k}"] for k in "xuf")
             results += child
             os.remove(path)
             os.remove(os.path.join(args.out, "_f32_final.npz"))
