@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from benchmarks import stability
-from benchmarks.speed_vs_error import (SimulatorPool, overrides_for, run, sweep,
+from benchmarks.speed_vs_error import (RESOLUTION, SimulatorPool, overrides_for, run, sweep,
                                        write_outputs)
 
 # Two resolutions a factor 4 apart in triangles; 13 is also the stability cases' mesh, so
@@ -86,6 +86,22 @@ def test_sweep_values_are_sane(swept):
         assert r["faces"] == 2 * (r["resolution"] - 1) ** 2
     for c in checks:
         assert np.isfinite(c[f"change_f{CF}"]) and c[f"change_f{CF}"] > 0
+
+
+def test_errors_below_the_references_resolution_are_not_reported_as_numbers(swept):
+    """An error under RESOLUTION x its reference's change is flagged and shown as '< floor'
+    in the table; every error shown as a number is at least that floor."""
+    out, results, checks = swept
+    md = open(os.path.join(out, "speed_vs_error.md")).read()
+    for c in checks:
+        mine = _by(results, method=c["method"], resolution=c["resolution"])
+        floor = RESOLUTION * c[f"change_f{CF}"]
+        for r in mine:
+            assert r[f"solution_floor_f{CF}"] == floor
+            assert r[f"resolved_f{CF}"] == (r[f"solution_error_f{CF}"] >= floor)
+        assert c[f"unresolved_f{CF}"] == sum(not r[f"resolved_f{CF}"] for r in mine)
+    shown_below = len(re.findall(r"\| < [0-9.e+-]+ \|", md))
+    assert shown_below == sum(not r[f"resolved_f{CF}"] for r in results)
 
 
 def _by(results, **fixed):
