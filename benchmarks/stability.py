@@ -40,10 +40,11 @@ SNAPSHOTS = ("_final", "_compare")    # (x, uv, faces) a case keeps: at the end,
 # f32 against f64 is judged at frame F32_FRAME, before the hanging sheet buckles out of its
 # plane (frames 3-4): after that 1 nm at the start moves the f64 run itself by 1e-4-1e-2 of
 # the diagonal (the "moved by 1 nm" cases measure it), so no precision could be judged there.
-# The bound is the f64 run's own error there: the smallest solution error at frame 3 of that
-# method at resolution 13 in docs/speed/speed_vs_error.md.
+# The bound is the f64 run's own error there: the solution error at frame 3 of the same
+# configuration (AL, one substep, resolution 13; the sweep's 32-round budget, which these runs
+# never exhaust) in docs/speed/speed_vs_error.md.
 F32_FRAME = 3
-F32_BOUND = {"svd": 1.0e-3, "mapping": 1.5e-3}
+F32_BOUND = {"svd": 1.07e-3, "mapping": 2.43e-3}
 
 
 @dataclass
