@@ -5,6 +5,7 @@ constraints after every frame's remesh and projection.
     python -m benchmarks.remesh_limits                 # hanging, 300 frames x 3 methods, ~25 min
     python -m benchmarks.remesh_limits --quick         # 30 frames each, ~2 min
     python -m benchmarks.remesh_limits --scene drape --frames 60
+    python -m benchmarks.remesh_limits --methods svd --iters 100 --out docs/remesh/svd_iters100
 
 Per frame it records the face count, the method's own violation after the frame (the remesh stage
 ends with a projection onto the new triangles, so this is the violation "after every frame's
@@ -114,7 +115,8 @@ def write(out, scene, summaries, cfg, command, seconds, where):
              f"Machine: {where[1]}  ", "",
              f"Remeshing every frame at the scene's default sizes (size_min {r['size_min']} m, "
              f"size_max {r['size_max']} m, curvature_smoothing {r['curvature_smoothing']}); "
-             f"strain tolerance {cfg['strain']['tol']:g}. *own violation*: the method's own "
+             f"strain tolerance {cfg['strain']['tol']:g}, AL budget {cfg['strain']['iters']} "
+             "rounds per projection. *own violation*: the method's own "
              "constraint violation after the frame, i.e. after the remesh stage's projection "
              "onto the new triangles. *passed*: every frame finite and under the tolerance. "
              "ms/frame leaves out frame 1 (kernel compilation).", "",
@@ -132,6 +134,8 @@ def main(argv=None):
     ap.add_argument("--frames", type=int, default=None, help="frames per method (default 300)")
     ap.add_argument("--methods", default=",".join(METHODS))
     ap.add_argument("--quick", action="store_true", help="30 frames per method")
+    ap.add_argument("--iters", type=int, default=None,
+                    help="AL round budget per projection (default: the scene's strain.iters)")
     ap.add_argument("--out", default=os.path.join(ROOT, "docs", "remesh"))
     args = ap.parse_args(argv)
     frames = args.frames or (30 if args.quick else 300)
@@ -143,7 +147,8 @@ def main(argv=None):
     runs, summaries, cfg = {}, [], None
     for method in args.methods.split(","):
         log(f"{args.scene}, {method}, {frames} frames")
-        rows, cfg = run(args.scene, method, frames)
+        rows, cfg = run(args.scene, method, frames,
+                        {"strain": {"iters": args.iters}} if args.iters else None)
         tol = float(cfg["strain"]["tol"])
         runs[method] = (rows, tol)
         summaries.append(summary(method, rows, tol, frames))
