@@ -20,11 +20,9 @@ new mesh (it is the stage's last action, and the remesh stage runs last in the f
    (``warm=False``); compares the AL rounds and ms of that projection and of the next
    substep's.
 
-Why drape runs with ``remesh.size_min = 0.03`` (twice the default): with the default 0.015 it
-refines to ~15k faces by frame 10, where each mapping projection takes 15-30 s and a frame about
-a minute (measured at ce9623a: frames 7-12 took 16-66 s, the AL at its 50-round cap), so 60
-frames take about an hour. That is what kept the first version of this script running for
-hours (with 60 frames of each scene at the default sizes).
+Both scenes run at the default sizes. Before the curvature term was smoothed
+(``RemeshParams.curvature_smoothing``), drape refined to ~15k faces by frame 10 at the default
+size_min, where each mapping projection took 15-30 s, so this script ran it at twice that.
 """
 import argparse
 import contextlib
@@ -42,7 +40,7 @@ from benchmarks import speed_vs_error  # noqa: E402
 REMESH_ON = {"remesh": {"enabled": True}}
 SCENES = {                                   # part 1: scene -> overrides besides REMESH_ON
     "hanging": {},
-    "drape": {"remesh": {"size_min": 0.03}},
+    "drape": {},
 }
 WARM_COLD = {"remesh": {"size_min": 0.03}}     # part 3: hanging, plus strain.method
 DEFAULT_SIZE_MIN, DEFAULT_SIZE_MAX, DEFAULT_RES = 0.015, 0.08, 25
@@ -260,17 +258,13 @@ def write_doc(path, cmd, seconds, where, p, part1, sweep, wc):
         "Scene defaults plus " + ", ".join(
             f"`{name}`: `" + " ".join(as_sets(combine(REMESH_ON, SCENES[name]))) + "`"
             for name in part1) + ". drape limits strain (mapping, the scene default), "
-        "hanging does not. drape uses twice the default `size_min`: with 0.015 it refines to "
-        "~15k faces where one mapping projection takes 15-30 s (about a minute per frame).",
+        "hanging does not.",
         "",
         *table(hdr, [r for name, rows in part1.items() for r in ops_table(name, rows)]),
         "",
         "Mean operations per frame over blocks of frames; *faces* and *top* (the cloth's "
         "highest point, m) at the block's end. hanging's top is its pins (2 m). drape's is "
-        "the sphere's top plus the thickness (0.855 m) while the sheet lies over the sphere; "
-        "it drops once the sheet slides off the sphere, which this scene's sheet does "
-        "within about 3 s even without remeshing (measured separately: frames 80-85), "
-        "and the sheet then crumples on the ground.",
+        "the sphere's top plus the thickness (0.855 m) while the sheet lies over the sphere.",
         "",
         *table(["scene", "frames", "faces", "top (m)", "splits", "flips", "collapses"],
                [r for name, rows in part1.items() for r in phases_table(name, rows)]),
