@@ -39,7 +39,12 @@ COMMON_DEFAULTS = {
         "weft": [-0.05, 0.05],    # strain band along the weft
         "bias": [],               # bias-strain band; [] = automatic (METHOD.md 3.2)
         "solver": "al",           # al (augmented Lagrangian) | jacobi (baseline)
-        "iters": 50,              # outer-iteration budget per substep
+        # Outer-iteration budget per projection: a cap for solves that stall, since converged
+        # solves stop at `tol` (2-8 AL rounds on hanging). 50 was too tight: svd on hanging with
+        # remeshing ran out once in 300 frames (violation 1.3e-3); that solve, continued,
+        # converged 84 rounds later, and with 100 all 300 frames pass
+        # (docs/remesh/svd_iters100).
+        "iters": 100,
         "tol": 1e-4,              # largest violation accepted, in strain
         # mapping only: width (in eta1^2 - eta2^2) of the closure of its feasible set at
         # isotropy, where the paper's constraint depends on an arbitrary principal frame;
