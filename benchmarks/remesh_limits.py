@@ -5,7 +5,7 @@ constraints after every frame's remesh and projection.
     python -m benchmarks.remesh_limits                 # hanging, 300 frames x 3 methods, ~25 min
     python -m benchmarks.remesh_limits --quick         # 30 frames each, ~2 min
     python -m benchmarks.remesh_limits --scene drape --frames 60
-    python -m benchmarks.remesh_limits --methods svd --iters 100 --out docs/remesh/svd_iters100
+    python -m benchmarks.remesh_limits --methods svd --iters 50 --out results/svd_iters50
 
 Per frame it records the face count, the method's own violation after the frame (the remesh stage
 ends with a projection onto the new triangles, so this is the violation "after every frame's

@@ -43,7 +43,7 @@ COMMON_DEFAULTS = {
         # solves stop at `tol` (2-8 AL rounds on hanging). 50 was too tight: svd on hanging with
         # remeshing ran out once in 300 frames (violation 1.3e-3); that solve, continued,
         # converged 84 rounds later, and with 100 all 300 frames pass
-        # (docs/remesh/svd_iters100).
+        # (docs/remesh/remesh_limits.md).
         "iters": 100,
         "tol": 1e-4,              # largest violation accepted, in strain
         # mapping only: width (in eta1^2 - eta2^2) of the closure of its feasible set at
