@@ -412,6 +412,11 @@ class _Work:
         i = tri.index(a)
         return tri[i], tri[(i + 1) % 3], tri[(i + 2) % 3]
 
+    def around_edge(self, f, a, b):
+        """Face f's vertices (p, q, r) counter-clockwise with (p, q) its edge {a, b}."""
+        p, q, r = self.rotate_to(self.faces[f], a)
+        return (p, q, r) if q == b else self.rotate_to(self.faces[f], b)
+
     def split_ok(self, a, b):
         # An edge between two frozen vertices (a seam) keeps its vertex list unchanged.
         if self.frozen[a] and self.frozen[b]:
@@ -423,9 +428,7 @@ class _Work:
         # its first remesh, 8656 of 13688 faces).
         mid = [0.5 * (s + t) for s, t in zip(self.uv[a], self.uv[b])]
         for f in self.edge_faces(a, b):
-            p, q, r = self.rotate_to(self.faces[f], a)
-            if q != b:                       # the face runs b -> a
-                p, q, r = self.rotate_to(self.faces[f], b)
+            p, q, r = self.around_edge(f, a, b)
             floor = min(_SPLIT_QUALITY * self.p.aspect_min, self.quality(p, q, r))
             m = self._metric(p, q, r)
             if min(self._quality_uv(m, self.uv[p], mid, self.uv[r]),
@@ -454,9 +457,7 @@ class _Work:
         self.vf.append(set())
         opp = []
         for f in fs:
-            p, q, r = self.rotate_to(self.faces[f], a)
-            if q != b:                       # the face runs b -> a
-                p, q, r = self.rotate_to(self.faces[f], b)
+            p, q, r = self.around_edge(f, a, b)
             self.set_face(f, [p, m, r])
             g = self.add_face([m, q, r], self.origin[f])
             self.vf[q].discard(f)
