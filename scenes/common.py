@@ -39,6 +39,10 @@ COMMON_DEFAULTS = {
         "weft": [-0.05, 0.05],    # strain band along the weft
         "bias": [],               # bias-strain band; [] = automatic (METHOD.md 3.2)
         "solver": "al",           # al (augmented Lagrangian) | jacobi (baseline)
+        # How the limits meet the dynamics: "implicit" carries the last step's constraint
+        # forces (the multipliers) into the implicit step, so a cloth at rest is an exact fixed
+        # point; "projection" is the paper's split step (eq. 6: project the unconstrained x_hat).
+        "coupling": "projection",
         # Outer-iteration budget per projection: a cap for solves that stall, since converged
         # solves stop at `tol` (2-8 AL rounds on hanging). 50 was too tight: svd on hanging with
         # remeshing ran out once in 300 frames (violation 1.3e-3); that solve, continued,
