@@ -24,11 +24,23 @@ def band(text):
     return [lo, hi]
 
 
+class _HelpFormatter(argparse.HelpFormatter):
+    """Shows a default only where there is one worth reading (not None, False or [])."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        d = action.default
+        if "%(default)" not in text and d not in (None, False, [], argparse.SUPPRESS) \
+                and action.option_strings and action.nargs != 0:
+            text += " (default: %(default)s)"
+        return text
+
+
 def parse_args(argv):
     p = argparse.ArgumentParser(
         prog="main.py", description="Loom: strain-limited cloth simulation. Without a display "
         "(or with --headless) it runs the scene and writes frames, meshes and metrics.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+        formatter_class=_HelpFormatter)
     p.add_argument("scene", nargs="?", default=None, help="scene name (see --list)")
     p.add_argument("--list", action="store_true", help="list the scenes and exit")
     p.add_argument("--show-config", action="store_true",
@@ -37,11 +49,14 @@ def parse_args(argv):
     p.add_argument("--compare", action="store_true",
                    help="teaching view: the scene with the methods svd, warp-weft and mapping "
                    "side by side in one window (needs a display)")
-    p.add_argument("--frames", type=int, help="frames to simulate (sim.frames)")
+    p.add_argument("--frames", type=int, help="frames to simulate, 1 or more (sim.frames)")
     p.add_argument("--out", help="output folder (default out/SCENE)")
     p.add_argument("--resolution", type=int, help="vertices along each side of a sheet "
                    "(cloth.resolution)")
-    p.add_argument("--arch", default="cpu", help="Taichi backend: cpu, gpu, cuda, vulkan, metal")
+    p.add_argument("--arch", default="cpu", metavar="ARCH",
+                   help="Taichi backend to simulate on: cpu (any machine), gpu (the best GPU "
+                   "backend available), cuda, vulkan or metal; one that cannot start stops with "
+                   "a message")
     p.add_argument("--precision", default="f64", choices=["f64", "f32"],
                    help="floating-point precision of the simulation")
     p.add_argument("--config", help="TOML file with settings (same keys as --show-config)")
@@ -126,6 +141,9 @@ def main(argv=None):
         from scenes.common import resolve
         cfg = resolve(module.DEFAULTS, overrides)
         cfg["scene"] = name
+        if not cfg["sim"]["frames"] >= 1:
+            raise ConfigError(f"sim.frames must be 1 or more (got {cfg['sim']['frames']}): "
+                              "give --frames N with N >= 1")
     except (KeyError, ConfigError, ValueError) as err:
         return fail(str(err).strip("'\""))
     if args.show_config:

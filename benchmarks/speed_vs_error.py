@@ -196,12 +196,13 @@ def sweep(grid, scene="hanging", log=print, pool=None):
                  "unconverged_substeps": ref["unconverged"] + chk["unconverged"]}
         for f in cf:
             check[f"change_f{f}"] = metrics.solution_error(chk["snaps"][f], ref["snaps"][f], points)
+            # None (JSON null) where the chaos run was not made (--quick): "not measured".
             check[f"chaos_f{f}"] = metrics.solution_error(
-                nudged["snaps"][f], ref["snaps"][f], points) if nudged else float("nan")
+                nudged["snaps"][f], ref["snaps"][f], points) if nudged else None
         checks.append(check)
         log(f"reference {method} res {res}: change on halving the step "
             + ", ".join(f"{check[f'change_f{f}']:.2e} (frame {f}, 1 nm: "
-                        f"{check[f'chaos_f{f}']:.2e})" for f in cf)
+                        f"{chaos_text(check[f'chaos_f{f}'])})" for f in cf)
             + f"  [{check['seconds']:.0f} s]")
         for solver, sub in itertools.product(grid["solvers"], grid["substeps"]):
             for iters in grid["iters"][solver]:
@@ -300,6 +301,14 @@ def fmt(v):
     return str(v)
 
 
+def chaos_text(v):
+    """The chaos floor as printed: a number, or "not measured" where no nudged run was made
+    (``--quick`` skips it; earlier JSON files stored NaN there)."""
+    if v is None or (isinstance(v, float) and not np.isfinite(v)):
+        return "not measured"
+    return f"{v:.3g}"
+
+
 def write_outputs(results, checks, out, grid, scene, command, seconds):
     os.makedirs(out, exist_ok=True)
     cf = sorted(grid["compare_frames"])
@@ -342,7 +351,7 @@ def write_outputs(results, checks, out, grid, scene, command, seconds):
              "|---|---|" + "---|---|---|---|---|" * len(cf)]
     for c in checks:
         lines.append(f"| {c['method']} | {c['resolution']} | " + " | ".join(
-            f"{fmt(c[f'change_f{f}'])} | {fmt(c.get(f'chaos_f{f}', float('nan')))} | "
+            f"{fmt(c[f'change_f{f}'])} | {chaos_text(c.get(f'chaos_f{f}'))} | "
             f"{fmt(c[f'smallest_f{f}'])} | {fmt(c[f'converged_f{f}'])} | "
             f"{c[f'unresolved_f{f}']} of {c[f'runs_f{f}']}" for f in cf) + " |")
     cols = ["method", "solver", "iters", "substeps", "resolution", "faces", "ms_median",

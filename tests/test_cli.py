@@ -88,3 +88,27 @@ def test_headless_writes_the_documented_folder(tmp_path):
     uv_ref, faces_ref = make_sheet(1.0, 1.0, 6, 6, "alternating")
     assert np.allclose(uv, uv_ref, atol=1e-12) and np.array_equal(faces, faces_ref)
     assert np.allclose(mesh.visual.uv, uv_ref, atol=1e-9)
+
+
+@pytest.mark.parametrize("frames", ["-3", "0"])
+def test_non_positive_frame_count_is_refused_and_nothing_written(frames, tmp_path):
+    out = tmp_path / "run"
+    res = run_main("hanging", "--headless", "--frames", frames, "--out", str(out))
+    assert_clear_error(res, "sim.frames must be 1 or more", "--frames N")
+    assert not out.exists()
+    assert "final check" not in res.stdout
+
+
+def test_help_describes_every_option():
+    res = run_main("--help")
+    assert res.returncode == 0
+    text = " ".join(res.stdout.split())
+    assert "--arch ARCH Taichi backend to simulate on: cpu" in text
+    assert "(default: None)" not in text and "(default: False)" not in text
+
+
+def test_quick_sweep_says_not_measured_where_no_chaos_run_was_made():
+    from benchmarks.speed_vs_error import chaos_text
+    assert chaos_text(None) == "not measured"
+    assert chaos_text(float("nan")) == "not measured"
+    assert chaos_text(3.8e-6) == "3.8e-06"
