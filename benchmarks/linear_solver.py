@@ -45,8 +45,9 @@ def main():
     module = scenes.get("hanging")
     rows = []
     for res in args.resolutions:
-        cfg = resolve(module.DEFAULTS, [parse_assignment(s) for s in args.set] +
-                      [{"cloth": {"resolution": res}}])
+        # The free sheet (hanging limits strain by default); --set strain.method=... changes it.
+        cfg = resolve(module.DEFAULTS, [{"strain": {"method": "none"}}] +
+                      [parse_assignment(s) for s in args.set] + [{"cloth": {"resolution": res}}])
         sim = Simulator(module.build(cfg), cfg)
         m, h, mf = sim.model, sim.h, sim.dynamics
         base = mf.settings

@@ -64,7 +64,9 @@ COMMON_DEFAULTS = {
         "every": 1,               # write every N-th frame
         "width": 640,             # image size in pixels
         "height": 480,
-        "color": "shading",       # shading | warp-strain | weft-strain | bias-strain | principal-strain
+        # Frames (and the window) start coloured by warp strain with its band on the legend,
+        # so the output shows what strain limiting does.
+        "color": "warp-strain",   # shading | warp-strain | weft-strain | bias-strain | principal-strain | violation | size
     },
 }
 

@@ -10,6 +10,10 @@ from cloth.simulator import Simulator
 from scenes.common import resolve
 
 
+# hanging limits strain by default (the paper's experiment); these tests are about the free sheet.
+FREE = {"method": "none"}
+
+
 def make_sim(name="hanging", **overrides):
     module = scenes.get(name)
     cfg = resolve(module.DEFAULTS, [overrides])
@@ -17,7 +21,7 @@ def make_sim(name="hanging", **overrides):
 
 
 def test_hanging_cloth_comes_to_rest_below_the_pins_and_symmetric():
-    sim, cfg = make_sim(cloth={"resolution": 13})
+    sim, cfg = make_sim(cloth={"resolution": 13}, strain=FREE)
     energies = []
     for _ in range(150):
         sim.step_frame()
@@ -31,7 +35,7 @@ def test_hanging_cloth_comes_to_rest_below_the_pins_and_symmetric():
 
 
 def test_cotton_preset_is_stable_at_one_substep_per_frame():
-    sim, cfg = make_sim(cloth={"resolution": 13}, material={"preset": "cotton"})
+    sim, cfg = make_sim(cloth={"resolution": 13}, material={"preset": "cotton"}, strain=FREE)
     assert cfg["sim"]["substeps"] == 1 and cfg["material"]["k_warp"] == 3000.0
     for _ in range(90):
         sim.step_frame()
@@ -41,7 +45,7 @@ def test_cotton_preset_is_stable_at_one_substep_per_frame():
 
 
 def test_moving_pin_target_is_followed():
-    sim, cfg = make_sim(cloth={"resolution": 9})
+    sim, cfg = make_sim(cloth={"resolution": 9}, strain=FREE)
     speed = np.array([0.3, 0.0, 0.2])
     sim.setup.pin_motion = lambda t, uv, rest: rest + t * speed
     for _ in range(20):
@@ -53,7 +57,7 @@ def test_moving_pin_target_is_followed():
 
 def test_divergence_is_reported_with_frame_and_stage_and_output_is_kept(tmp_path):
     from ui.headless import HeadlessRun
-    sim, cfg = make_sim(cloth={"resolution": 6})
+    sim, cfg = make_sim(cloth={"resolution": 6}, strain=FREE)
     dyn = sim.stage("dynamics")
     original = dyn.run
 
@@ -79,12 +83,12 @@ def test_restart_refuses_what_it_cannot_reset():
     (remeshing, stitches, self-collision): anything else must be a new Simulator."""
     import scenes
     from scenes.common import resolve
-    sim, cfg = make_sim(cloth={"resolution": 5})
+    sim, cfg = make_sim(cloth={"resolution": 5}, strain=FREE)
     module = scenes.get("hanging")
-    same = resolve(module.DEFAULTS, [{"cloth": {"resolution": 5}}])
+    same = resolve(module.DEFAULTS, [{"cloth": {"resolution": 5}, "strain": FREE}])
     assert sim.can_restart(module.build(same), same)
     for change in ({"cloth": {"resolution": 6}}, {"cloth": {"resolution": 5},
                                                   "remesh": {"enabled": True}}):
-        other = resolve(module.DEFAULTS, [change])
+        other = resolve(module.DEFAULTS, [change, {"strain": FREE}])
         with pytest.raises(ValueError, match="new Simulator"):
             sim.restart(module.build(other), other)
