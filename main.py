@@ -41,7 +41,8 @@ def parse_args(argv):
         prog="main.py", description="Loom: strain-limited cloth simulation. Without a display "
         "(or with --headless) it runs the scene and writes frames, meshes and metrics.",
         formatter_class=_HelpFormatter)
-    p.add_argument("scene", nargs="?", default=None, help="scene name (see --list)")
+    p.add_argument("scene", nargs="?", default=None,
+                   help="scene name (see --list) or a scene file, e.g. scenes/examples/drape.toml")
     p.add_argument("--list", action="store_true", help="list the scenes and exit")
     p.add_argument("--show-config", action="store_true",
                    help="print every settable key of the scene with its value and exit")
@@ -133,6 +134,7 @@ def main(argv=None):
     name = args.scene or scenes.DEFAULT_SCENE
     try:
         module = scenes.get(name)
+        name = getattr(module, "NAME", name)      # a scene file: its file name without .toml
         overrides = []
         if args.config:
             overrides.append(load_toml(args.config))
@@ -140,7 +142,7 @@ def main(argv=None):
         overrides.append(flag_overrides(args, module.DEFAULTS))
         from scenes.common import resolve
         cfg = resolve(module.DEFAULTS, overrides)
-        cfg["scene"] = name
+        cfg["scene"] = getattr(module, "path", name)
         if not cfg["sim"]["frames"] >= 1:
             raise ConfigError(f"sim.frames must be 1 or more (got {cfg['sim']['frames']}): "
                               "give --frames N with N >= 1")
@@ -152,6 +154,13 @@ def main(argv=None):
             if key != "scene":
                 print(f"{key} = {value!r}")
         return 0
+
+    if hasattr(module, "check"):
+        # Scene files: every input check (meshes, pins, obstacles) before Taichi starts.
+        try:
+            module.check(cfg)
+        except (ConfigError, ValueError) as err:
+            return fail(str(err))
 
     from cloth import backend
     from cloth.model import ModelError

@@ -9,6 +9,13 @@ class ConfigError(ValueError):
     """Bad configuration input; the message names the fix."""
 
 
+# Keys that take a number or one of a few words (key path -> the words).
+NUMBER_OR_WORD = {
+    "cloth.uv_scale": ("auto",),      # metres per vt unit, or per-island area matching
+    "cloth.warp": ("u", "v"),         # the warp direction: material u, v, or degrees from u
+}
+
+
 def merge(base, override, where=""):
     """A copy of ``base`` with ``override`` applied. Keys must already exist in ``base`` (the
     defaults declare every settable key); values keep their type where it is clear."""
@@ -32,6 +39,14 @@ def merge(base, override, where=""):
 
 
 def _coerce(old, value, path):
+    if path in NUMBER_OR_WORD:
+        words = NUMBER_OR_WORD[path]
+        if isinstance(value, str) and value in words:
+            return value
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            return float(value)
+        raise ConfigError(f"'{path}' takes a number or " + " or ".join(f'"{w}"' for w in words)
+                          + f" (got {value!r})")
     if isinstance(old, bool) or old is None:
         if old is not None and not isinstance(value, bool):
             raise ConfigError(f"'{path}' takes true or false (got {value!r})")
@@ -101,21 +116,31 @@ def _toml_value(v):
         return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
     if isinstance(v, (list, tuple)):
         return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{" + ", ".join(f"{k} = {_toml_value(x)}" for k, x in v.items()
+                               if x is not None) + "}"
     raise ConfigError(f"cannot write {v!r} to TOML")
 
 
 def to_toml(cfg, prefix=""):
     """Nested dict -> TOML text (top-level scalars first, then one table per section)."""
-    lines, tables = [], []
+    lines, tables, arrays = [], [], []
     for k, v in cfg.items():
         if isinstance(v, dict):
             tables.append((k, v))
+        elif isinstance(v, list) and v and all(isinstance(x, dict) for x in v):
+            arrays.append((k, v))            # an array of tables: [[obstacles]]
         elif v is not None:
             lines.append(f"{k} = {_toml_value(v)}")
     for k, v in tables:
         name = f"{prefix}{k}"
         body = to_toml(v, name + ".")
         lines.append(f"\n[{name}]\n{body}" if body.strip() else f"\n[{name}]")
+    for k, v in arrays:
+        for item in v:
+            body = "\n".join(f"{ik} = {_toml_value(iv)}" for ik, iv in item.items()
+                             if iv is not None)
+            lines.append(f"\n[[{prefix}{k}]]\n{body}")
     return "\n".join(lines).strip("\n") + "\n" if not prefix else "\n".join(lines)
 
 

@@ -8,7 +8,8 @@ SCENES = {
     "tshirt": "scenes.tshirt",
 }
 DESCRIPTIONS = {
-    "hanging": "paper Table 1: a cloth hanging from its two top corners, settling to rest",
+    "hanging": "paper Table 1: a cloth hanging from its two top corners, settling to rest "
+               "(mapping, warp +-1 %, weft +-5 %)",
     "pull": "a sheet pinned along its top edge with a corner dragged away (the user stretches it)",
     "drape": "a square sheet falling onto a sphere and the ground",
     "tshirt": "paper Table 2: a mannequin wearing a T-shirt, settling at rest",
@@ -17,6 +18,11 @@ DEFAULT_SCENE = "hanging"
 
 
 def get(name):
+    """A built-in scene's module, or for a path (``*.toml``) a ``SceneFile`` that behaves like
+    one (``DEFAULTS``, ``build``; plus ``NAME`` and ``check``)."""
+    from .scene_file import SceneFile, is_scene_file
+    if name not in SCENES and is_scene_file(name):
+        return SceneFile(name)
     if name not in SCENES:
         import difflib
         hint = difflib.get_close_matches(name, list(SCENES), n=1)

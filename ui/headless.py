@@ -32,23 +32,38 @@ class HeadlessRun:
 
     # -- set-up -------------------------------------------------------------------------------
     def _prepare(self):
-        os.makedirs(self.out, exist_ok=True)
-        if self.meshes:
-            os.makedirs(os.path.join(self.out, "meshes"), exist_ok=True)
-        with open(os.path.join(self.out, "config.toml"), "w") as fh:
-            fh.write("# Loom: the fully resolved configuration of this run\n")
-            fh.write(to_toml(self.cfg))
+        # Everything that can fail at start-up comes first (the renderer needs a Vulkan
+        # device), so a failed start leaves an earlier output folder as it was.
         if self.images:
             from .render import ClothRenderer, open_window
-            os.makedirs(os.path.join(self.out, "frames"), exist_ok=True)
             window = open_window("Loom (offscreen)", self.size, show_window=False)
             self.renderer = ClothRenderer(window, self.sim.setup.camera)
+        config_text = to_toml(self.cfg)
+        os.makedirs(self.out, exist_ok=True)
+        self._clear_earlier_output()
+        if self.meshes:
+            os.makedirs(os.path.join(self.out, "meshes"), exist_ok=True)
+        if self.images:
+            os.makedirs(os.path.join(self.out, "frames"), exist_ok=True)
+        with open(os.path.join(self.out, "config.toml"), "w") as fh:
+            fh.write("# Loom: the fully resolved configuration of this run\n")
+            fh.write(config_text)
         if self.video:
             import imageio.v2 as imageio
             self._video_writer = imageio.get_writer(
                 os.path.join(self.out, "video.mp4"), fps=self.cfg["sim"]["fps"],
                 macro_block_size=8, quality=7)
         self.metrics = io.MetricsWriter(os.path.join(self.out, "metrics.csv"))
+
+    def _clear_earlier_output(self):
+        """Remove what an earlier run wrote here (only Loom's own file names), so the folder
+        never mixes two runs' frames."""
+        import glob
+        patterns = ["config.toml", "metrics.csv", "video.mp4", "meshes/frame_*.obj",
+                    "meshes/obstacles*.obj", "frames/frame_*.png"]
+        for pat in patterns:
+            for path in glob.glob(os.path.join(self.out, pat)):
+                os.remove(path)
 
     # -- per frame ----------------------------------------------------------------------------
     def _write_frame(self):

@@ -1,0 +1,192 @@
+"""Scene files (issue #14): bad input stops with one line and exit code 2 before Taichi compiles
+anything and without touching an earlier output folder; OBJ garments are split along their UV
+seams and stitched; the example files reproduce the built-in scenes."""
+import os
+
+import numpy as np
+import pytest
+
+import main as loom_main
+from cloth.garment import check_size, load_garment
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+EXAMPLES = os.path.join(ROOT, "scenes", "examples")
+
+GRID_V = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)]
+GRID_VT = [(0, 0), (1, 0), (1, 1), (0, 1)]
+
+
+def obj_text(v=GRID_V, vt=GRID_VT, faces=("1/1 2/2 3/3", "1/1 3/3 4/4")):
+    lines = [f"v {' '.join(str(c) for c in p)}" for p in v]
+    lines += [f"vt {' '.join(str(c) for c in p)}" for p in vt]
+    lines += [f"f {f}" for f in faces]
+    return "\n".join(lines) + "\n"
+
+
+def scene(tmp_path, obj=None, extra="", cloth_extra=""):
+    if obj is not None:
+        (tmp_path / "cloth.obj").write_text(obj)
+    text = f'[cloth]\nmesh = "cloth.obj"\n{cloth_extra}\n{extra}\n'
+    path = tmp_path / "scene.toml"
+    path.write_text(text)
+    return str(path)
+
+
+def run(capsys, *args):
+    rc = loom_main.main([*args, "--headless", "--quiet", "--no-images"])
+    err = capsys.readouterr().err
+    return rc, err
+
+
+def assert_one_line(rc, err, *words):
+    assert rc == 2, err
+    lines = [ln for ln in err.splitlines() if ln.startswith("loom: error:")]
+    assert len(lines) == 1 and "Traceback" not in err, err
+    for w in words:
+        assert w in lines[0], lines[0]
+
+
+# -- bad input: one line, exit code 2 ------------------------------------------------------------
+def test_missing_scene_file(capsys, tmp_path):
+    assert_one_line(*run(capsys, str(tmp_path / "nope.toml")), "scene file", "not found")
+
+
+def test_missing_mesh_file(capsys, tmp_path):
+    assert_one_line(*run(capsys, scene(tmp_path)), "mesh file", "cloth.obj", "not found")
+
+
+def test_obj_without_vt(capsys, tmp_path):
+    path = scene(tmp_path, obj_text(vt=[], faces=("1 2 3", "1 3 4")))
+    assert_one_line(*run(capsys, path), "no texture coordinate", "export the OBJ with UVs")
+
+
+@pytest.mark.parametrize("bad", ["nan", "inf"])
+def test_nan_or_infinite_coordinates(capsys, tmp_path, bad):
+    v = [GRID_V[0], GRID_V[1], (1, bad, 0), GRID_V[3]]
+    assert_one_line(*run(capsys, scene(tmp_path, obj_text(v=v))), "NaN or infinite", "v 3")
+
+
+def test_face_indexing_a_missing_vertex(capsys, tmp_path):
+    path = scene(tmp_path, obj_text(faces=("1/1 2/2 3/3", "1/1 3/3 9/4")))
+    assert_one_line(*run(capsys, path), "cloth.obj:", "missing vertex", "fix the face indices")
+
+
+def test_face_without_texture_index(capsys, tmp_path):
+    path = scene(tmp_path, obj_text(faces=("1/1 2/2 3/3", "1 3 4")))
+    assert_one_line(*run(capsys, path), "no texture coordinate index", "v/vt")
+
+
+def test_non_manifold_edge(capsys, tmp_path):
+    v = GRID_V + [(0.5, 0.5, 1.0)]
+    vt = GRID_VT + [(0.5, 2.0)]
+    path = scene(tmp_path, obj_text(v=v, vt=vt, faces=("1/1 2/2 3/3", "1/1 3/3 4/4",
+                                                          "3/3 1/1 5/5")))
+    assert_one_line(*run(capsys, path), "non-manifold edge", "3 faces share")
+
+
+def test_zero_area_material_triangle(capsys, tmp_path):
+    vt = [(0, 0), (1, 0), (2, 0), (0, 1)]          # first triangle's vt on a line
+    assert_one_line(*run(capsys, scene(tmp_path, obj_text(vt=vt))), "zero area in material space")
+
+
+def test_flipped_material_triangle(capsys, tmp_path):
+    # A 2 x 1 strip whose last triangle is wound the other way in vt (a fold in the UVs).
+    v = [(0, 0, 0), (1, 0, 0), (2, 0, 0), (0, 1, 0), (1, 1, 0), (2, 1, 0)]
+    vt = [(0, 0), (1, 0), (2, 0), (0, 1), (1, 1), (2, 1)]
+    faces = ("1/1 2/2 5/5", "1/1 5/5 4/4", "2/2 3/3 6/6", "2/2 6/6 5/5".replace("6/6 5/5",
+                                                                               "5/5 6/6"))
+    path = scene(tmp_path, obj_text(v=v, vt=vt, faces=faces))
+    assert_one_line(*run(capsys, path), "flipped in material space", "unfold the UVs")
+
+
+def test_pin_box_holding_no_vertex(capsys, tmp_path):
+    path = scene(tmp_path, obj_text(), cloth_extra="pins = [[0.4, 0.4, 0.6, 0.6]]")
+    assert_one_line(*run(capsys, path), "cloth.pins[0]", "holds no vertex", "enlarge the box")
+
+
+def test_moving_pin_box_holding_no_vertex(capsys, tmp_path):
+    path = scene(tmp_path, obj_text(), extra="[[pins]]\nbox = [5, 5, 6, 6]\n"
+                 "motion = {translate = [0, 1, 0], duration = 1.0}")
+    assert_one_line(*run(capsys, path), "pins[0].box", "holds no vertex")
+
+
+def test_obstacle_mesh_not_closed(capsys, tmp_path):
+    (tmp_path / "body.obj").write_text(obj_text())          # an open square
+    path = scene(tmp_path, obj_text(), extra='[[obstacles]]\nkind = "mesh"\npath = "body.obj"')
+    assert_one_line(*run(capsys, path), "obstacles[0].path", "not a closed surface",
+                    "close its holes")
+
+
+def test_mesh_too_large(capsys, tmp_path):
+    path = scene(tmp_path, obj_text(), cloth_extra="max_faces = 1")
+    assert_one_line(*run(capsys, path), "2 triangles", "cloth.max_faces = 1", "decimate")
+
+
+def test_mesh_too_large_for_the_memory():
+    from cloth.config import ConfigError
+    with pytest.raises(ConfigError, match="needs about 2.0 GB but only 1.0 GB"):
+        check_size(100_000, None, "mesh file 'x.obj'", memory=1e9)
+
+
+def test_unknown_obstacle_kind_and_key(capsys, tmp_path):
+    path = scene(tmp_path, obj_text(), extra='[[obstacles]]\nkind = "cone"')
+    assert_one_line(*run(capsys, path), "obstacles[0].kind", "sphere, plane, capsule, box, mesh")
+    path = scene(tmp_path, extra='[[obstacles]]\nkind = "sphere"\ncentre = [0, 0, 0]\nradius = 1')
+    assert_one_line(*run(capsys, path), "unknown key 'obstacles[0].centre'", "center")
+
+
+def test_unknown_section_key_names_the_known_ones(capsys, tmp_path):
+    path = scene(tmp_path, obj_text(), extra="[strain]\nmethd = \"svd\"")
+    assert_one_line(*run(capsys, path), "unknown setting 'strain.methd'", "method")
+
+
+def test_a_failed_start_leaves_an_earlier_output_folder_alone(capsys, tmp_path):
+    out = tmp_path / "out"
+    (out / "frames").mkdir(parents=True)
+    (out / "config.toml").write_text("earlier")
+    (out / "frames" / "frame_0000.png").write_bytes(b"earlier")
+    path = scene(tmp_path, obj_text(), cloth_extra="pins = [[7, 7, 8, 8]]")
+    rc = loom_main.main([path, "--headless", "--out", str(out)])
+    assert rc == 2
+    assert (out / "config.toml").read_text() == "earlier"
+    assert (out / "frames" / "frame_0000.png").read_bytes() == b"earlier"
+    assert sorted(p.name for p in out.rglob("*")) == ["config.toml", "frame_0000.png", "frames"]
+
+
+# -- garments ---------------------------------------------------------------------------------------
+def test_polygons_are_triangulated_with_a_note(tmp_path):
+    (tmp_path / "quad.obj").write_text(obj_text(faces=("1/1 2/2 3/3 4/4",)))
+    g = load_garment(str(tmp_path / "quad.obj"))
+    assert len(g.mesh.faces) == 2 and "1 polygon(s)" in g.notes[0]
+
+
+def test_uv_seams_are_split_and_stitched_and_auto_scale_matches_areas(tmp_path):
+    # Two panels sharing the edge v2-v3 in 3-D (a welded seam), laid out apart in UV at
+    # 10 UV units per metre (panel 1) and 20 (panel 2).
+    v = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (2, 0, 0), (2, 1, 0)]
+    vt = [(0, 0), (10, 0), (10, 10), (0, 10),          # panel 1
+          (50, 0), (70, 0), (70, 20), (50, 20)]        # panel 2: v2, v5, v6, v3
+    faces = ("1/1 2/2 3/3", "1/1 3/3 4/4", "2/5 5/6 6/7", "2/5 6/7 3/8")
+    (tmp_path / "g.obj").write_text(obj_text(v=v, vt=vt, faces=faces))
+    g = load_garment(str(tmp_path / "g.obj"), uv_scale="auto")
+    assert len(g.mesh.uv) == 8 and len(set(g.islands)) == 2
+    assert np.allclose(sorted(g.island_scale), [0.05, 0.1])
+    # The two seam vertices are sewn to their copies, which start at the same place.
+    assert len(g.stitches) == 2
+    x = g.mesh.x
+    assert np.allclose(x[g.stitches[:, 0]], x[g.stitches[:, 1]])
+    from cloth.metrics import material_areas
+    assert np.isclose(material_areas(g.mesh.uv, g.mesh.faces).sum(), 2.0)
+    # The warp is material u by default; "v" turns it.
+    assert np.allclose(g.mesh.grain[0], np.eye(2))
+    g2 = load_garment(str(tmp_path / "g.obj"), uv_scale=0.1, warp="v")
+    assert np.allclose(g2.mesh.grain[0][:, 0], [0, 1])
+
+
+def test_mirrored_uv_island_is_turned_over(tmp_path):
+    vt = [(1, 0), (0, 0), (0, 1), (1, 1)]               # u mirrored: every face clockwise
+    (tmp_path / "m.obj").write_text(obj_text(vt=vt))
+    g = load_garment(str(tmp_path / "m.obj"))
+    from cloth.model import signed_material_areas
+    assert (signed_material_areas(g.mesh.uv, g.mesh.faces) > 0).all()
+    assert "mirrored" in g.notes[0]
