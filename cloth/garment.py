@@ -281,10 +281,12 @@ def build_garment(v, vt, tris, tri_lines, path, uv_scale=1.0, warp="u"):
         if warp not in ("u", "v"):
             raise ConfigError(f"cloth.warp takes \"u\", \"v\" or an angle in degrees from "
                               f"material u (got '{warp}')")
-        angle = 0.0 if warp == "u" else np.pi / 2
+        angle = 0.0 if warp == "u" else 90.0
     else:
-        angle = np.radians(float(warp))
-    grain = grain_from_angle(angle, len(faces))
+        angle = float(warp)
+    grain = grain_from_angle(np.radians(angle), len(faces))
+    if angle % 90.0 == 0.0:
+        grain = np.round(grain)          # exact axes for u, v and their opposites
 
     # Seams: the copies of one file vertex are sewn together (star from the first copy).
     order = np.argsort(src_v, kind="stable")
