@@ -5,6 +5,8 @@ Writes, next to this file:
   mannequin.obj   a triangle mesh of those primitives, for drawing only
   tshirt.npz      the two-panel T-shirt (see ``assets.load_tshirt`` for the arrays)
   tshirt.obj      the same shirt with its material coordinates as texture coordinates (vt)
+  dress_form.obj, tabard.obj  the garment example of scenes/examples/garment.toml (--garment
+                  writes only these): a closed torso mesh and a two-panel tabard with UV islands
 
 Everything is built from numbers in this file with numpy (trimesh only tessellates the
 drawing mesh), so the output is deterministic.
@@ -709,13 +711,190 @@ def preview(path, prims, shirt, size=420):
     plt.close(fig)
 
 
+# ---------------------------------------------------------------------------------------------
+# Garment example (issue #14): a dress form as one closed triangle mesh, and a two-panel tabard
+# (front and back panel sewn along the shoulders) exported the way pattern tools write
+# garments: one UV island per panel at a non-metric scale (a 0..1 texture atlas), the panels
+# turned in the atlas so that the garment's vertical (the warp) runs along u, and one shared
+# vertex ("v") per seam point with a texture coordinate ("vt") per panel.
+# ---------------------------------------------------------------------------------------------
+FORM_BOTTOM, FORM_TOP = 0.74, 1.44   # the dress form's torso spans these heights
+TABARD_LENGTH = 0.50                 # m, shoulder seam to hem (material, per panel)
+TABARD_WIDTH = 0.36                  # m, panel width
+TABARD_STEP = 0.025                  # m, target edge length
+TABARD_CLEARANCE = 0.008             # m, start distance from the form
+ATLAS_METRES = 1.6                   # metres per texture unit in the OBJ (non-metric UVs)
+
+
+def _stadium_ring(hl, r, n):
+    """n points around a stadium (half-length hl along x, radius r) in the x-z plane at equal
+    arc-length steps, starting at the front centre (0, r) and going towards +x."""
+    P = 4 * hl + 2 * np.pi * r
+    pts = np.zeros((n, 2))
+    for i, t in enumerate(np.arange(n) * P / n):
+        if t < hl:                                  # front straight, from the centre to +x
+            pts[i] = (t, r)
+        elif t < hl + np.pi * r:                    # right half-circle
+            phi = (t - hl) / r
+            pts[i] = (hl + r * np.sin(phi), r * np.cos(phi))
+        elif t < 3 * hl + np.pi * r:                # back straight
+            pts[i] = (hl - (t - hl - np.pi * r), -r)
+        elif t < 3 * hl + 2 * np.pi * r:            # left half-circle
+            phi = (t - 3 * hl - np.pi * r) / r
+            pts[i] = (-hl - r * np.sin(phi), -r * np.cos(phi))
+        else:                                       # front straight back to the centre
+            pts[i] = (-hl + (t - 3 * hl - 2 * np.pi * r), r)
+    return pts
+
+
+def _form_rings(dy=0.01, cap=4):
+    """(half-length, radius, height) of the dress form's sections from bottom to top: the
+    mannequin's torso sections, rounded off at both ends by ``cap`` shrinking rings."""
+    ys = np.arange(FORM_BOTTOM, FORM_TOP + 1e-9, dy)
+    hl, r = _torso_section(ys)
+    out = []
+    for k in range(cap, 0, -1):
+        a = 0.5 * np.pi * k / (cap + 1)
+        out.append((hl[0], r[0] * np.cos(a), ys[0] - 0.5 * r[0] * np.sin(a)))
+    out += list(zip(hl, r, ys))
+    for k in range(1, cap + 1):
+        a = 0.5 * np.pi * k / (cap + 1)
+        out.append((hl[-1], r[-1] * np.cos(a), ys[-1] + 0.5 * r[-1] * np.sin(a)))
+    return out
+
+
+def dress_form(n_ring=64):
+    """A closed torso (one surface, no overlaps) lofted through the mannequin's torso
+    sections. Returns (vertices, faces) with outward normals."""
+    rings = _form_rings()
+    verts = np.concatenate([np.c_[q[:, 0], np.full(n_ring, y), q[:, 1]]
+                            for q, y in ((_stadium_ring(h, r, n_ring), y) for h, r, y in rings)])
+    n_r = len(rings)
+    faces = []
+    for j in range(n_r - 1):
+        for i in range(n_ring):
+            a, b = j * n_ring + i, j * n_ring + (i + 1) % n_ring
+            faces += [(a, a + n_ring, b), (b, a + n_ring, b + n_ring)]
+    bottom, top = len(verts), len(verts) + 1
+    verts = np.vstack([verts, [[0.0, rings[0][2] - 0.002, 0.0], [0.0, rings[-1][2] + 0.002, 0.0]]])
+    last = (n_r - 1) * n_ring
+    for i in range(n_ring):
+        faces.append((bottom, i, (i + 1) % n_ring))
+        faces.append((top, last + (i + 1) % n_ring, last + i))
+    faces = np.array(faces, np.int64)
+    p = verts[faces]
+    if np.einsum("ij,ij->i", p[:, 0], np.cross(p[:, 1], p[:, 2])).sum() < 0:
+        faces = faces[:, ::-1]                       # outward normals: positive volume
+    return verts, faces
+
+
+def _tabard_profile(step):
+    """The panel's path in the y-z plane (z >= 0, the front): the form's outline at x = 0
+    from the top centre down the front, offset outwards by TABARD_CLEARANCE, resampled every
+    ``step`` m of arc length over TABARD_LENGTH. A panel is this path swept along x, a
+    developable surface, so it starts unstretched. Returns (rows, 2) of (y, z)."""
+    rings = _form_rings()
+    outline = [(rings[-1][2] + 0.002, 0.0)] + [(y, r) for _, r, y in rings[::-1]]
+    outline = np.array(outline)                       # (y, z) from the top, going down
+    d = np.gradient(outline, axis=0)
+    n = np.stack([d[:, 1], -d[:, 0]], axis=1)         # right of the downward path: +z side
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    n[0] = (1.0, 0.0)                                 # straight up at the top centre
+    path = outline + TABARD_CLEARANCE * n
+    path = _resample(path, 0.002)
+    seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
+    s = np.r_[0.0, np.cumsum(seg)]
+    rows = int(np.ceil(TABARD_LENGTH / step))
+    t = np.linspace(0.0, TABARD_LENGTH, rows + 1)
+    return np.stack([np.interp(t, s, path[:, 0]), np.interp(t, s, path[:, 1])], axis=1), t
+
+
+def tabard():
+    """The two-panel tabard over the dress form. Returns dict: x (N, 3) with the shoulder-seam
+    vertices shared, vt (T, 2) atlas coordinates, faces (F, 3, 2) (v, vt) index pairs and
+    panel (F,) 0 front, 1 back."""
+    prof, v = _tabard_profile(TABARD_STEP)
+    cols = int(np.ceil(TABARD_WIDTH / TABARD_STEP))
+    u = np.linspace(-0.5 * TABARD_WIDTH, 0.5 * TABARD_WIDTH, cols + 1)
+    R, C = len(v), len(u)
+    # Panel material coordinates: u across, v down from the shoulder seam.
+    U, V = np.meshgrid(u, v)
+    x_front = np.stack([U, np.repeat(prof[:, :1], C, axis=1), np.repeat(prof[:, 1:], C, axis=1)],
+                       axis=2)
+    # The back panel is cut as seen from behind (its u runs along world -x), mirrored in z.
+    x_back = np.stack([-U, x_front[..., 1], -x_front[..., 2]], axis=2)
+    vid_front = np.arange(R * C).reshape(R, C)
+    vid_back = vid_front + R * C
+    vid_back[0] = vid_front[0, ::-1]                  # the shoulder seam: one vertex per point
+    x = np.concatenate([x_front.reshape(-1, 3), x_back.reshape(-1, 3)])
+
+    def atlas(panel):
+        # Turned so the garment's vertical runs along the texture's u (warp = u), in a 0..1
+        # atlas at 1 / ATLAS_METRES, the back island beside the front one.
+        t = np.stack([V, U], axis=-1) / ATLAS_METRES
+        return t + np.array([0.05, 0.25 + 0.5 * panel])
+    vt = np.concatenate([atlas(0).reshape(-1, 2), atlas(1).reshape(-1, 2)])
+    tid = np.arange(R * C).reshape(R, C)
+    faces, panel = [], []
+    for p, vid in enumerate((vid_front, vid_back)):
+        for j in range(R - 1):
+            for i in range(C - 1):
+                a, b, c, d = (j, i), (j, i + 1), (j + 1, i + 1), (j + 1, i)
+                tris = [(a, c, b), (a, d, c)] if (i + j) % 2 == 0 else [(a, d, b), (b, d, c)]
+                for tri in tris:       # counter-clockwise in the atlas (texture u = v down)
+                    faces.append([(vid[q], tid[q] + p * R * C) for q in tri])
+                    panel.append(p)
+    faces = np.array(faces)
+    used = np.unique(faces[:, :, 0])
+    remap = np.full(len(x), -1)
+    remap[used] = np.arange(len(used))
+    faces[:, :, 0] = remap[faces[:, :, 0]]
+    return {"x": x[used], "vt": vt, "faces": faces, "panel": np.array(panel)}
+
+
+def write_garment(path, x, vt, faces, panel, header):
+    with open(path, "w") as out:
+        for line in header.splitlines():
+            out.write(f"# {line}\n")
+        for p in x:
+            out.write(f"v {p[0]:.6f} {p[1]:.6f} {p[2]:.6f}\n")
+        for t in vt:
+            out.write(f"vt {t[0]:.6f} {t[1]:.6f}\n")
+        for k, name in enumerate(("front", "back")):
+            out.write(f"g {name}\n")
+            for f in faces[panel == k] + 1:
+                out.write("f " + " ".join(f"{a}/{b}" for a, b in f) + "\n")
+
+
+def save_garment(out_dir=ASSET_DIR):
+    """Write dress_form.obj (a closed torso) and tabard.obj (two panels, welded seam)."""
+    v, f = dress_form()
+    write_obj(os.path.join(out_dir, "dress_form.obj"), v, f,
+              header="Loom dress form: a closed torso mesh (an obstacle of kind 'mesh')\n"
+                     "made by python -m assets.make_assets --garment")
+    g = tabard()
+    write_garment(os.path.join(out_dir, "tabard.obj"), g["x"], g["vt"], g["faces"], g["panel"],
+                  "Loom tabard: front and back panel sewn along the shoulders, as a pattern "
+                  "tool exports them:\nv shared along the seam, vt one UV island per panel in a "
+                  f"0..1 atlas ({ATLAS_METRES} m per unit),\nthe garment's vertical along vt u\n"
+                  "made by python -m assets.make_assets --garment")
+    return (v, f), g
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--resolution", type=float, default=0.03,
                     help="target material edge length of the shirt, m (default 0.03)")
     ap.add_argument("--out", default=ASSET_DIR, help="output folder (default: assets/)")
     ap.add_argument("--preview", metavar="PNG", help="also draw the assets to this file")
+    ap.add_argument("--garment", action="store_true",
+                    help="write only the garment example (dress_form.obj, tabard.obj)")
     args = ap.parse_args(argv)
+    if args.garment:
+        (v, f), g = save_garment(args.out)
+        print(f"dress form: {len(v)} vertices, {len(f)} faces; tabard: {len(g['x'])} vertices, "
+              f"{len(g['vt'])} texture coordinates, {len(g['faces'])} faces")
+        return
     prims, shirt = save_assets(args.out, args.resolution)
     if args.preview:
         preview(args.preview, prims, shirt)

@@ -274,3 +274,79 @@ def test_example_file_runs_headless(path, tmp_path):
     import tomllib
     cfg = tomllib.loads((out / "config.toml").read_text())
     assert cfg["scene"].endswith(path) and os.path.isabs(cfg["cloth"]["mesh"])
+
+
+# -- a garment OBJ with UV islands on a mesh body --------------------------------------------------
+def winding_numbers(points, verts, faces):
+    """Generalised winding number of a closed triangle mesh at each point (1 inside, 0
+    outside): the solid angles of its triangles summed (Van Oosterom and Strackee)."""
+    w = np.zeros(len(points))
+    tri = verts[faces]
+    for start in range(0, len(points), 256):
+        p = points[start:start + 256]
+        a, b, c = (tri[None, :, k, :] - p[:, None, :] for k in range(3))
+        la, lb, lc = (np.linalg.norm(q, axis=2) for q in (a, b, c))
+        det = np.einsum("pfk,pfk->pf", a, np.cross(b, c))
+        den = (la * lb * lc + np.einsum("pfk,pfk->pf", a, b) * lc
+               + np.einsum("pfk,pfk->pf", b, c) * la + np.einsum("pfk,pfk->pf", c, a) * lb)
+        w[start:start + 256] = 2 * np.arctan2(det, den).sum(axis=1) / (4 * np.pi)
+    return w
+
+
+def test_garment_obj_is_split_stitched_scaled_and_drapes_without_penetration():
+    """assets/tabard.obj (made by make_assets --garment): two UV islands at 1.6 m per texture
+    unit, welded along the shoulder seam; on the dress form (a closed mesh obstacle) it
+    settles with its seam closed, no vertex inside the form (winding number), and stays on."""
+    import scenes
+    import trimesh
+    from cloth.simulator import Simulator
+    from scenes.common import resolve
+    module = scenes.get(os.path.join(EXAMPLES, "garment.toml"))
+    cfg = resolve(module.DEFAULTS, [])
+    g = module.garment(cfg)
+    assert len(g.island_scale) == 2
+    assert np.allclose(g.island_scale, 1.6, rtol=0.01)       # "auto" recovers the atlas scale
+    assert len(g.stitches) == 16                             # the shoulder seam, every column
+    x0 = g.mesh.x
+    assert np.allclose(x0[g.stitches[:, 0]], x0[g.stitches[:, 1]])
+    assert not np.array_equal(g.mesh.uv[g.stitches[:, 0]], g.mesh.uv[g.stitches[:, 1]])
+    # The warp is material u: along the garment's vertical.
+    faces = g.mesh.faces
+    e = g.mesh.uv[faces[:, 1]] - g.mesh.uv[faces[:, 0]]
+    d = x0[faces[:, 1]] - x0[faces[:, 0]]
+    along_u = (np.abs(e[:, 0]) > 10 * np.abs(e[:, 1])) & (x0[faces[:, 0], 1] < 1.35)
+    assert np.median(np.abs(d[along_u, 1]) / np.linalg.norm(d[along_u], axis=1)) > 0.9
+
+    sim = Simulator(module.build(cfg), cfg)
+    body = trimesh.load(os.path.join(ROOT, "assets", "dress_form.obj"), force="mesh")
+    bv, bf = np.asarray(body.vertices), np.asarray(body.faces)
+    for frame in range(1, 25):
+        sim.step_frame()
+        if frame % 8 == 0:
+            x = sim.model.positions()
+            assert np.all(np.isfinite(x))
+            inside = winding_numbers(x, bv, bf) > 0.5
+            assert not inside.any(), f"frame {frame}: {inside.sum()} vertices inside the form"
+    st = sim.dynamics.stitches_np
+    assert np.linalg.norm(x[st[:, 0]] - x[st[:, 1]], axis=1).max() < 2e-3   # seam closed
+    assert x[:, 1].max() > 1.45                      # still over the shoulders
+    row = sim.metrics_row()
+    assert row["own_violation_max"] < 2 * sim.strain.tol
+    ok, message = sim.setup.check_final(sim)
+    assert ok, message
+
+
+def test_garment_assets_match_their_generator():
+    """assets/tabard.obj and dress_form.obj are what make_assets --garment writes."""
+    from assets import make_assets as gen
+    from cloth.garment import read_obj
+    g = gen.tabard()
+    v, vt, faces, _ = read_obj(os.path.join(ROOT, "assets", "tabard.obj"))
+    assert np.allclose(v, g["x"], atol=1e-6) and np.allclose(vt, g["vt"], atol=1e-6)
+    assert np.array_equal(np.array(faces), g["faces"][np.argsort(g["panel"], kind="stable")])
+    fv, ff = gen.dress_form()
+    import trimesh
+    body = trimesh.load(os.path.join(ROOT, "assets", "dress_form.obj"), force="mesh",
+                        process=False, maintain_order=True)
+    assert np.allclose(body.vertices, fv, atol=1e-6) and np.array_equal(body.faces, ff)
+    assert body.is_watertight
