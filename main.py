@@ -125,7 +125,7 @@ def fail(message, code=EXIT_BAD_INPUT):
 def main(argv=None):
     args = parse_args(sys.argv[1:] if argv is None else argv)
     import scenes
-    from cloth.config import ConfigError, flatten, load_toml, parse_assignment
+    from cloth.config import ConfigError, load_toml, parse_assignment
 
     if args.list:
         for name in scenes.SCENES:
@@ -146,13 +146,16 @@ def main(argv=None):
         if not cfg["sim"]["frames"] >= 1:
             raise ConfigError(f"sim.frames must be 1 or more (got {cfg['sim']['frames']}): "
                               "give --frames N with N >= 1")
+        from scenes.schema import show_config, validate
+        validate(cfg)        # ranges and choices (types and unknown keys: at the merge)
     except (KeyError, ConfigError, ValueError) as err:
-        return fail(str(err).strip("'\""))
+        # KeyError's str() adds quotes around the message; the others are the message.
+        return fail(err.args[0] if isinstance(err, KeyError) and err.args else str(err))
     if args.show_config:
-        print(f"# settable keys of scene '{name}' (use --set KEY=VALUE or a TOML file)")
-        for key, value in flatten(cfg):
-            if key != "scene":
-                print(f"{key} = {value!r}")
+        print(f"# settable keys of scene '{name}' (use --set KEY=VALUE or a TOML file; "
+              "docs/scenes.md)")
+        for line in show_config(cfg):
+            print(line)
         return 0
 
     if hasattr(module, "check"):

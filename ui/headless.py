@@ -14,7 +14,6 @@ import os
 import numpy as np
 
 from cloth import io
-from cloth.config import to_toml
 from cloth.simulator import SimulationDiverged
 
 from .progress import Progress
@@ -38,7 +37,8 @@ class HeadlessRun:
             from .render import ClothRenderer, open_window
             window = open_window("Loom (offscreen)", self.size, show_window=False)
             self.renderer = ClothRenderer(window, self.sim.setup.camera)
-        config_text = to_toml(self.cfg)
+        from scenes.schema import commented_toml
+        config_text = commented_toml(self.cfg)
         os.makedirs(self.out, exist_ok=True)
         self._clear_earlier_output()
         if self.meshes:
