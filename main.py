@@ -130,6 +130,12 @@ def main(argv=None):
     if args.list:
         for name in scenes.SCENES:
             print(f"{name:12s} {scenes.DESCRIPTIONS.get(name, '')}")
+        examples = os.path.join(os.path.dirname(os.path.abspath(__file__)), "scenes", "examples")
+        if os.path.isdir(examples):
+            print("scene files (python main.py PATH):")
+            for f in sorted(os.listdir(examples)):
+                if f.endswith(".toml"):
+                    print(f"  {os.path.relpath(os.path.join(examples, f))}")
         return 0
     name = args.scene or scenes.DEFAULT_SCENE
     try:

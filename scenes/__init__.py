@@ -22,6 +22,20 @@ def get(name):
     one (``DEFAULTS``, ``build``; plus ``NAME`` and ``check``)."""
     from .scene_file import SceneFile, is_scene_file
     if name not in SCENES and is_scene_file(name):
+        import os
+        from cloth.config import load_toml
+        data = load_toml(name) if os.path.isfile(name) else {}
+        base = data.get("scene")
+        if base in SCENES and not (data.get("cloth") or {}).get("mesh"):
+            # A config.toml written by a run of a built-in scene: that scene with these values.
+            import types
+            from .common import resolve
+            module = importlib.import_module(SCENES[base])
+            data = {k: v for k, v in data.items() if k != "scene"}
+            return types.SimpleNamespace(
+                DEFAULTS=resolve(module.DEFAULTS, [data]), build=module.build,
+                NAME=os.path.splitext(os.path.basename(name))[0], __name__=module.__name__,
+                path=base)
         return SceneFile(name)
     if name not in SCENES:
         import difflib

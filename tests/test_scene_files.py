@@ -350,3 +350,18 @@ def test_garment_assets_match_their_generator():
                         process=False, maintain_order=True)
     assert np.allclose(body.vertices, fv, atol=1e-6) and np.array_equal(body.faces, ff)
     assert body.is_watertight
+
+
+def test_a_written_config_of_a_builtin_scene_runs_as_that_scene(capsys, tmp_path):
+    """config.toml of a built-in scene's run (scene = "pull") is accepted as the scene
+    argument: that scene with the file's values."""
+    (tmp_path / "config.toml").write_text('scene = "pull"\n[sim]\nframes = 7\n')
+    rc = loom_main.main([str(tmp_path / "config.toml"), "--show-config"])
+    out = capsys.readouterr().out
+    assert rc == 0 and "sim.frames = 7" in out and "pull.duration = 2.0" in out
+
+
+def test_list_names_the_example_scene_files(capsys):
+    assert loom_main.main(["--list"]) == 0
+    out = capsys.readouterr().out
+    assert "scenes/examples/garment.toml" in out and "hanging" in out
