@@ -31,15 +31,42 @@ class CapacityExceeded(RuntimeError):
         self.needed = (nv, nf, ne)
 
 
+# The bending energy of an interior edge e is k_bend w_e (theta_e - theta0_e)^2 / 2 with
+# w_e = BEND_CONSTANT |e|^2 / (A1 + A2) (material-space edge length and areas of its two faces).
+# The discrete-shells weight (Grinspun et al. 2003) has 3 here, the constant for which the sum
+# approximates the integral of the squared mean curvature when curvature is spread evenly over
+# the edges of a mesh. Cloth bends (nearly) developably: a cylinder of curvature k bends only
+# the edges along its generators, each by k times the spacing d of those edge lines, and a
+# weight of |e|^2 / (A1 + A2) = |e| / d then gives exactly the plate energy (B / 2) k^2 per
+# area. Free of such an ideal fold, a strip also finds lower-energy (twisting, zig-zag) ways to
+# share its curvature among the mesh's other edges, softening it by 10-19 %. The constant is
+# therefore measured (benchmarks/calibration.py, docs/calibration/calibration.md): a strip
+# under its own weight, 0.5-2 cm triangles, regular / alternating / random triangulations,
+# along the mesh's warp or weft lines, chord 7 or 41.5 deg, then matches the inextensible
+# elastica of flexural rigidity B = k_bend: 0.96-1.07 B at 0.5-1 cm, 0.95-1.11 B at 2 cm (the
+# high end: random triangulation, large deflection); with 3 it read 2.44-2.71 B.
+# Limit of the hinge energy: a strip cut at 45 deg to the mesh lines (no edges along its
+# generators) reads 0.78-1.11 B on the regular pattern, 1.05-1.84 B on the alternating and
+# random ones, stiffer the finer the mesh (same document). No per-edge weight can cure that (on
+# the regular pattern the three edge directions fix the curvature tensor, so any weights give
+# a direction-dependent energy); it would take a bending energy that couples a triangle's edges.
+BEND_CONSTANT = 1.17
+
+
 @dataclass
 class Material:
-    """Fabric parameters (SI). Stiffnesses are per unit width (N/m): the 2-D membrane moduli
-    of the cloth, i.e. Young's modulus times thickness, along warp and weft and in shear."""
+    """Fabric parameters (SI), as a textile lab reports them. Stretch stiffnesses are per unit
+    width (N/m): the 2-D membrane moduli of the cloth, i.e. Young's modulus times thickness,
+    along warp and weft and in shear. ``k_bend`` is the flexural rigidity B (N m = N m^2 per
+    m of width) of the plate energy (B / 2) kappa^2 per unit area, the number a cantilever
+    test (ASTM D1388: B = w c^3 with w the weight per area, N/m^2, and c the bending length)
+    or a KES-FB2 bending test (its B is per unit width, N m^2/m) reports; isotropic (the same
+    about warp and weft)."""
     density: float = 0.15          # kg/m^2 (areal density)
     k_warp: float = 3000.0         # N/m, stretch stiffness along the warp
     k_weft: float = 2000.0         # N/m, stretch stiffness along the weft
     k_shear: float = 50.0          # N/m, in-plane shear stiffness
-    k_bend: float = 5e-6           # N m, bending stiffness (dihedral-angle energy)
+    k_bend: float = 1.5e-5         # N m, flexural rigidity B (see BEND_CONSTANT)
     damp_mass: float = 0.1         # 1/s, mass-proportional (air) damping
     damp_stiff: float = 0.002      # s, stiffness-proportional damping
 
@@ -168,7 +195,8 @@ class ClothModel:
       face_rest_area (F, m^2)
       face_grain (F, mat2)            columns: warp and weft unit directions in material space
       edge_verts, edge_faces, edge_opp (E, ivec2)  see ``build_edges``
-      edge_rest_angle (E, rad), edge_rest_len (E, m), edge_bend_weight (E, 1)
+      edge_rest_angle (E, rad), edge_rest_len (E, m), edge_bend_weight (E, 1):
+      w_e, the edge's share of k_bend (BEND_CONSTANT)
     """
 
     def __init__(self, mesh: MeshArrays, material: Material, capacity_factor=1.5,
@@ -244,12 +272,13 @@ class ClothModel:
         mass = np.zeros(nv)
         np.add.at(mass, faces.reshape(-1), np.repeat(area * self.material.density / 3.0, 3))
 
-        # Bending weight of the discrete-shells energy 3 |e|^2 / (A1 + A2) (Grinspun 2003),
-        # measured in material space so it does not change as the cloth deforms.
+        # Bending weight BEND_CONSTANT |e|^2 / (A1 + A2) of the hinge energy, in material
+        # space so it does not change as the cloth deforms; with it k_bend is the plate's
+        # flexural rigidity B (see BEND_CONSTANT).
         inner = ef[:, 1] >= 0
         elen = np.linalg.norm(uv[ev[:, 1]] - uv[ev[:, 0]], axis=1)
         weight = np.zeros(ne)
-        weight[inner] = 3.0 * elen[inner] ** 2 / (area[ef[inner, 0]] + area[ef[inner, 1]])
+        weight[inner] = BEND_CONSTANT * elen[inner] ** 2 / (area[ef[inner, 0]] + area[ef[inner, 1]])
         rx = mesh.x if rest_x is None else np.asarray(rest_x, dtype=np.float64)
         rest_angle = dihedral_angles(rx, ev, eo) if rest_x is not None else np.zeros(ne)
 

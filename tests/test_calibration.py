@@ -1,0 +1,109 @@
+"""Material calibration (#16): material.k_bend is the plate's flexural rigidity B and k_warp /
+k_weft the tensile moduli, checked on small static experiments against references computed
+here (the static solves use benchmarks.calibration's rig: the simulator's own forces and
+Jacobian, minimised)."""
+import numpy as np
+import pytest
+
+from benchmarks import calibration as cal
+
+G_ACC = 9.81
+
+
+# ---- an elastica of our own (not the benchmark's), by shooting --------------------------------
+def _elastica_end(G, a, n=120):
+    """RK4 of B theta'' = -q (L - s) cos theta in units of L (theta' = a at the clamp);
+    returns theta'(L) and the tip (x, y) (y downward)."""
+    ds = 1.0 / n
+    t, o, x, y = 0.0, a, 0.0, 0.0
+
+    def rhs(s, t, o):
+        return o, -G * (1.0 - s) * np.cos(t), np.cos(t), np.sin(t)
+    for i in range(n):
+        s = i * ds
+        k1 = rhs(s, t, o)
+        k2 = rhs(s + ds / 2, t + ds / 2 * k1[0], o + ds / 2 * k1[1])
+        k3 = rhs(s + ds / 2, t + ds / 2 * k2[0], o + ds / 2 * k2[1])
+        k4 = rhs(s + ds, t + ds * k3[0], o + ds * k3[1])
+        t, o, x, y = (v + ds / 6 * (a1 + 2 * a2 + 2 * a3 + a4)
+                      for v, a1, a2, a3, a4 in zip((t, o, x, y), k1, k2, k3, k4))
+    return o, x, y
+
+
+def elastica_chord(G):
+    """Chord angle (clamp to tip, below horizontal) of the self-weight cantilever with
+    G = q L^3 / B: bisection on the clamp moment a in [0, G/2] for theta'(L) = 0."""
+    lo, hi = 0.0, G / 2.0
+    for _ in range(45):
+        mid = 0.5 * (lo + hi)
+        if _elastica_end(G, mid)[0] < 0.0:
+            lo = mid
+        else:
+            hi = mid
+    _, x, y = _elastica_end(G, 0.5 * (lo + hi))
+    return np.arctan2(y, x)
+
+
+def G_read_back(chord, G0):
+    """The G whose elastica has this chord angle (secant in log G from the nominal G0)."""
+    l0, l1 = np.log(G0), np.log(G0 * 1.2)
+    f0, f1 = elastica_chord(G0) - chord, elastica_chord(G0 * 1.2) - chord
+    for _ in range(20):
+        l0, l1, f0 = l1, l1 - f1 * (l1 - l0) / (f1 - f0), f1
+        f1 = elastica_chord(np.exp(l1)) - chord
+        if abs(f1) < 1e-10:
+            break
+    return float(np.exp(l1))
+
+
+def test_own_elastica_small_deflection_and_benchmark_agree():
+    # Linear beam: tip drop q L^4 / (8 B), so the chord is atan(G / 8) for small G.
+    assert elastica_chord(0.02) == pytest.approx(np.arctan(0.02 / 8), rel=1e-3)
+    # The benchmark's table-based read-back agrees with a direct solve.
+    for G in (1.0, 8.0):
+        assert cal.chord_angle(G) == pytest.approx(elastica_chord(G), rel=1e-5)
+        assert cal.G_from_chord(elastica_chord(G)) == pytest.approx(G, rel=1e-3)
+    # ASTM D1388: overhang = 2 x bending length (G = 8) at a 41.5 deg chord.
+    assert np.degrees(elastica_chord(8.0)) == pytest.approx(41.5, abs=0.1)
+
+
+@pytest.fixture(scope="module")
+def rig():
+    return cal.Rig(capacity=400)
+
+
+@pytest.mark.parametrize("pattern,direction,G", [("regular", "warp", 1.0),
+                                                 ("alternating", "weft", 8.0),
+                                                 ("random", "warp", 4.0)])
+def test_cantilever_has_the_rigidity_k_bend(rig, pattern, direction, G):
+    # Two 20 cm cantilevers back to back (8 cm wide, 1 cm triangles) held on their middle
+    # line, G = q L^3 / B from 1 (chord 7 deg) to 8 (41.5 deg); B = k_bend read back from the
+    # chord to the tips through the elastica. (The benchmark's whole grid, and where the hinge
+    # energy misses 5 %, is in docs/calibration/calibration.md.)
+    r = cal.cantilever(rig, G=G, h=0.01, pattern=pattern, direction=direction, L=0.2,
+                       width=0.08)
+    assert r["chord_deg"] > 0.2 * np.degrees(np.arctan(G / 8))     # it did bend
+    B_eff = G / G_read_back(np.radians(r["chord_deg"]), G)
+    assert B_eff == pytest.approx(1.0, abs=0.05), r
+
+
+@pytest.mark.parametrize("pattern,direction", [("regular", "warp"), ("random", "weft")])
+def test_hanging_strip_stretches_by_rho_g_L_over_k(rig, pattern, direction):
+    # A 50 cm x 2 cm strip hung from its top row, modulus k = 100 N/m along it: the top
+    # strain is rho g L / k (to first order; the membrane law read exactly below), and the
+    # whole strip lengthens by the integral of the strain.
+    L, k, h = 0.5, 100.0, 0.025
+    r = cal.hanging_strip(rig, h=h, pattern=pattern, direction=direction, k=k, L=L, width=0.02)
+    q = 0.15 * G_ACC
+    assert r["strain"] == pytest.approx(q * L / k, rel=0.05)       # the first-order number
+    assert r["ratio"] == pytest.approx(1.0, abs=0.02)              # k_eff / k, exact law
+    # Elongation against the integral of eps(T) with (1 + eps)(eps + eps^2 / 2) k = T.
+    Z = np.linspace(0.0, L, 2001)
+    T = q * (L - Z)
+    eps = T / k
+    for _ in range(30):                                            # Newton on the cubic
+        f = (1 + eps) * (eps + eps ** 2 / 2) - T / k
+        eps -= f / (1 + 2 * eps + 1.5 * eps ** 2)
+    stretch_ref = np.trapezoid(eps, Z)
+    assert r["elongation"] == pytest.approx(stretch_ref, rel=0.02)
+    assert r["elongation"] == pytest.approx(q * L * L / (2 * k), rel=0.02)
