@@ -296,6 +296,24 @@ def test_window_app_runs_under_xvfb(tmp_path):
     assert len(list((tmp_path / "screenshots").iterdir())) == 1
 
 
+def test_comparison_view_is_reached_from_the_panel_and_left_again():
+    """The panel's "compare the three methods" button: AppState.set_compare builds the three
+    simulators of the current scene and settings, and switches back."""
+    from ui.state import AppState
+    st = AppState.from_scene("hanging", [{"cloth": {"resolution": 5}}])
+    assert st.sim.method == "mapping" and not st.compare
+    st.set_band("warp", -0.02, 0.02)
+    assert st.set_compare(True), st.message
+    assert st.compare and st.labels == ["svd", "warp-weft", "mapping"]
+    assert [s.method for s in st.sims] == ["svd", "warp-weft", "mapping"]
+    assert all(s.cfg["strain"]["warp"] == [-0.02, 0.02] for s in st.sims)
+    run(st, 1)
+    assert all(s.frame == 1 for s in st.sims)
+    assert st.set_compare(False), st.message
+    assert not st.compare and len(st.sims) == 1 and st.sim.method == "mapping"
+    assert st.sim.frame == 0
+
+
 def test_scene_switch_rebuilds_with_that_scenes_defaults(shared):
     """Last: it replaces the shared simulator with the scene's default one."""
     st = shared

@@ -211,6 +211,9 @@ class App:
             # Strain limiting.
             g.text("")
             g.text("strain limiting" + (": svd | warp-weft | mapping" if st.compare else ""))
+            if g.button("back to one method" if st.compare else "compare the three methods"):
+                if st.set_compare(not st.compare):
+                    self.reset_view()
             if not st.compare:
                 for m in STRAIN_METHODS:
                     if g.checkbox(m, st.sim.method == m) and st.sim.method != m:

@@ -193,6 +193,23 @@ class AppState:
         self._install(None, cfg)
         return True
 
+    def set_compare(self, on):
+        """Switch between the single view and the comparison view (svd, warp-weft and mapping
+        side by side) of the current scene with the current settings; both restart at frame 0.
+        Returns False (and says why in ``message``) when the simulators cannot be built."""
+        on = bool(on)
+        if on == self.compare:
+            return True
+        cfg = copy.deepcopy(self.cfg)
+        self.compare, self.message, self.failed = on, "", False
+        try:
+            self._install(None, cfg)
+        except ValueError as err:
+            self.compare = not on
+            self.message = str(err)
+            return False
+        return True
+
     # -- strain limiting ----------------------------------------------------------------------
     def switch_method(self, name):
         """Switch the strain-limiting method live (next substep). Single view only."""
