@@ -365,3 +365,34 @@ def test_list_names_the_example_scene_files(capsys):
     assert loom_main.main(["--list"]) == 0
     out = capsys.readouterr().out
     assert "scenes/examples/garment.toml" in out and "hanging" in out
+
+
+def test_obstacle_and_pin_motions_follow_their_scripts(tmp_path):
+    """[[obstacles]] motion: translation ramp plus spin about a pivot; [[pins]] motion:
+    oscillation. No kernel is compiled (poses are evaluated on the host)."""
+    import scenes
+    from cloth.collision import rotation_about
+    from scenes.common import resolve
+    (tmp_path / "cloth.obj").write_text(obj_text())
+    (tmp_path / "s.toml").write_text(
+        '[cloth]\nmesh = "cloth.obj"\n'
+        '[[pins]]\nbox = [0.9, 0.9, 1.1, 1.1]\n'
+        'motion = {amplitude = [0.0, 0.1, 0.0], period = 2.0}\n'
+        '[[obstacles]]\nkind = "box"\ncenter = [1.0, 0.0, 0.0]\nextents = [0.2, 0.2, 0.2]\n'
+        'motion = {translate = [0.0, 0.0, 0.5], duration = 1.0, ease = "linear", spin = 90.0, '
+        'axis = [0.0, 1.0, 0.0], pivot = [0.0, 0.0, 0.0]}\n')
+    module = scenes.get(str(tmp_path / "s.toml"))
+    cfg = resolve(module.DEFAULTS, [])
+    setup = module.build(cfg)
+    box = setup.obstacles[0]
+    c, R = box.pose(1.0)                     # a quarter turn about y through the origin, +0.5 z
+    assert np.allclose(R, rotation_about([0, 1, 0], np.pi / 2))
+    assert np.allclose(c, R @ [1.0, 0.0, 0.0] + [0.0, 0.0, 0.5])
+    assert np.allclose(box.pose(0.5)[0], rotation_about([0, 1, 0], np.pi / 4) @ [1, 0, 0]
+                       + [0, 0, 0.25])
+    assert box.moving and np.allclose(box.pose(0.0)[0], [1.0, 0.0, 0.0])
+    m = setup.mesh
+    assert m.pinned.sum() == 1
+    p = m.pinned
+    moved = setup.pin_motion(0.5, m.uv[p], m.x[p])           # a quarter period: +amplitude
+    assert np.allclose(moved - m.x[p], [0.0, 0.1, 0.0])
