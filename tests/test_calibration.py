@@ -108,3 +108,14 @@ def test_hanging_strip_stretches_by_rho_g_L_over_k(rig, pattern, direction):
     stretch_ref = np.trapezoid(eps, Z)
     assert r["elongation"] == pytest.approx(stretch_ref, rel=0.02)
     assert r["elongation"] == pytest.approx(q * L * L / (2 * k), rel=0.02)
+
+
+def test_benchmark_report_writes_table_and_plot(rig, tmp_path):
+    rows = [cal.cantilever(rig, G=1.0, h=0.02, pattern="regular", direction="warp", L=0.2,
+                           width=0.08),
+            cal.hanging_strip(rig, h=0.05, pattern="random", direction="weft", L=0.5,
+                              width=0.05)]
+    cal.report(rows, str(tmp_path), 1.0, "test")
+    md = (tmp_path / "calibration.md").read_text()
+    assert "| regular | 2 | warp | 1 |" in md and "| random | 5 | weft |" in md
+    assert (tmp_path / "calibration.png").stat().st_size > 10000
