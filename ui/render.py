@@ -433,10 +433,15 @@ def draw_cloth(renderer, sim, key="cloth", color="shading", wireframe=False, smo
     rgb, legend = face_colors_legend(color, x, m.uv, m.faces, m.grain, sim.cfg.get("strain"),
                                      m.rest_area, strains=strains)
     renderer.add_mesh(key, x, m.faces, rgb, wireframe=wireframe, smooth=smooth, offset=offset)
+    # Obstacle buffers made before the first step are not reused after it: with strain
+    # limiting and obstacles, the first substeps allocate Taichi memory (the collider's contact
+    # scratch), after which GGUI drew nothing from buffers made earlier (the dress form of
+    # scenes/examples/garment.toml vanished from every frame after frame 0).
+    late = ".run" if sim.frame > 0 else ""
     for k, o in enumerate(sim.setup.obstacles):
         v, f = o.mesh_at(sim.time)
         f = np.asarray(f)
-        renderer.add_mesh(f"{key}.obstacle{k}", v, f, np.tile(OBSTACLE, (len(f), 1)),
+        renderer.add_mesh(f"{key}.obstacle{k}{late}", v, f, np.tile(OBSTACLE, (len(f), 1)),
                           smooth=False, offset=offset)
     return legend
 
