@@ -396,3 +396,26 @@ def test_obstacle_and_pin_motions_follow_their_scripts(tmp_path):
     p = m.pinned
     moved = setup.pin_motion(0.5, m.uv[p], m.x[p])           # a quarter period: +amplitude
     assert np.allclose(moved - m.x[p], [0.0, 0.1, 0.0])
+
+
+def test_a_garment_started_stretched_is_projected_onto_its_limits_before_the_first_step():
+    """The tabard with vt read at 1.45 m per unit (its panels 9 % smaller than the file's
+    3-D shape, beyond the 5 % band): the start is relaxed onto the limits (as tshirt's is),
+    with no velocity and without entering the form."""
+    import scenes
+    from cloth.simulator import Simulator
+    from scenes.common import resolve
+    module = scenes.get(os.path.join(EXAMPLES, "garment.toml"))
+    cfg = resolve(module.DEFAULTS, [{"cloth": {"uv_scale": 1.45}}])
+    setup = module.build(cfg)
+    x0 = setup.mesh.x.copy()
+    from cloth import metrics
+    before = metrics.face_strains(x0, setup.mesh.uv, setup.mesh.faces, setup.mesh.grain)
+    assert before["warp"].max() > 0.08
+    sim = Simulator(setup, cfg)
+    row = sim.metrics_row()
+    assert row["own_violation_max"] < sim.strain.tol
+    assert row["warp_strain_max"] < 0.075                 # mapping: up to sqrt(2) x 5 %
+    assert np.abs(sim.model.positions() - x0).max() > 1e-3 and row["kinetic_energy"] == 0.0
+    phi, _ = setup.obstacles[0].sdf(sim.model.positions())
+    assert phi.min() > 0.0
