@@ -45,9 +45,10 @@ class CapacityExceeded(RuntimeError):
 # along the mesh's warp or weft lines, chord 7 or 41.5 deg, then matches the inextensible
 # elastica of flexural rigidity B = k_bend: 0.96-1.07 B at 0.5-1 cm, 0.95-1.11 B at 2 cm (the
 # high end: random triangulation, large deflection); with 3 it read 2.44-2.71 B.
-# Limit of the hinge energy: a strip cut at 45 deg to the mesh lines (no edges along its
-# generators) reads 0.78-1.11 B on the regular pattern, 1.05-1.84 B on the alternating and
-# random ones, stiffer the finer the mesh (same document). No per-edge weight can cure that (on
+# Limit of the hinge energy: a strip cut at 45 deg to the mesh lines reads 0.78-1.11 B on the
+# regular pattern when its diagonals run across the strip (fold lines), 2.6-3.8 B when they
+# run along it (none), 1.05-1.88 B on the alternating and random patterns, stiffer the finer
+# the mesh (same document). No per-edge weight can cure that (on
 # the regular pattern the three edge directions fix the curvature tensor, so any weights give
 # a direction-dependent energy); it would take a bending energy that couples a triangle's edges.
 BEND_CONSTANT = 1.17
