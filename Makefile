@@ -9,10 +9,11 @@ STAMP  := $(VENV)/.installed
 
 .PHONY: demo test vulkan clean
 
-$(STAMP): requirements.txt
+$(STAMP): requirements.txt requirements-cholmod.txt
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q -r requirements.txt
+	bash scripts/ensure_cholmod.sh $(PY)
 	touch $(STAMP)
 
 vulkan:

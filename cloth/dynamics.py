@@ -135,6 +135,62 @@ class ImplicitEuler:
                                self.n_stitches, 1 if exact else 0)
         return -self.Ap.to_numpy()[: m.n_verts].astype(np.float64)
 
+    def system_matrix(self, h, B):
+        """Fill the BlockMatrix ``B`` (cloth/system_matrix.py, built over this model's mesh and
+        stitches) with the matrix of the last ``step(h)``: A = (1 + h alpha) M + h (beta + h)
+        K_psd, linearised where that step started (the element data its ``_linearise`` left).
+        Pinned rows are not filtered (the strain solver keeps pins fixed itself)."""
+        mat, s, m = self.model.material, self.settings, self.model
+        self._fill_blocks(h, mat.damp_mass, mat.damp_stiff, mat.k_warp, mat.k_weft, mat.k_shear,
+                          mat.k_bend, s.stitch_stiffness, m.n_verts, m.n_faces, m.n_edges,
+                          self.n_stitches, B.nnz, B.val, B.diag, B.face_slot, B.edge_slot,
+                          B.stitch_slot)
+
+    @ti.kernel
+    def _fill_blocks(self, h: float, alpha: float, beta: float, kw: float, kf: float,
+                     ks: float, kb: float, kst: float, nv: ti.i32, nf: ti.i32, ne: ti.i32,
+                     nst: ti.i32, nnz: ti.i32, val: ti.types.ndarray(), diag: ti.types.ndarray(),
+                     face_slot: ti.types.ndarray(), edge_slot: ti.types.ndarray(),
+                     stitch_slot: ti.types.ndarray()):
+        # The blocks of _add_K_product (exact = 0) written out: serial, as elements share
+        # blocks.
+        ti.loop_config(serialize=True)
+        for _ in range(1):
+            scale = h * (beta + h)
+            I = ti.Matrix.identity(float, 3)
+            for k in range(nnz):
+                val[k] = ti.Matrix.zero(float, 3, 3)
+            for i in range(nv):
+                val[diag[i]] += (1.0 + h * alpha) * self.model.vert_mass[i] * I
+            for f in range(nf):
+                A = self.model.face_rest_area[f]
+                fu, fv, E = self.face_fu[f], self.face_fv[f], self.face_E[f]
+                wa, wb = self.face_wa[f], self.face_wb[f]
+                e0, e1 = ti.max(E[0], 0.0), ti.max(E[1], 0.0)
+                for n in ti.static(range(3)):
+                    gn = wa[n] * fv + wb[n] * fu
+                    for q in ti.static(range(3)):
+                        gq = wa[q] * fv + wb[q] * fu
+                        blk = kw * wa[n] * wa[q] * (fu.outer_product(fu) + e0 * I) \
+                            + kf * wb[n] * wb[q] * (fv.outer_product(fv) + e1 * I) \
+                            + ks * gn.outer_product(gq)
+                        val[face_slot[f, 3 * n + q]] += scale * A * blk
+            for e in range(ne):
+                if self.model.edge_faces[e][1] >= 0:
+                    k = scale * kb * self.model.edge_bend_weight[e]
+                    G = self.edge_grad[e]
+                    for n in ti.static(range(4)):
+                        gn = ti.Vector([G[n, 0], G[n, 1], G[n, 2]])
+                        for q in ti.static(range(4)):
+                            gq = ti.Vector([G[q, 0], G[q, 1], G[q, 2]])
+                            val[edge_slot[e, 4 * n + q]] += k * gn.outer_product(gq)
+            for s in range(nst):
+                k = scale * kst
+                val[stitch_slot[s, 0]] += k * I
+                val[stitch_slot[s, 1]] -= k * I
+                val[stitch_slot[s, 2]] -= k * I
+                val[stitch_slot[s, 3]] += k * I
+
     # -- element kinematics -------------------------------------------------------------------
     @ti.func
     def _face_weights(self, f):

@@ -86,7 +86,7 @@ class Simulator:
         self.collider = None
         self.remesher = None
         self.stages = [
-            Stage("dynamics", lambda: self.dynamics.step(self.h)),
+            Stage("dynamics", self._dynamics_step),
             Stage("collision", self._collide, enabled=bool(setup.obstacles) or setup.self_collision),
             Stage("strain_limit", self._strain_limit, enabled=False),
             Stage("collision_final", self._collide_final, enabled=False),
@@ -143,6 +143,8 @@ class Simulator:
                 int(st_cfg["iters"])
             lim.mapping_iso = float(st_cfg.get("isotropy", lim.mapping_iso))
             lim._explicit_bias = bool(st_cfg["bias"])
+            lim.set_coupling(st_cfg.get("coupling", "projection"))
+            lim.linear_solver = st_cfg.get("linear_solver", "pcg")
             lim.set_bands(warp=st_cfg["warp"], weft=st_cfg["weft"],
                           bias=st_cfg["bias"] if st_cfg["bias"] else None)
             lim.on_mesh_changed()                     # multipliers back to zero
@@ -201,12 +203,22 @@ class Simulator:
             self.model, method=strain["method"], warp=tuple(strain["warp"]),
             weft=tuple(strain["weft"]), bias=tuple(strain["bias"]) if strain["bias"] else None,
             solver=strain["solver"], tol=strain["tol"], max_iters=strain["iters"],
-            mapping_iso=strain.get("isotropy", MAPPING_ISO), stitches=self.dynamics.stitches_np)
+            mapping_iso=strain.get("isotropy", MAPPING_ISO), stitches=self.dynamics.stitches_np,
+            coupling=strain.get("coupling", "projection"),
+            linear_solver=strain.get("linear_solver", "pcg"))
         self._enable_strain_limit(strain["method"] != "none")
 
     def _enable_strain_limit(self, on):
         self.stage("strain_limit").enabled = on
         self.stage("collision_final").enabled = on and bool(self.setup.obstacles)
+
+    def _dynamics_step(self):
+        """The implicit step. Under coupling "implicit" its matrix then becomes the strain
+        projection's metric (cloth/system_matrix.py)."""
+        self.dynamics.step(self.h)
+        if self.strain is not None and self.strain.coupling == "implicit" and \
+                self.stage("strain_limit").enabled:
+            self.dynamics.system_matrix(self.h, self.strain.system_metric())
 
     def _strain_limit(self):
         self._project_limits(self.h, self.time + self.h)

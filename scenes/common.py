@@ -55,6 +55,9 @@ COMMON_DEFAULTS = {
         # forces (the multipliers) into the implicit step, so a cloth at rest is an exact fixed
         # point; "projection" is the paper's split step (eq. 6: project the unconstrained x_hat).
         "coupling": "projection",
+        # Newton steps of the AL: "cholesky" (sparse direct, CHOLMOD) or "pcg" (block-Jacobi
+        # PCG in one kernel, the earlier solver).
+        "linear_solver": "pcg",
         # Outer-iteration budget per projection: a cap for solves that stall, since converged
         # solves stop at `tol` (2-8 AL rounds on hanging). 50 was too tight: svd on hanging with
         # remeshing ran out once in 300 frames (violation 1.3e-3); that solve, continued,

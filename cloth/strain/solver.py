@@ -16,8 +16,10 @@ PBD style) of the same constraints, the baseline the paper calls traditional.
 import time
 
 import numpy as np
+import taichi as ti
 
 from .. import metrics
+from .. import system_matrix
 from .constraints import MAPPING_DELTA, MAPPING_ISO, METHOD_IDS, N_CONSTRAINTS, SVD_DELTA
 from . import workspace as W
 from .workspace import (ST_CG, ST_CONVERGED, ST_ITERS, ST_NEWTON, ST_START_VIOL, ST_VIOL,
@@ -25,6 +27,14 @@ from .workspace import (ST_CG, ST_CONVERGED, ST_ITERS, ST_NEWTON, ST_START_VIOL,
 
 METHOD_NAMES = ("svd", "warp-weft", "mapping", "none")
 SOLVERS = ("al", "jacobi", "gauss-seidel")
+COUPLINGS = ("implicit", "projection")
+# Initial AL penalty per coupling, x the mean vertex mass. Under "implicit" the warm multipliers
+# are the ones a resting cloth needs, and a stiffer start lets the first round end the solve:
+# hanging, resolution 9, mapping, mean kinetic energy over frames 120-150 with 1e2: 2.9e-5 J
+# (5 rounds per substep, the solve never settles); with 1e3: 2.1e-9 J (1 round). svd and
+# warp-weft rest with either (1.4e-7 / 2.3e-7 J at 1e2). The split projection keeps 1e2.
+MU_SCALE = {"implicit": 1e3, "projection": 1e2}
+LINEAR_SOLVERS = ("cholesky", "pcg")
 
 
 class StrainLimitError(ValueError):
@@ -86,13 +96,20 @@ class StrainLimiter:
 
     def __init__(self, model, method="mapping", warp=(-0.01, 0.01), weft=(-0.05, 0.05),
                  bias=None, solver="al", tol=1e-4, max_iters=None, max_newton=5,
-                 max_cg=50, cg_rtol=0.1, mu_scale=1e2, mu_grow=4.0, mu_max_scale=1e6,
+                 max_cg=50, cg_rtol=0.1, mu_scale=None, mu_grow=4.0, mu_max_scale=1e6,
                  mapping_delta=MAPPING_DELTA, mapping_iso=MAPPING_ISO, jacobi_omega=1.0,
                  active_margin=1e-2,
-                 adaptive_margin=False, stitches=None):
+                 adaptive_margin=False, stitches=None, coupling="projection",
+                 linear_solver="pcg"):
         if solver not in SOLVERS:
             raise StrainLimitError(f"unknown strain-limiting solver '{solver}': use one of "
                                    f"{', '.join(SOLVERS)}")
+        if coupling not in COUPLINGS:
+            raise StrainLimitError(f"unknown strain coupling '{coupling}': use one of "
+                                   f"{', '.join(COUPLINGS)}")
+        if linear_solver not in LINEAR_SOLVERS:
+            raise StrainLimitError(f"unknown strain linear solver '{linear_solver}': use one of "
+                                   f"{', '.join(LINEAR_SOLVERS)}")
         if not tol > 0:
             raise StrainLimitError(f"tol must be > 0 (got {tol}); 1e-4 is 0.01 % strain")
         if max_iters is None:
@@ -101,6 +118,8 @@ class StrainLimiter:
                           ("max_cg", max_cg)):
             if int(val) < 1:
                 raise StrainLimitError(f"{name} must be >= 1 (got {val})")
+        if mu_scale is None:
+            mu_scale = MU_SCALE[coupling] if coupling in MU_SCALE else 1e2
         if not (mu_scale > 0 and mu_grow >= 1 and mu_max_scale >= mu_scale):
             raise StrainLimitError("penalty settings need mu_scale > 0, mu_grow >= 1 and "
                                    "mu_max_scale >= mu_scale")
@@ -114,6 +133,13 @@ class StrainLimiter:
             raise StrainLimitError(f"jacobi_omega must be in (0, 2] (got {jacobi_omega})")
         self.model = model
         self.solver = solver
+        self.coupling = coupling
+        self.linear_solver = linear_solver
+        self._full_mass = None     # M in the full block pattern (for the Cholesky path)
+        self._chol = None          # (pattern id, SparseCholesky)
+        self._mass_metric = None   # M as a block matrix (the paper's projection metric)
+        self._system = None        # the implicit step's matrix (coupling "implicit")
+        self._system_ready = False
         self.tol = float(tol)
         self.max_iters = int(max_iters)
         self.max_newton, self.max_cg, self.cg_rtol = int(max_newton), int(max_cg), cg_rtol
@@ -152,6 +178,16 @@ class StrainLimiter:
             # Multipliers belong to the constraints of one method: start the new one cold.
             self._ws.lam.fill(0.0)
         self.method = name
+
+    def set_coupling(self, coupling):
+        """Switch between the split projection and the implicit step's metric (live); the
+        initial penalty follows (``MU_SCALE``)."""
+        if coupling not in COUPLINGS:
+            raise StrainLimitError(f"unknown strain coupling '{coupling}': use one of "
+                                   f"{', '.join(COUPLINGS)}")
+        self.coupling = coupling
+        self.mu_scale = MU_SCALE[coupling]
+        self._system_ready = False
 
     def set_bands(self, warp=None, weft=None, bias=None):
         """Change the warp / weft / bias bands (strains). Without an explicit bias band the
@@ -197,6 +233,10 @@ class StrainLimiter:
         if len(self._stitches) > ws.s_cap:
             ws.set_stitch_capacity(len(self._stitches))
         ws.lam_s.fill(0.0)
+        self._system = None                    # the stitches are part of its pattern
+        self._full_mass = None
+        self._chol = None
+        self._system_ready = False
         if len(self._stitches):
             ws.stitch.from_numpy(np.resize(self._stitches, (ws.s_cap, 2)).astype(np.int32))
 
@@ -228,7 +268,55 @@ class StrainLimiter:
         ws.rest_area.from_numpy(m.face_rest_area.to_numpy())
         ws.mass.from_numpy(m.vert_mass.to_numpy())
         ws.pinned.from_numpy(m.vert_pinned.to_numpy())
+        self._mass_metric = system_matrix.diagonal(m.n_verts, m.mass)
+        self._full_mass = None
+        self._chol = None
+        self._system = None
+        self._system_ready = False
         self._mesh_key = self._current_mesh_key()
+
+    def system_metric(self):
+        """The BlockMatrix the implicit step's matrix goes into (coupling "implicit"): the
+        caller fills it after each dynamics step (``ImplicitEuler.system_matrix``); the next
+        projection with h > 0 then uses it as its metric. Its pattern is rebuilt after a mesh
+        or seam change (and the projection falls back to the masses until it is filled)."""
+        self._sync_mesh()
+        m = self.model
+        if self._system is None:
+            self._system = self._build_pattern()
+        self._system_ready = True
+        return self._system
+
+    def _build_pattern(self):
+        m = self.model
+        ne = m.n_edges
+        return system_matrix.build_pattern(m.n_verts, m.faces, m.edge_verts.to_numpy()[:ne],
+                                           m.edge_opp.to_numpy()[:ne], self._stitches)
+
+    def _direct_metric(self, use_system):
+        """The metric for the Cholesky path (it needs every face and seam pair in the
+        pattern), with the factorisation object of its pattern."""
+        from .. import linalg
+        if use_system:
+            metric = self._system
+        else:
+            if self._full_mass is None:
+                self._full_mass = self._build_pattern()
+                self._full_mass.val.fill(0.0)
+                system_matrix.fill_diagonal(self.model.n_verts, self._full_mass.diag,
+                                            self._full_mass.val, self.model.mass)
+            metric = self._full_mass
+        key = (metric.nnz, id(metric.ptr))
+        if self._chol is None or self._chol[0] != key:
+            # Both metrics of a mesh share one pattern: the analysis carries over.
+            same = self._chol is not None and self._chol[2].nnz == metric.nnz and \
+                np.array_equal(self._chol[2].col_np, metric.col_np)
+            chol = self._chol[1] if same else linalg.SparseCholesky(metric.ptr_np,
+                                                                    metric.col_np, metric.n)
+            self._chol = (key, chol, metric)
+            if self._ws.H is None or self._ws.H.shape[0] < metric.nnz:
+                self._ws.H = ti.ndarray(system_matrix.mat3, metric.nnz)
+        return metric, self._chol[1]
 
     def face_state(self):
         """The per-face solver state a remesh carries to the new faces (``remesh``'s
@@ -320,7 +408,12 @@ class StrainLimiter:
                 saved = [a.to_numpy() for a in (ws.lam, ws.lam_c, ws.lam_s, ws.lam_t)]
                 for a in (ws.lam, ws.lam_c, ws.lam_s, ws.lam_t):
                     a.fill(0.0)
-            rounds, newton, converged = self._solve_al(mid, K)
+            use_system = self.coupling == "implicit" and h > 0 and self._system_ready
+            if self.linear_solver == "cholesky":
+                rounds, newton, converged = self._solve_direct(mid, K, use_system)
+            else:
+                metric = self._system if use_system else self._mass_metric
+                rounds, newton, converged = self._solve_al(mid, K, metric)
             if saved is not None:
                 for a, val in zip((ws.lam, ws.lam_c, ws.lam_s, ws.lam_t), saved):
                     a.from_numpy(val)
@@ -363,7 +456,16 @@ class StrainLimiter:
                    ws.rest_area, ws.params, ws.g, ws.grad, ws.cm, ws.what, ws.kappa,
                    ws.twist)
 
-    def _solve_al(self, mid, K):
+    def _solve_direct(self, mid, K, use_system):
+        from . import direct
+        metric, chol = self._direct_metric(use_system)
+        m = self.model
+        mean_mass = self._mean_mass()
+        mu, mu_max = self.mu_scale * mean_mass, self.mu_max_scale * mean_mass
+        step_tol = 0.01 * self.tol * float(np.sqrt(np.mean(m.rest_area[:m.n_faces])))
+        return direct.solve(self, mid, K, metric, chol, mu, mu_max, step_tol)
+
+    def _solve_al(self, mid, K, metric):
         """The AL loop (METHOD 4), one kernel launch (workspace.solve_al): rounds of inexact
         minimisation of L_A by projected Newton with a backtracking line search, then the
         multiplier step of eq. 27 and mu *= mu_grow. Returns (rounds, Newton steps,
@@ -381,8 +483,11 @@ class StrainLimiter:
         W.solve_al(mid, K, m.n_verts, m.n_faces, len(self._stitches), mu, self.mu_grow,
                    mu_max, self.max_iters,
                    self.max_newton, max_cg, self.cg_rtol, self.tol, step_tol,
-                   int(self.adaptive_margin), ws.params, ws.x, ws.x_hat, ws.x_trial, ws.mass,
-                   ws.pinned, ws.face_verts, ws.Dm_inv, ws.grain, ws.rest_area, ws.lam, ws.g,
+                   int(self.adaptive_margin),
+                   int(self.coupling == "implicit" and metric is self._system), ws.params, ws.x, ws.x_hat,
+                   ws.x_trial, metric.ptr, metric.col, metric.val, metric.diag,
+                   ws.pinned, ws.face_verts, ws.Dm_inv, ws.grain, ws.rest_area, ws.lam,
+                   ws.g,
                    ws.grad, ws.cm, ws.what, ws.kappa, ws.twist, ws.contact, ws.lam_c,
                    ws.stitch, ws.lam_s, ws.fric, ws.lam_t, ws.b, ws.d, ws.r, ws.z, ws.p,
                    ws.Ap, ws.P_inv,

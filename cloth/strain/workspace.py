@@ -74,13 +74,15 @@ class Workspace:
         # Per-vertex vectors: positions (x), unconstrained x_hat, start of the call, line-search
         # trial, Newton direction and PCG vectors; Jacobi accumulators.
         names = ("x", "v", "x_hat", "x_start", "x_trial", "b", "d", "r", "z", "p", "Ap",
-                 "acc")
+                 "acc", "force")
         for name in names:
             setattr(self, name, ti.ndarray(vec3, V))
         self.P_inv = ti.ndarray(ti.types.matrix(3, 3, float), V)
         self.cnt = ti.ndarray(float, V)
         self.params = ti.ndarray(float, N_PARAMS)  # bands (warp, weft, shear), margin, deltas
         self.stats = ti.ndarray(float, 8)
+        self.info = ti.ndarray(float, 8)          # the direct solver's per-kernel results
+        self.H = None                             # its Newton matrix values (per pattern)
         self.set_stitch_capacity(1)
 
     def set_stitch_capacity(self, n):
@@ -233,14 +235,35 @@ def clamp_disc(y, radius):
 
 
 @ti.func
-def merit(K, nv, nf, ns, mu, pos: T, x_hat: T, mass: T, lam: T, g: T, contact: T,
+def metric_row(n, w_ptr: T, w_col: T, w_val: T, a: T, b: T):
+    """Row n of W (a - b), W the projection's metric (system_matrix.py: the masses for the
+    paper's projection, the implicit step's matrix for coupling "implicit")."""
+    acc = ti.Vector([0.0, 0.0, 0.0])
+    for k in range(w_ptr[n], w_ptr[n + 1]):
+        j = w_col[k]
+        acc += w_val[k] @ (a[j] - b[j])
+    return acc
+
+
+@ti.func
+def metric_times(n, w_ptr: T, w_col: T, w_val: T, p: T):
+    """Row n of W p."""
+    acc = ti.Vector([0.0, 0.0, 0.0])
+    for k in range(w_ptr[n], w_ptr[n + 1]):
+        acc += w_val[k] @ p[w_col[k]]
+    return acc
+
+
+@ti.func
+def merit(K, nv, nf, ns, mu, pos: T, x_hat: T, w_ptr: T, w_col: T, w_val: T, w_diag: T, lam: T, g: T, contact: T,
           lam_c: T, stitch: T, lam_s: T, fric: T, lam_t: T):
     """L_A = 1/2 sum m |x - x_hat|^2 + sum (mu/2) max(0, g + lam/mu)^2 - lam^2/(2 mu), the
     slack variables of eq. 25 eliminated, with g as last assembled (at ``pos``), over the
     strain and contact constraints; plus lam_s.c + (mu/2)|c|^2 for the seams' equalities."""
     total = 0.0
     for n in range(nv):
-        total += 0.5 * mass[n] * (pos[n] - x_hat[n]).norm_sqr()
+        total += 0.5 * (pos[n] - x_hat[n]).dot(
+            metric_row(n, w_ptr, w_col, w_val, pos, x_hat))
         for j in ti.static(range(CONTACT_SLOTS)):
             t = ti.max(0.0, contact_g(contact, pos, n, j) + lam_c[n, j] / mu)
             total += 0.5 * mu * t * t - 0.5 * lam_c[n, j] * lam_c[n, j] / mu
@@ -265,12 +288,12 @@ def merit(K, nv, nf, ns, mu, pos: T, x_hat: T, mass: T, lam: T, g: T, contact: T
 
 
 @ti.func
-def residual(K, nv, nf, ns, mu, x: T, x_hat: T, mass: T, pinned: T, face_verts: T,
+def residual(K, nv, nf, ns, mu, x: T, x_hat: T, w_ptr: T, w_col: T, w_val: T, w_diag: T, pinned: T, face_verts: T,
              lam: T, g: T, grad: T, contact: T, lam_c: T, stitch: T, lam_s: T, fric: T,
              lam_t: T, r: T):
-    """r = -grad L_A = -M (x - x_hat) - sum max(0, lam + mu g) grad g; zero at pins."""
+    """r = -grad L_A = -W (x - x_hat) - sum max(0, lam + mu g) grad g; zero at pins."""
     for n in range(nv):
-        r[n] = -mass[n] * (x[n] - x_hat[n])
+        r[n] = -metric_row(n, w_ptr, w_col, w_val, x, x_hat)
         for j in ti.static(range(CONTACT_SLOTS)):
             s = lam_c[n, j] + mu * contact_g(contact, x, n, j)
             if s > 0.0:
@@ -295,14 +318,14 @@ def residual(K, nv, nf, ns, mu, x: T, x_hat: T, mass: T, pinned: T, face_verts: 
 
 
 @ti.func
-def build_preconditioner(K, nv, nf, ns, mu, margin, use_twist, mass: T, pinned: T,
+def build_preconditioner(K, nv, nf, ns, mu, margin, use_twist, w_ptr: T, w_col: T, w_val: T, w_diag: T, pinned: T,
                          face_verts: T, rest_area: T, lam: T, g: T,
                          grad: T, cm: T, what: T, kappa: T, twist: T, x: T, contact: T,
                          lam_c: T, stitch: T, lam_s: T, fric: T, lam_t: T, c_scale,
                          P_inv: T):
     """3x3 block Jacobi of the projected-Newton matrix (see apply_hessian)."""
     for n in range(nv):
-        P_inv[n] = mass[n] * ti.Matrix.identity(float, 3)
+        P_inv[n] = w_val[w_diag[n]]
         for j in ti.static(range(CONTACT_SLOTS)):
             if lam_c[n, j] + mu * (contact_g(contact, x, n, j) + margin * c_scale) > 0.0:
                 cn = contact_normal(contact, n, j)
@@ -312,18 +335,19 @@ def build_preconditioner(K, nv, nf, ns, mu, margin, use_twist, mass: T, pinned: 
         near = mu * margin * ti.sqrt(rest_area[f])
         for c in range(K):
             s = lam[f, c] + mu * g[f, c]
+            sc = ti.max(s, 0.0)        # curvature weight (inactive: none)
             if s + near > 0.0:
                 gr, w = grad[f, c], what[f, c]
                 proj = ti.Matrix.identity(float, 3) - w.outer_product(w)
                 for n in ti.static(range(3)):
                     gn = ti.Vector([gr[3 * n], gr[3 * n + 1], gr[3 * n + 2]])
                     P_inv[ids[n]] += mu * gn.outer_product(gn) \
-                        + ti.max(s, 0.0) * kappa[f, c] * cm[f, c][n] ** 2 * proj
-                if use_twist and s > 0.0:
+                        + sc * kappa[f, c] * cm[f, c][n] ** 2 * proj
+                if use_twist and sc > 0.0:
                     tw = twist[f, c]
                     for n in ti.static(range(3)):
                         tn = ti.Vector([tw[3 * n], tw[3 * n + 1], tw[3 * n + 2]])
-                        P_inv[ids[n]] += s * tn.outer_product(tn)
+                        P_inv[ids[n]] += sc * tn.outer_product(tn)
     for k in range(ns):
         P_inv[stitch[k][0]] += mu * ti.Matrix.identity(float, 3)
         P_inv[stitch[k][1]] += mu * ti.Matrix.identity(float, 3)
@@ -339,7 +363,7 @@ def build_preconditioner(K, nv, nf, ns, mu, margin, use_twist, mass: T, pinned: 
 
 
 @ti.func
-def apply_hessian(K, nv, nf, ns, mu, margin, use_twist, mass: T, pinned: T,
+def apply_hessian(K, nv, nf, ns, mu, margin, use_twist, w_ptr: T, w_col: T, w_val: T, w_diag: T, pinned: T,
                   face_verts: T, rest_area: T, lam: T, g: T, grad: T,
                   cm: T, what: T, kappa: T, twist: T, x: T, contact: T, lam_c: T, stitch: T,
                   lam_s: T, fric: T, lam_t: T, c_scale, p: T, Ap: T):
@@ -350,7 +374,7 @@ def apply_hessian(K, nv, nf, ns, mu, margin, use_twist, mass: T, pinned: T,
     1e-3 of a step) and the line search then accepts only tiny steps; with the margin the
     same projection needs 6 instead of > 40 rounds."""
     for n in range(nv):
-        Ap[n] = mass[n] * p[n]
+        Ap[n] = metric_times(n, w_ptr, w_col, w_val, p)
         for j in ti.static(range(CONTACT_SLOTS)):
             if lam_c[n, j] + mu * (contact_g(contact, x, n, j) + margin * c_scale) > 0.0:
                 cn = contact_normal(contact, n, j)
@@ -367,16 +391,17 @@ def apply_hessian(K, nv, nf, ns, mu, margin, use_twist, mass: T, pinned: T,
             if s + near > 0.0:
                 gr = grad[f, c]
                 scatter(Ap, ids, gr, mu * gr.dot(pf))
-                if s > 0.0:
+                sc = ti.max(s, 0.0)
+                if sc > 0.0:
                     # Curvature of ||F e||: dw = sum_n (M_n.e) p_n, projected off w^.
                     cmv, w = cm[f, c], what[f, c]
                     dw = cmv[0] * p[ids[0]] + cmv[1] * p[ids[1]] + cmv[2] * p[ids[2]]
-                    t = s * kappa[f, c] * (dw - w * w.dot(dw))
+                    t = sc * kappa[f, c] * (dw - w * w.dot(dw))
                     for n in ti.static(range(3)):
                         Ap[ids[n]] += cmv[n] * t
                     if use_twist:
                         tw = twist[f, c]
-                        scatter(Ap, ids, tw, s * tw.dot(pf))
+                        scatter(Ap, ids, tw, sc * tw.dot(pf))
     for k in range(ns):
         t = mu * (p[stitch[k][0]] - p[stitch[k][1]])
         Ap[stitch[k][0]] += t
@@ -400,7 +425,7 @@ def apply_hessian(K, nv, nf, ns, mu, margin, use_twist, mass: T, pinned: T,
 
 @ti.func
 def pcg_direction(K, nv, nf, ns, mu, max_cg, rtol, margin, use_twist, x: T, x_hat: T,
-                  mass: T, pinned: T, face_verts: T, rest_area: T, lam: T, g: T, grad: T,
+                  w_ptr: T, w_col: T, w_val: T, w_diag: T, pinned: T, face_verts: T, rest_area: T, lam: T, g: T, grad: T,
                   cm: T, what: T, kappa: T, twist: T, contact: T, lam_c: T, stitch: T,
                   lam_s: T, fric: T, lam_t: T, c_scale, b: T, d: T, r: T, z: T, p: T,
                   Ap: T, P_inv: T):
@@ -408,9 +433,9 @@ def pcg_direction(K, nv, nf, ns, mu, max_cg, rtol, margin, use_twist, x: T, x_ha
     |r| <= rtol |grad L_A| (an inexact Newton step: measured on the hanging scene, rtol = 0.1
     needs as many Newton steps as 1e-3 with about half the CG iterations). Leaves
     b = -grad L_A; returns (slope grad L_A . d, CG iterations)."""
-    residual(K, nv, nf, ns, mu, x, x_hat, mass, pinned, face_verts, lam, g, grad,
+    residual(K, nv, nf, ns, mu, x, x_hat, w_ptr, w_col, w_val, w_diag, pinned, face_verts, lam, g, grad,
              contact, lam_c, stitch, lam_s, fric, lam_t, r)
-    build_preconditioner(K, nv, nf, ns, mu, margin, use_twist, mass, pinned, face_verts,
+    build_preconditioner(K, nv, nf, ns, mu, margin, use_twist, w_ptr, w_col, w_val, w_diag, pinned, face_verts,
                          rest_area, lam, g, grad, cm, what, kappa, twist, x, contact, lam_c,
                          stitch, lam_s, fric, lam_t, c_scale, P_inv)
     r0 = ti.sqrt(dot(r, r, nv))
@@ -422,7 +447,7 @@ def pcg_direction(K, nv, nf, ns, mu, max_cg, rtol, margin, use_twist, x: T, x_ha
     rz = dot(r, z, nv)
     it = 0
     while it < max_cg and ti.sqrt(dot(r, r, nv)) > rtol * r0:
-        apply_hessian(K, nv, nf, ns, mu, margin, use_twist, mass, pinned, face_verts,
+        apply_hessian(K, nv, nf, ns, mu, margin, use_twist, w_ptr, w_col, w_val, w_diag, pinned, face_verts,
                       rest_area, lam, g, grad, cm, what, kappa, twist, x, contact, lam_c,
                       stitch, lam_s, fric, lam_t, c_scale, p, Ap)
         pAp = dot(p, Ap, nv)
@@ -466,14 +491,84 @@ def vertex_violation(nv, ns, pos: T, contact: T, stitch: T, c_scale):
     return viol
 
 
+@ti.func
+def update_multipliers(K, nv, nf, ns, mu, mu_max, x: T, rest_area: T, lam: T, g: T,
+                       contact: T, lam_c: T, stitch: T, lam_s: T, fric: T, lam_t: T, c_scale):
+    """The multiplier step of eq. 27, lam <- max(0, lam + mu g) (capped at mu_max sqrt(a), so
+    an infeasible problem cannot grow it without bound across calls), for the strain,
+    contact, seam and friction multipliers, with g as last assembled (at x). Returns the
+    largest violation and the largest |delta lambda| / mu (complementarity), in strain
+    units."""
+    viol, comp = 0.0, 0.0
+    for f in range(nf):
+        sqa = ti.sqrt(rest_area[f])
+        for c in range(K):
+            new = ti.min(ti.max(0.0, lam[f, c] + mu * g[f, c]), mu_max * sqa)
+            viol = ti.max(viol, g[f, c] / sqa)
+            comp = ti.max(comp, ti.abs(new - lam[f, c]) / (mu * sqa))
+            lam[f, c] = new
+    for n in range(nv):
+        for j in ti.static(range(CONTACT_SLOTS)):
+            gc = contact_g(contact, x, n, j)
+            new = ti.min(ti.max(0.0, lam_c[n, j] + mu * gc), mu_max * c_scale)
+            viol = ti.max(viol, gc / c_scale)
+            comp = ti.max(comp, ti.abs(new - lam_c[n, j]) / (mu * c_scale))
+            lam_c[n, j] = new
+    for k in range(ns):
+        cs = stitch_g(stitch, x, k)
+        new = lam_s[k] + mu * cs               # equality: either sign
+        cap = mu_max * c_scale
+        if new.norm() > cap:
+            new *= cap / new.norm()
+        viol = ti.max(viol, cs.norm() / c_scale)
+        lam_s[k] = new
+    for n in range(nv):
+        # Friction multipliers: the trial, clamped to the cone of the new normal
+        # multipliers (zero where there is no contact).
+        _P, y, radius = friction_state(n, mu, x, contact, lam_c, fric, lam_t)
+        lam_t[n] = clamp_disc(y, radius)
+    return viol, comp
+
+
+@ti.func
+def choose_start(method: ti.template(), K, nv, nf, ns, mu, x: T, x_hat: T, x_trial: T,
+                 w_ptr: T, w_col: T, w_val: T, w_diag: T, face_verts: T, Dm_inv: T, grain: T,
+                 rest_area: T, params: T, lam: T, g: T, grad: T, cm: T, what: T, kappa: T,
+                 twist: T, contact: T, lam_c: T, stitch: T, lam_s: T, fric: T, lam_t: T,
+                 pinned: T):
+    """Start the Newton iteration at the step's start x_prev = x_hat - h v (kept in ``fric``)
+    instead of at x_hat when its merit is lower. In the implicit step's metric a cloth at rest
+    is a fixed point, so x_prev is then the solution itself (one round, one Newton step),
+    while x_hat lies a whole sag away (12-17 % strain past the band on the soft cloth) and
+    Newton has to travel back across the constraints' curvature. Pinned vertices stay at
+    x_hat (their targets). Leaves the constraints assembled at the chosen start."""
+    L_hat = merit(K, nv, nf, ns, mu, x, x_hat, w_ptr, w_col, w_val, w_diag, lam, g, contact,
+                  lam_c, stitch, lam_s, fric, lam_t)
+    for n in range(nv):
+        x_trial[n] = x[n]
+        if pinned[n] == 0:
+            x_trial[n] = ti.Vector([fric[n][0], fric[n][1], fric[n][2]])
+    assemble_all(method, nf, x_trial, face_verts, Dm_inv, grain, rest_area, params, g, grad,
+                 cm, what, kappa, twist)
+    L_prev = merit(K, nv, nf, ns, mu, x_trial, x_hat, w_ptr, w_col, w_val, w_diag, lam, g,
+                   contact, lam_c, stitch, lam_s, fric, lam_t)
+    if L_prev < L_hat:
+        for n in range(nv):
+            x[n] = x_trial[n]
+    else:
+        assemble_all(method, nf, x, face_verts, Dm_inv, grain, rest_area, params, g, grad,
+                     cm, what, kappa, twist)
+
+
 @ti.kernel
 def solve_al(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu0: float,
              mu_grow: float,
              mu_max: float, max_rounds: int, max_newton: int, max_cg: int, rtol: float,
-             tol: float, step_tol: float, adaptive: int, params: A, x: A, x_hat: A,
-             x_trial: A, mass: A, pinned: A, face_verts: A, Dm_inv: A, grain: A,
-             rest_area: A, lam: A, g: A, grad: A, cm: A, what: A, kappa: A, twist: A,
-             contact: A, lam_c: A, stitch: A, lam_s: A, fric: A, lam_t: A, b: A, d: A, r: A,
+             tol: float, step_tol: float, adaptive: int, from_prev: int, params: A, x: A,
+             x_hat: A,
+             x_trial: A, w_ptr: A, w_col: A, w_val: A, w_diag: A, pinned: A, face_verts: A, Dm_inv: A, grain: A,
+             rest_area: A, lam: A, g: A, grad: A, cm: A, what: A, kappa: A,
+             twist: A, contact: A, lam_c: A, stitch: A, lam_s: A, fric: A, lam_t: A, b: A, d: A, r: A,
              z: A, p: A, Ap: A,
              P_inv: A, stats: A):
     """The whole AL projection (METHOD 4) in one launch (measured: with one launch per
@@ -506,7 +601,7 @@ def solve_al(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu0: floa
                 L0 = 0.0
                 if first == 0:
                     slope, cg_it = pcg_direction(K, nv, nf, ns, mu, max_cg, rtol, margin,
-                                                 use_twist, x, x_hat, mass, pinned,
+                                                 use_twist, x, x_hat, w_ptr, w_col, w_val, w_diag, pinned,
                                                  face_verts, rest_area, lam, g, grad, cm,
                                                  what, kappa, twist, contact, lam_c, stitch,
                                                  lam_s, fric, lam_t, c_scale, b, d, r, z, p,
@@ -514,7 +609,7 @@ def solve_al(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu0: floa
                     cg_total += cg_it
                     newton += 1
                     inner += 1
-                    L0 = merit(K, nv, nf, ns, mu, x, x_hat, mass, lam, g, contact,
+                    L0 = merit(K, nv, nf, ns, mu, x, x_hat, w_ptr, w_col, w_val, w_diag, lam, g, contact,
                                lam_c, stitch, lam_s, fric, lam_t)
                 if first == 0 and not slope < 0.0:
                     break
@@ -531,7 +626,7 @@ def solve_al(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu0: floa
                                  params, g, grad, cm, what, kappa, twist)
                     if a == 0.0:
                         break
-                    L = merit(K, nv, nf, ns, mu, x_trial, x_hat, mass, lam, g, contact,
+                    L = merit(K, nv, nf, ns, mu, x_trial, x_hat, w_ptr, w_col, w_val, w_diag, lam, g, contact,
                               lam_c, stitch, lam_s, fric, lam_t)
                     if L <= L0 + 1e-4 * a * slope:
                         for n in range(nv):
@@ -548,6 +643,11 @@ def solve_al(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu0: floa
                     if viol < tol:
                         converged = 2       # feasible as given: nothing to do
                         break
+                    if from_prev:
+                        choose_start(method, K, nv, nf, ns, mu, x, x_hat, x_trial, w_ptr,
+                                     w_col, w_val, w_diag, face_verts, Dm_inv, grain,
+                                     rest_area, params, lam, g, grad, cm, what, kappa, twist,
+                                     contact, lam_c, stitch, lam_s, fric, lam_t, pinned)
                     continue
                 if adaptive:
                     # Trust the exact active set more after a full step, widen it after a
@@ -560,34 +660,9 @@ def solve_al(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu0: floa
                     break
             if converged == 2:
                 break
-            viol, comp = 0.0, 0.0
-            for f in range(nf):
-                sqa = ti.sqrt(rest_area[f])
-                for c in range(K):
-                    new = ti.min(ti.max(0.0, lam[f, c] + mu * g[f, c]), mu_max * sqa)
-                    viol = ti.max(viol, g[f, c] / sqa)
-                    comp = ti.max(comp, ti.abs(new - lam[f, c]) / (mu * sqa))
-                    lam[f, c] = new
-            for n in range(nv):
-                for j in ti.static(range(CONTACT_SLOTS)):
-                    gc = contact_g(contact, x, n, j)
-                    new = ti.min(ti.max(0.0, lam_c[n, j] + mu * gc), mu_max * c_scale)
-                    viol = ti.max(viol, gc / c_scale)
-                    comp = ti.max(comp, ti.abs(new - lam_c[n, j]) / (mu * c_scale))
-                    lam_c[n, j] = new
-            for k in range(ns):
-                cs = stitch_g(stitch, x, k)
-                new = lam_s[k] + mu * cs               # equality: either sign
-                cap = mu_max * c_scale
-                if new.norm() > cap:
-                    new *= cap / new.norm()
-                viol = ti.max(viol, cs.norm() / c_scale)
-                lam_s[k] = new
-            for n in range(nv):
-                # Friction multipliers: the trial, clamped to the cone of the new normal
-                # multipliers (zero where there is no contact).
-                _P, y, radius = friction_state(n, mu, x, contact, lam_c, fric, lam_t)
-                lam_t[n] = clamp_disc(y, radius)
+            viol, comp = update_multipliers(K, nv, nf, ns, mu, mu_max, x, rest_area, lam, g,
+                                            contact, lam_c, stitch, lam_s, fric, lam_t,
+                                            c_scale)
             rounds += 1
             if viol < tol and comp < tol:
                 converged = 1

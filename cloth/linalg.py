@@ -1,0 +1,90 @@
+"""Sparse Cholesky factorisation of a symmetric positive-definite 3x3-block matrix
+(``system_matrix.BlockMatrix``), with the symbolic analysis (fill-reducing ordering) done once
+per pattern and only the numeric factorisation repeated.
+
+Backend: CHOLMOD (SuiteSparse, through scikit-sparse; supernodal, the fastest measured here) when
+it is installed, else SciPy's SuperLU (an LU of the same matrix, re-ordered every call: correct
+but slower). ``make`` installs CHOLMOD (scripts/ensure_suitesparse.sh and requirements.txt).
+"""
+import numpy as np
+import scipy.sparse as sp
+
+try:
+    from sksparse.cholmod import CholmodNotPositiveDefiniteError, analyze
+    HAVE_CHOLMOD = True
+except ImportError:                      # pragma: no cover - depends on the machine
+    HAVE_CHOLMOD = False
+
+
+_warned = False
+
+
+def _warn_once():
+    global _warned
+    _warned = True
+    import sys
+    print("loom: CHOLMOD (scikit-sparse) is not installed, so the sparse Cholesky uses SciPy's "
+          "SuperLU (slower); `make` installs it (scripts/ensure_cholmod.sh)", file=sys.stderr)
+
+
+class FactorizationError(RuntimeError):
+    """The Newton matrix is not positive definite (a non-finite state or zero masses)."""
+
+
+class SparseCholesky:
+    """Factorise and solve a BlockMatrix pattern's values.
+
+    ``factorize(val)`` takes the block values (nnz, 3, 3) in the pattern's order; ``solve(b)``
+    takes a (3n,) right-hand side. ``backend`` is "cholmod" or "superlu"."""
+
+    def __init__(self, ptr, col, n, backend=None):
+        self.n = int(n)
+        if backend is None:
+            backend = "cholmod" if HAVE_CHOLMOD else "superlu"
+            if not HAVE_CHOLMOD and not _warned:
+                _warn_once()
+        if backend == "cholmod" and not HAVE_CHOLMOD:
+            raise ImportError("CHOLMOD is not installed: run `make test` (it installs "
+                              "libsuitesparse-dev and scikit-sparse) or use strain.linear_solver"
+                              " = \"pcg\"")
+        self.backend = backend
+        ptr, col = np.asarray(ptr, np.int64), np.asarray(col, np.int64)
+        nnzb = len(col)
+        rows = np.repeat(np.arange(self.n), np.diff(ptr))
+        # Scalar entry (3 i + a, 3 j + b) of block k = (i, j) is val.ravel()[9 k + 3 a + b];
+        # scipy orders CSR entries by row then column.
+        k = np.arange(nnzb)
+        a, b = np.meshgrid(np.arange(3), np.arange(3), indexing="ij")
+        r_idx = (3 * rows[:, None, None] + a[None]).ravel()
+        c_idx = (3 * col[:, None, None] + b[None]).ravel()
+        src = (9 * k[:, None, None] + 3 * a[None] + b[None]).ravel()
+        order = np.lexsort((c_idx, r_idx))
+        self._perm = src[order]
+        counts = np.bincount(r_idx, minlength=3 * self.n)
+        self._indptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        self._indices = c_idx[order].astype(np.int64)
+        self._factor = None
+        self._lu = None
+
+    def matrix(self, val):
+        """The values as a scipy CSC matrix (symmetric, so CSR arrays serve as CSC)."""
+        data = np.asarray(val, np.float64).reshape(-1)[self._perm]
+        return sp.csc_matrix((data, self._indices, self._indptr), shape=(3 * self.n,) * 2)
+
+    def factorize(self, val):
+        A = self.matrix(val)
+        if self.backend == "cholmod":
+            try:
+                if self._factor is None:
+                    self._factor = analyze(A, mode="supernodal")
+                self._factor.cholesky_inplace(A)
+            except CholmodNotPositiveDefiniteError as err:
+                raise FactorizationError(f"Newton matrix not positive definite ({err})") from None
+        else:
+            from scipy.sparse.linalg import splu
+            self._lu = splu(A)
+
+    def solve(self, b):
+        if self.backend == "cholmod":
+            return self._factor(np.asarray(b, np.float64))
+        return self._lu.solve(np.asarray(b, np.float64))

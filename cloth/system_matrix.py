@@ -1,0 +1,104 @@
+"""The implicit step's system matrix as a 3x3-block sparse matrix (BSR in Taichi ndarrays).
+
+    A = (1 + h alpha) M + h (beta + h) K_psd        (dynamics.py's linearised backward Euler)
+
+Under coupling "implicit" the strain projection minimises ``1/2 (x - x_hat)^T A (x - x_hat)``
+instead of the paper's mass-weighted distance: one linearised backward-Euler step with the
+limits as constraints. Its constraint forces then meet the same inertia and elastic stiffness
+as the dynamics' forces, so a cloth at rest is an exact fixed point (with the mass metric the
+projection's correction disagrees with the dynamics' response, by h^2 K / M ~ 100 on the soft
+cloth, and the hanging sheet never settles: issue #13).
+
+The pattern (which vertex pairs couple: faces, bending stencils, stitches) is built on the
+host when the mesh changes; ``slots`` map every element's local block (n, m) to its place in
+``val``. For the split projection the same structure holds the lumped masses only
+(``diagonal``), so the solver has one code path.
+"""
+import numpy as np
+import taichi as ti
+
+mat3 = ti.types.matrix(3, 3, float)
+
+
+class BlockMatrix:
+    """Pattern and values of a symmetric 3x3-block matrix over ``n`` vertices.
+
+    ptr (n + 1), col (nnz): CSR of the block pattern (rows sorted, diagonal included);
+    val (nnz, 3x3): values; diag (n): slot of each row's diagonal block;
+    face_slot (F, 9), edge_slot (E, 16), stitch_slot (S, 4): slots of element blocks,
+    row-major over the element's local vertices."""
+
+    def __init__(self, n, pairs_i, pairs_j):
+        self.n = int(n)
+        key = np.concatenate([pairs_i, np.arange(n)]).astype(np.int64) * n + \
+            np.concatenate([pairs_j, np.arange(n)]).astype(np.int64)
+        uniq, inverse = np.unique(key, return_inverse=True)
+        rows, cols = uniq // n, uniq % n
+        self.nnz = len(uniq)
+        ptr = np.zeros(n + 1, np.int64)
+        np.add.at(ptr, rows + 1, 1)
+        self.ptr_np = np.cumsum(ptr).astype(np.int32)
+        self.col_np = cols.astype(np.int32)
+        self._slots = inverse[: len(pairs_i)].astype(np.int32)
+        self.diag_np = inverse[len(pairs_i):].astype(np.int32)
+        self.ptr = ti.ndarray(ti.i32, n + 1)
+        self.ptr.from_numpy(self.ptr_np)
+        self.col = ti.ndarray(ti.i32, max(self.nnz, 1))
+        self.col.from_numpy(self.col_np)
+        self.diag = ti.ndarray(ti.i32, max(n, 1))
+        self.diag.from_numpy(self.diag_np if n else np.zeros(1, np.int32))
+        self.val = ti.ndarray(mat3, max(self.nnz, 1))
+
+    def to_scipy(self):
+        """The matrix as a scipy CSR matrix (3n x 3n), for tests and direct solvers."""
+        import scipy.sparse as sp
+        v = self.val.to_numpy()[: self.nnz]
+        return sp.bsr_matrix((v, self.col_np, self.ptr_np), shape=(3 * self.n, 3 * self.n)).tocsr()
+
+
+def _element_pairs(elems):
+    """All (row, col) vertex pairs of each element, row-major: (E * k * k,) each."""
+    k = elems.shape[1]
+    i = np.repeat(elems, k, axis=1).ravel()
+    j = np.tile(elems, (1, k)).ravel()
+    return i, j
+
+
+def build_pattern(n_verts, faces, edge_verts, edge_opp, stitches):
+    """The BlockMatrix of the implicit step over a mesh: faces (F, 3), interior edges' bending
+    stencils (x0, x1, x2, x3) = (edge_verts, edge_opp), stitch pairs (S, 2)."""
+    faces = np.asarray(faces, np.int64).reshape(-1, 3)
+    stencil = np.concatenate([np.asarray(edge_verts, np.int64).reshape(-1, 2),
+                              np.asarray(edge_opp, np.int64).reshape(-1, 2)], axis=1)
+    boundary = stencil[:, 3] < 0
+    stencil[boundary] = stencil[boundary, :1]     # unused: every slot on (x0, x0)
+    stitches = np.asarray(stitches, np.int64).reshape(-1, 2)
+    parts = [_element_pairs(faces), _element_pairs(stencil), _element_pairs(stitches)]
+    pi = np.concatenate([p[0] for p in parts])
+    pj = np.concatenate([p[1] for p in parts])
+    B = BlockMatrix(n_verts, pi, pj)
+    nf, ne, ns = len(faces), len(stencil), len(stitches)
+    s = B._slots
+    B.face_slot = ti.ndarray(ti.i32, (max(nf, 1), 9))
+    B.edge_slot = ti.ndarray(ti.i32, (max(ne, 1), 16))
+    B.stitch_slot = ti.ndarray(ti.i32, (max(ns, 1), 4))
+    for arr, seg, k in ((B.face_slot, s[: 9 * nf], 9), (B.edge_slot, s[9 * nf: 9 * nf + 16 * ne], 16),
+                        (B.stitch_slot, s[9 * nf + 16 * ne:], 4)):
+        if len(seg):
+            arr.from_numpy(seg.reshape(-1, k).astype(np.int32))
+    return B
+
+
+def diagonal(n_verts, mass):
+    """The mass matrix M as a BlockMatrix (the paper's projection metric)."""
+    empty = np.zeros(0, np.int64)
+    B = BlockMatrix(n_verts, empty, empty)
+    fill_diagonal(n_verts, B.diag, B.val, np.ascontiguousarray(mass, np.float64))
+    return B
+
+
+@ti.kernel
+def fill_diagonal(n: int, diag: ti.types.ndarray(), val: ti.types.ndarray(),
+                  mass: ti.types.ndarray()):
+    for i in range(n):
+        val[diag[i]] = mass[i] * ti.Matrix.identity(float, 3)
