@@ -102,3 +102,17 @@ def fill_diagonal(n: int, diag: ti.types.ndarray(), val: ti.types.ndarray(),
                   mass: ti.types.ndarray()):
     for i in range(n):
         val[diag[i]] = mass[i] * ti.Matrix.identity(float, 3)
+
+
+@ti.kernel
+def mean_diagonal(n: int, diag: ti.types.ndarray(), val: ti.types.ndarray(),
+                  pinned: ti.types.ndarray()) -> float:
+    """Mean of trace / 3 of the free rows' diagonal blocks: the metric's typical "mass" per
+    vertex (the lumped mass for M; mostly h^2 K for the implicit step's A on soft cloth)."""
+    total, count = 0.0, 0
+    for i in range(n):
+        if pinned[i] == 0:
+            b = val[diag[i]]
+            total += (b[0, 0] + b[1, 1] + b[2, 2]) / 3.0
+            count += 1
+    return total / ti.max(count, 1)

@@ -51,10 +51,11 @@ COMMON_DEFAULTS = {
         "weft": [-0.05, 0.05],    # strain band along the weft
         "bias": [],               # bias-strain band; [] = automatic (METHOD.md 3.2)
         "solver": "al",           # al (augmented Lagrangian) | jacobi (baseline)
-        # How the limits meet the dynamics: "implicit" carries the last step's constraint
-        # forces (the multipliers) into the implicit step, so a cloth at rest is an exact fixed
-        # point; "projection" is the paper's split step (eq. 6: project the unconstrained x_hat).
-        "coupling": "projection",
+        # How the limits meet the dynamics: "implicit" projects in the implicit step's metric
+        # (one linearised backward-Euler step with the limits as constraints: a cloth at rest
+        # is an exact fixed point); "projection" is the paper's split step (eq. 6: the
+        # mass-weighted projection of the unconstrained x_hat), which never comes to rest.
+        "coupling": "implicit",
         # Newton steps of the AL: "cholesky" (sparse direct, CHOLMOD) or "pcg" (block-Jacobi
         # PCG in one kernel, the earlier solver).
         "linear_solver": "pcg",

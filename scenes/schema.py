@@ -68,8 +68,9 @@ SCHEMA = {
         "solver": Key("", "al = augmented Lagrangian; jacobi = per-triangle projection "
                       "(baseline)", choices=("al", "jacobi")),
         "coupling": Key("", "how the limits meet the dynamics: the paper's split step "
-                        "(projection) or constraint forces in the implicit step (implicit)",
-                        choices=("projection", "implicit")),
+                        "(projection: mass-weighted projection of x_hat) or one implicit step "
+                        "with the limits as constraints (implicit: projection in the implicit "
+                        "step's metric)", choices=("projection", "implicit")),
         "linear_solver": Key("", "the AL's Newton steps: block-Jacobi PCG or sparse Cholesky",
                              choices=("pcg", "cholesky")),
         "iters": Key("", "outer-iteration budget per projection", lo=1),

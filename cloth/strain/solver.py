@@ -28,11 +28,13 @@ from .workspace import (ST_CG, ST_CONVERGED, ST_ITERS, ST_NEWTON, ST_START_VIOL,
 METHOD_NAMES = ("svd", "warp-weft", "mapping", "none")
 SOLVERS = ("al", "jacobi", "gauss-seidel")
 COUPLINGS = ("implicit", "projection")
-# Initial AL penalty per coupling, x the mean vertex mass. Under "implicit" the warm multipliers
-# are the ones a resting cloth needs, and a stiffer start lets the first round end the solve:
-# hanging, resolution 9, mapping, mean kinetic energy over frames 120-150 with 1e2: 2.9e-5 J
-# (5 rounds per substep, the solve never settles); with 1e3: 2.1e-9 J (1 round). svd and
-# warp-weft rest with either (1.4e-7 / 2.3e-7 J at 1e2). The split projection keeps 1e2.
+# Initial AL penalty per coupling, x the metric's mean diagonal (``_mean_mass``). Under
+# "implicit" the warm multipliers are the ones a resting cloth needs, and a stiffer start lets
+# the first round end the solve. Measured on hanging, mapping, mean kinetic energy over frames
+# 120-150, with the penalty in units of the mean vertex mass m (A's diagonal is ~10 m at
+# resolution 9, ~100 m at 25): resolution 9: 1e2 m 2.9e-5 J (5 rounds per substep, never
+# settles), 1e3 m 2.1e-9 J (1 round); resolution 25: 1e3 m 2.3e-5 J, 1e4 m 3e-6 J, 1e5 m
+# 4e-8 J. svd and warp-weft rest at 1e2-1e3 m. The split projection keeps 1e2 x the mass.
 MU_SCALE = {"implicit": 1e3, "projection": 1e2}
 LINEAR_SOLVERS = ("cholesky", "pcg")
 
@@ -344,7 +346,14 @@ class StrainLimiter:
             self.on_mesh_changed()
 
     # ---- solving -------------------------------------------------------------------------
-    def _mean_mass(self):
+    def _mean_mass(self, metric=None):
+        """The penalty's unit: the mean lumped vertex mass, or under coupling "implicit" the
+        mean diagonal of the implicit step's matrix (on the soft cloth h^2 K is 10-100 x M
+        there, growing with the resolution: a penalty scaled by the mass alone was 100 x too
+        weak at resolution 25, and the mapping family never came to rest)."""
+        if metric is not None and metric is self._system:
+            return float(system_matrix.mean_diagonal(self.model.n_verts, metric.diag,
+                                                     metric.val, self._ws.pinned))
         free = ~self.model.pinned
         mass = self.model.mass
         return float(mass[free].mean() if free.any() else mass.mean())
@@ -460,7 +469,7 @@ class StrainLimiter:
         from . import direct
         metric, chol = self._direct_metric(use_system)
         m = self.model
-        mean_mass = self._mean_mass()
+        mean_mass = self._mean_mass(metric)
         mu, mu_max = self.mu_scale * mean_mass, self.mu_max_scale * mean_mass
         step_tol = 0.01 * self.tol * float(np.sqrt(np.mean(m.rest_area[:m.n_faces])))
         return direct.solve(self, mid, K, metric, chol, mu, mu_max, step_tol)
@@ -471,7 +480,7 @@ class StrainLimiter:
         multiplier step of eq. 27 and mu *= mu_grow. Returns (rounds, Newton steps,
         converged)."""
         ws, m = self._ws, self.model
-        mean_mass = self._mean_mass()
+        mean_mass = self._mean_mass(metric)
         mu, mu_max = self.mu_scale * mean_mass, self.mu_max_scale * mean_mass
         # An inner loop stops once its steps are far below the tolerance (in metres).
         step_tol = 0.01 * self.tol * float(np.sqrt(np.mean(m.rest_area[:m.n_faces])))
