@@ -51,6 +51,9 @@ class CapacityExceeded(RuntimeError):
 # the mesh (same document). No per-edge weight can cure that (on
 # the regular pattern the three edge directions fix the curvature tensor, so any weights give
 # a direction-dependent energy); it would take a bending energy that couples a triangle's edges.
+# The quadratic bending model with cotangent weights per edge is this energy to O(theta^2)
+# (the same out-of-plane stiffness at the flat state), so it measures the same; isotropic fits
+# tried, and what they need (a wider block pattern): docs/calibration/bending_models.md.
 BEND_CONSTANT = 1.17
 
 

@@ -119,3 +119,42 @@ def test_benchmark_report_writes_table_and_plot(rig, tmp_path):
     md = (tmp_path / "calibration.md").read_text()
     assert "| regular | 2 | warp | 1 |" in md and "| random | 5 | weft |" in md
     assert (tmp_path / "calibration.png").stat().st_size > 10000
+
+
+# ---- bending models compared (docs/calibration/bending_models.md) ----------------------------
+@pytest.mark.parametrize("pattern", ["regular", "random"])
+def test_quadratic_per_edge_model_is_the_hinge_stiffness_at_the_flat_state(pattern):
+    # The per-edge quadratic bending model (cotangent weights, c = BEND_CONSTANT / 2; Hessian
+    # K x I3) that benchmarks.bending_models uses as the hinge's stand-in has exactly the
+    # simulator's bending stiffness out of the plane at the flat state (the hinge's acts only
+    # out of the plane there): hence it measures the same anisotropy.
+    from benchmarks import bending_models as bm
+    from cloth.dynamics import ImplicitEuler
+    from cloth.model import Material, build_edges, signed_material_areas
+    from tests.helpers import sheet_model
+    mat = Material(density=0.2, k_warp=1e-9, k_weft=1e-9, k_shear=0.0, k_bend=1e-3,
+                   damp_mass=0.0, damp_stiff=0.0)
+    model = sheet_model(n=5, size=0.3, pattern=pattern, material=mat)
+    uv, faces = model.uv, model.faces
+    ev, ef, eo = build_edges(faces)
+    m = dict(uv=uv, faces=faces.astype(np.int64), ev=ev, ef=ef, eo=eo,
+             area=signed_material_areas(uv, faces))
+    K = bm.K_hinge(m).toarray()
+    p = np.random.default_rng(1).standard_normal((model.n_verts, 3))
+    J = ImplicitEuler(model).force_jacobian_product(p, exact=True)
+    assert np.abs(J[:, 2]).max() > 0.1
+    assert np.allclose(J[:, 2], -mat.k_bend * K @ p[:, 2], rtol=1e-6,
+                       atol=1e-9 * np.abs(J).max())
+    assert np.abs(J[:, :2]).max() < 1e-8 * np.abs(J).max()
+
+
+def test_face_fit_is_exact_for_quadratic_fields():
+    from benchmarks import bending_models as bm
+    m = bm._mesh("random", "bias", 0.02)
+    sten, C = bm.face_fit(m)
+    H = np.array([[0.7, -0.4], [-0.4, 1.3]])
+    w = 0.5 * np.einsum("vi,ij,vj->v", m["uv"], H, m["uv"]) + m["uv"] @ [0.2, -0.1]
+    est = np.einsum("fan,fn->fa", C, w[sten])
+    interior = np.ones(len(sten), bool)
+    interior[m["ef"][m["ef"][:, 1] < 0, 0]] = False
+    assert np.allclose(est[interior], [0.7, 1.3, -0.4], atol=1e-8)
