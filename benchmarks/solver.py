@@ -99,16 +99,53 @@ def plan(quick):
     return jobs
 
 
+def plot(rest, speed, path):
+    """Two panels: rest kinetic energy per method and coupling (log), strain-limiting ms per
+    frame against faces for mapping (log-log)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.2))
+    rows = [r for r in rest if "error" not in r]
+    labels = [f"{r['method']}\n{r['faces']} tri\n{r['coupling']}/{r['linear_solver']}"
+              for r in rows]
+    colors = ["tab:red" if r["coupling"] == "projection" else "tab:blue" for r in rows]
+    a.bar(range(len(rows)), [r["ke_mean"] for r in rows], color=colors)
+    a.set_yscale("log")
+    a.set_xticks(range(len(rows)), labels, fontsize=6)
+    a.axhline(1e-6, color="k", ls=":", lw=1)
+    a.set_ylabel("mean kinetic energy, frames 120-150 (J)")
+    a.set_title("hanging at rest (red: split projection, blue: implicit)")
+    for (c, ls_), marker in zip(VARIANTS, "osD"):
+        pts = sorted((r["faces"], r["ms_median"]) for r in speed + rest
+                     if "error" not in r and r["method"] == "mapping" and
+                     (r["coupling"], r["linear_solver"]) == (c, ls_) and r["faces"] > 200)
+        if pts:
+            b.loglog(*zip(*pts), marker=marker, label=f"{c} / {ls_}")
+    b.set_xlabel("triangles")
+    b.set_ylabel("strain limiting, median ms per frame")
+    b.set_title("hanging, mapping, from the start")
+    b.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--child")
     ap.add_argument("--out", default="docs/speed")
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--plot-only", action="store_true", help="redraw solver.png from solver.json")
     args = ap.parse_args()
     if args.child:
         print(json.dumps(child(*json.loads(args.child))))
         return
     os.makedirs(args.out, exist_ok=True)
+    if args.plot_only:
+        with open(os.path.join(args.out, "solver.json")) as fh:
+            data = json.load(fh)
+        plot(data["rest"], data["speed"], os.path.join(args.out, "solver.png"))
+        return
     t0 = time.time()
     rest, speed = [], []
     jobs = plan(args.quick)
@@ -137,6 +174,8 @@ def main():
                 ["faces", "method", "F", "coupling", "Newton solve", "SL ms median", "p90",
                  "rounds",
                  "max", "Newton", "converged", "max viol"]), ""]
+    plot(rest, speed, os.path.join(args.out, "solver.png"))
+    md.append("![rest and speed](solver.png)")
     with open(os.path.join(args.out, "solver.md"), "w") as fh:
         fh.write("\n".join(md))
     print("\n".join(md))
