@@ -15,15 +15,18 @@ multiplier step, stopping rule); only the loop runs on the host, so a library ca
 factorisation. Per Newton step: one kernel assembles the residual and the matrix values, the
 host factorises and solves, one kernel runs the line search.
 """
+import os
+
 import numpy as np
 import taichi as ti
 
-from .workspace import (CONTACT_SLOTS, P_CONTACT_SCALE, P_MARGIN, P_SVD_DELTA, ST_CONVERGED,
-                        ST_ITERS, ST_NEWTON, ST_START_VIOL, ST_VIOL, ST_COMP, A, T,
-                        assemble_all, choose_start, contact_g, contact_normal, friction_state, merit,
-                        residual, update_multipliers, vertex_violation, violation_of)
+from .workspace import (CONTACT_SLOTS, P_CONTACT_SCALE, P_MARGIN, P_SVD_DELTA, ST_COMP,
+                        ST_CONVERGED, ST_ITERS, ST_NEWTON, ST_START_VIOL, ST_VIOL, A, T,
+                        assemble_all, choose_start, contact_g, contact_normal, friction_state,
+                        merit, near_weight, residual, update_multipliers, vertex_violation,
+                        violation_of)
 
-import os
+# LOOM_DEBUG_DIRECT=1 prints every Newton step (residual, step, line-search alpha).
 _DEBUG = bool(os.environ.get("LOOM_DEBUG_DIRECT"))
 # Indices into the direct solver's ``info`` array.
 I_SLOPE, I_STEP, I_VIOL, I_COMP, I_ALPHA = range(5)
@@ -96,6 +99,7 @@ def newton_system(K: int, nv: int, nf: int, ns: int, mu: float, x: A, x_hat: A, 
                 if s + near > 0.0:
                     gr, cmv, w = grad[f, c], cm[f, c], what[f, c]
                     sc = ti.max(s, 0.0)
+                    wn = near_weight(s, near)
                     proj = sc * kappa[f, c] * (I - w.outer_product(w))
                     tw = twist[f, c]
                     for a in ti.static(range(3)):
@@ -103,7 +107,7 @@ def newton_system(K: int, nv: int, nf: int, ns: int, mu: float, x: A, x_hat: A, 
                         ta = ti.Vector([tw[3 * a], tw[3 * a + 1], tw[3 * a + 2]])
                         for b in ti.static(range(3)):
                             gb = ti.Vector([gr[3 * b], gr[3 * b + 1], gr[3 * b + 2]])
-                            blk = mu * ga.outer_product(gb) + cmv[a] * cmv[b] * proj
+                            blk = wn * mu * ga.outer_product(gb) + cmv[a] * cmv[b] * proj
                             if use_twist:
                                 tb = ti.Vector([tw[3 * b], tw[3 * b + 1], tw[3 * b + 2]])
                                 blk += sc * ta.outer_product(tb)

@@ -318,6 +318,20 @@ def residual(K, nv, nf, ns, mu, x: T, x_hat: T, w_ptr: T, w_col: T, w_val: T, w_
 
 
 @ti.func
+def near_weight(s, near):
+    """Weight of a constraint's Gauss-Newton term in the Newton model: 1 when active (s > 0),
+    falling linearly to 0 across the margin. With the full weight on every constraint within
+    the margin the model is stiffer than L_A, and at rest the inner loop stagnated (exact
+    Cholesky steps lowered the residual by ~2 % each); ramped, the model changes continuously
+    as a constraint approaches. Measured on hanging, implicit coupling, mapping, mean KE over
+    frames 120-150: resolution 9 3.3e-7 -> 6.6e-8 J, resolution 25 7.2e-7 -> 1.1e-7 J."""
+    w = 1.0
+    if s <= 0.0:
+        w = (s + near) / near if near > 0.0 else 0.0
+    return w
+
+
+@ti.func
 def build_preconditioner(K, nv, nf, ns, mu, margin, use_twist, w_ptr: T, w_col: T, w_val: T, w_diag: T, pinned: T,
                          face_verts: T, rest_area: T, lam: T, g: T,
                          grad: T, cm: T, what: T, kappa: T, twist: T, x: T, contact: T,
@@ -341,7 +355,7 @@ def build_preconditioner(K, nv, nf, ns, mu, margin, use_twist, w_ptr: T, w_col: 
                 proj = ti.Matrix.identity(float, 3) - w.outer_product(w)
                 for n in ti.static(range(3)):
                     gn = ti.Vector([gr[3 * n], gr[3 * n + 1], gr[3 * n + 2]])
-                    P_inv[ids[n]] += mu * gn.outer_product(gn) \
+                    P_inv[ids[n]] += near_weight(s, near) * mu * gn.outer_product(gn) \
                         + sc * kappa[f, c] * cm[f, c][n] ** 2 * proj
                 if use_twist and sc > 0.0:
                     tw = twist[f, c]
@@ -390,7 +404,7 @@ def apply_hessian(K, nv, nf, ns, mu, margin, use_twist, w_ptr: T, w_col: T, w_va
             s = lam[f, c] + mu * g[f, c]
             if s + near > 0.0:
                 gr = grad[f, c]
-                scatter(Ap, ids, gr, mu * gr.dot(pf))
+                scatter(Ap, ids, gr, near_weight(s, near) * mu * gr.dot(pf))
                 sc = ti.max(s, 0.0)
                 if sc > 0.0:
                     # Curvature of ||F e||: dw = sum_n (M_n.e) p_n, projected off w^.
