@@ -53,7 +53,8 @@ def child(res, method, coupling, linear_solver, frames, ke_from):
         conv.append(bool(sim.strain.last_converged))
         viol.append(sim.strain.last_violation_max)
     ms, rounds = np.array(ms[1:]), np.array(rounds[1:])
-    return dict(res=res, faces=sim.model.n_faces, method=method, coupling=coupling,
+    return dict(commit=_commit(), res=res, faces=sim.model.n_faces, method=method,
+                coupling=coupling,
                 linear_solver=linear_solver, frames=frames,
                 ke_mean=float(np.mean(ke[ke_from:])) if ke_from < frames else None,
                 ms_median=float(np.median(ms)), ms_p90=float(np.percentile(ms, 90)),
@@ -135,16 +136,27 @@ def main():
     ap.add_argument("--child")
     ap.add_argument("--out", default="docs/speed")
     ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--plot-only", action="store_true", help="redraw solver.png from solver.json")
+    ap.add_argument("--rerun-rest", metavar="COUPLING/SOLVER",
+                    help="re-measure only those rest rows in OUT/solver.json, e.g. implicit/pcg")
     args = ap.parse_args()
     if args.child:
         print(json.dumps(child(*json.loads(args.child))))
         return
     os.makedirs(args.out, exist_ok=True)
-    if args.plot_only:
+    if args.rerun_rest:
+        # Re-measure the rest rows of one coupling / Newton solver (after a solver change),
+        # keep every other row, and rewrite the docs.
         with open(os.path.join(args.out, "solver.json")) as fh:
             data = json.load(fh)
-        plot(data["rest"], data["speed"], os.path.join(args.out, "solver.png"))
+        coupling, linear_solver = args.rerun_rest.split("/")
+        for i, r in enumerate(data["rest"]):
+            if (r.get("coupling"), r.get("linear_solver")) == (coupling, linear_solver):
+                data["rest"][i] = run_child(r["res"], r["method"], coupling, linear_solver,
+                                            r["frames"], 120)
+                print(json.dumps(data["rest"][i]), file=sys.stderr, flush=True)
+        write_docs(data["rest"], data["speed"], args.out,
+                   f"`python -m benchmarks.solver` (rest rows of {args.rerun_rest} re-run with "
+                   f"`--rerun-rest {args.rerun_rest}`)")
         return
     t0 = time.time()
     rest, speed = [], []
@@ -154,31 +166,43 @@ def main():
               flush=True)
         (rest if kind == "rest" else speed).append(run_child(*a))
         print(json.dumps((rest if kind == "rest" else speed)[-1]), file=sys.stderr, flush=True)
-    with open(os.path.join(args.out, "solver.json"), "w") as fh:
+    write_docs(rest, speed, args.out, f"`python -m benchmarks.solver"
+               f"{' --quick' if args.quick else ''}`")
+
+
+def write_docs(rest, speed, out, how):
+    """solver.json, solver.md (tables) and solver.png from the rows."""
+    with open(os.path.join(out, "solver.json"), "w") as fh:
         json.dump({"rest": rest, "speed": speed}, fh, indent=1)
     md = ["# The constrained step: split projection vs implicit coupling (issue #13)", "",
-          f"`python -m benchmarks.solver{' --quick' if args.quick else ''}`, "
-          f"{time.strftime('%Y-%m-%d')}, 2-core CPU, f64, machine shared with other jobs "
-          "(timings are indicative; compare within a table).", "",
+          f"{how}, {time.strftime('%Y-%m-%d')}, 2-core CPU, f64, machine shared with other "
+          "jobs (timings are indicative; compare within a table).", "",
           "## Rest: hanging, mean kinetic energy over frames 120-150 (J); strain-limiting "
           "ms per frame: median over frames 2-150", "",
           table(rest, ["faces", "method", "coupling", "linear_solver", "ke_mean", "ms_median",
-                       "rounds_median", "newton_median", "converged"],
+                       "rounds_median", "newton_median", "converged", "commit"],
                 ["faces", "method", "coupling", "Newton solve", "KE (J)", "SL ms/frame",
-                 "AL rounds", "Newton steps", "converged"]), "",
+                 "AL rounds", "Newton steps", "converged", "commit"]), "",
           "## Speed: hanging from its start (the sheet falls and settles), median over frames "
           "2-F", "",
-          table(speed, ["faces", "method", "frames", "coupling", "linear_solver", "ms_median", "ms_p90",
-                        "rounds_median", "rounds_max", "newton_median", "converged",
-                        "viol_max"],
+          table(speed, ["faces", "method", "frames", "coupling", "linear_solver", "ms_median",
+                        "ms_p90", "rounds_median", "rounds_max", "newton_median", "converged",
+                        "viol_max", "commit"],
                 ["faces", "method", "F", "coupling", "Newton solve", "SL ms median", "p90",
-                 "rounds",
-                 "max", "Newton", "converged", "max viol"]), ""]
-    plot(rest, speed, os.path.join(args.out, "solver.png"))
+                 "rounds", "max", "Newton", "converged", "max viol", "commit"]), ""]
+    plot(rest, speed, os.path.join(out, "solver.png"))
     md.append("![rest and speed](solver.png)")
-    with open(os.path.join(args.out, "solver.md"), "w") as fh:
-        fh.write("\n".join(md))
+    with open(os.path.join(out, "solver.md"), "w") as fh:
+        fh.write("\n".join(md) + "\n")
     print("\n".join(md))
+
+
+def _commit():
+    try:
+        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
+                              text=True).stdout.strip()
+    except OSError:
+        return "?"
 
 
 if __name__ == "__main__":
