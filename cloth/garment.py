@@ -312,15 +312,17 @@ def load_garment(path, uv_scale=1.0, warp="u", max_faces=200_000, memory=None):
     return g
 
 
-def write_garment_obj(path, x, uv, faces, groups=None, header=""):
+def write_garment_obj(path, x, uv, faces, groups=None, header="", digits=9):
     """An OBJ with v and vt numbered independently (v shared along seams, vt per panel), as
-    pattern tools write them. ``faces`` (F, 3, 2) of (v index, vt index), 0-based."""
+    pattern tools write them. ``faces`` (F, 3, 2) of (v index, vt index), 0-based; coordinates
+    with ``digits`` significant digits (17 round-trips a float64 exactly)."""
     tmp = path + ".tmp"
     with open(tmp, "w") as fh:
         for line in header.splitlines():
             fh.write(f"# {line}\n")
-        np.savetxt(fh, np.asarray(x), fmt="v %.9g %.9g %.9g")
-        np.savetxt(fh, np.asarray(uv), fmt="vt %.9g %.9g")
+        g = f"%.{int(digits)}g"
+        np.savetxt(fh, np.asarray(x), fmt=f"v {g} {g} {g}")
+        np.savetxt(fh, np.asarray(uv), fmt=f"vt {g} {g}")
         f = np.asarray(faces, np.int64) + 1
         if groups is None:
             groups = [(None, np.ones(len(f), bool))]
