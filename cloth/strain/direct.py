@@ -54,11 +54,6 @@ def start(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: float,
                          pinned)
 
 
-@ti.func
-def add_block(H: T, slot, blk):
-    H[slot] += blk
-
-
 @ti.kernel
 def newton_system(K: int, nv: int, nf: int, ns: int, mu: float, x: A, x_hat: A, w_ptr: A,
                   w_col: A, w_val: A, w_diag: A, pinned: A, face_verts: A, rest_area: A,
@@ -111,12 +106,12 @@ def newton_system(K: int, nv: int, nf: int, ns: int, mu: float, x: A, x_hat: A, 
                             if use_twist:
                                 tb = ti.Vector([tw[3 * b], tw[3 * b + 1], tw[3 * b + 2]])
                                 blk += sc * ta.outer_product(tb)
-                            add_block(H, face_slot[f, 3 * a + b], blk)
+                            H[face_slot[f, 3 * a + b]] += blk
         for k in range(ns):
-            add_block(H, stitch_slot[k, 0], mu * I)
-            add_block(H, stitch_slot[k, 1], -mu * I)
-            add_block(H, stitch_slot[k, 2], -mu * I)
-            add_block(H, stitch_slot[k, 3], mu * I)
+            H[stitch_slot[k, 0]] += mu * I
+            H[stitch_slot[k, 1]] += -mu * I
+            H[stitch_slot[k, 2]] += -mu * I
+            H[stitch_slot[k, 3]] += mu * I
         for i in range(nv):
             for k in range(w_ptr[i], w_ptr[i + 1]):
                 j = w_col[k]

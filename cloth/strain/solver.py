@@ -138,7 +138,7 @@ class StrainLimiter:
         self.coupling = coupling
         self.linear_solver = linear_solver
         self._full_mass = None     # M in the full block pattern (for the Cholesky path)
-        self._chol = None          # (pattern id, SparseCholesky)
+        self._chol = None          # SparseCholesky of this mesh's block pattern
         self._mass_metric = None   # M as a block matrix (the paper's projection metric)
         self._system = None        # the implicit step's matrix (coupling "implicit")
         self._system_ready = False
@@ -308,17 +308,13 @@ class StrainLimiter:
                 system_matrix.fill_diagonal(self.model.n_verts, self._full_mass.diag,
                                             self._full_mass.val, self.model.mass)
             metric = self._full_mass
-        key = (metric.nnz, id(metric.ptr))
-        if self._chol is None or self._chol[0] != key:
-            # Both metrics of a mesh share one pattern: the analysis carries over.
-            same = self._chol is not None and self._chol[2].nnz == metric.nnz and \
-                np.array_equal(self._chol[2].col_np, metric.col_np)
-            chol = self._chol[1] if same else linalg.SparseCholesky(metric.ptr_np,
-                                                                    metric.col_np, metric.n)
-            self._chol = (key, chol, metric)
-            if self._ws.H is None or self._ws.H.shape[0] < metric.nnz:
-                self._ws.H = ti.ndarray(system_matrix.mat3, metric.nnz)
-        return metric, self._chol[1]
+        if self._chol is None:
+            # Both metrics of a mesh are built by _build_pattern, so one analysis serves both
+            # (it is dropped with them on a mesh or seam change).
+            self._chol = linalg.SparseCholesky(metric.ptr_np, metric.col_np, metric.n)
+        if self._ws.H is None or self._ws.H.shape[0] < metric.nnz:
+            self._ws.H = ti.ndarray(system_matrix.mat3, metric.nnz)
+        return metric, self._chol
 
     def face_state(self):
         """The per-face solver state a remesh carries to the new faces (``remesh``'s
