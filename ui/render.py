@@ -347,10 +347,13 @@ class ClothRenderer:
         """Render the scene into the canvas (call before every capture) and draw the colour
         bar of ``legend`` (rect x, y, w, h in window fractions, y up)."""
         self.canvas.set_background_color(BACKGROUND)
-        self.canvas.scene(self.scene)
+        # The colour bar first: it may allocate Taichi fields, and a field allocated after
+        # canvas.scene() in the same frame lost the scene's meshes from the capture when the
+        # kernels were compiled fresh (no offline cache; seen in CI, reproduced).
         self._legend = (legend, bar_rect) if legend is not None else None
         if legend is not None:
             self.draw_colorbar(legend, bar_rect)
+        self.canvas.scene(self.scene)
 
     def draw_colorbar(self, legend, rect):
         x0, y0, w, h = rect
