@@ -17,6 +17,8 @@ import taichi as ti
 from cloth import metrics
 
 from .camera import OrbitCamera
+from .ggui_buffers import (VertexBuffers, draw_lines, draw_mesh, draw_particles,
+                           draw_triangles_2d)
 
 COLOR_MODES = ("shading", "warp-strain", "weft-strain", "bias-strain", "principal-strain",
                "violation", "size")
@@ -236,7 +238,7 @@ class ClothRenderer:
         self.canvas = window.get_canvas()
         self.scene = window.get_scene()
         self.camera = ti.ui.Camera()
-        self._buffers = {}
+        self._buffers = VertexBuffers()   # alive until the next frame (see ggui_buffers)
         self.ground_y, self.ground_half = ground_y, ground_half
         self.set_camera_cfg(camera_cfg)
         self._make_ground()
@@ -265,27 +267,11 @@ class ClothRenderer:
         for t in s:
             lines += [[t, self.ground_y, -half], [t, self.ground_y, half],
                       [-half, self.ground_y, t], [half, self.ground_y, t]]
-        self.ground = ti.Vector.field(3, ti.f32, len(lines))
-        self.ground.from_numpy(np.array(lines, np.float32))
-
-    def _fields(self, key, n, kinds):
-        """Render fields (f32) per key, reallocated only when they must grow."""
-        buf = self._buffers.get(key)
-        if buf is None or buf[0].shape[0] < n:
-            cap = max(n, 16) * 3 // 2
-            buf = tuple(ti.Vector.field(d, dt, cap) for d, dt in kinds)
-            self._buffers[key] = buf
-        return buf
-
-    @staticmethod
-    def _upload(fld, arr, dtype=np.float32):
-        full = np.zeros((fld.shape[0],) + arr.shape[1:], dtype)
-        full[: len(arr)] = arr
-        fld.from_numpy(full)
+        self.ground = np.array(lines, np.float32)
 
     def add_mesh(self, key, x, faces, face_rgb, wireframe=False, smooth=False, offset=None):
-        """Upload one triangle mesh with per-face colours and draw it; ``smooth`` interpolates
-        vertex normals, ``wireframe`` overlays the edges, ``offset`` translates it."""
+        """Draw one triangle mesh with per-face colours; ``smooth`` interpolates vertex
+        normals, ``wireframe`` overlays the edges, ``offset`` translates it."""
         x = np.asarray(x, np.float64)
         faces = np.asarray(faces)
         if offset is not None:
@@ -298,13 +284,8 @@ class ClothRenderer:
             n = np.cross(x[faces[:, 1]] - x[faces[:, 0]], x[faces[:, 2]] - x[faces[:, 0]])
             n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-20)
             normals = np.repeat(n, 3, axis=0)
-        cnt = len(corners)
-        pos, nrm, col = self._fields(key, cnt, [(3, ti.f32)] * 3)
-        self._upload(pos, corners)
-        self._upload(nrm, normals)
-        self._upload(col, np.repeat(np.asarray(face_rgb, float), 3, axis=0))
-        self.scene.mesh(pos, normals=nrm, per_vertex_color=col, two_sided=True,
-                        vertex_count=cnt)
+        colors = np.repeat(np.asarray(face_rgb, float), 3, axis=0)
+        draw_mesh(self.scene, self._buffers, key, corners, normals, colors)
         if wireframe:
             self.add_wireframe(key + ".wire", x, faces, vn if smooth else vertex_normals(x, faces))
 
@@ -316,24 +297,12 @@ class ClothRenderer:
         size = np.ptp(x, axis=0).max() if len(x) else 1.0
         lift = 2e-3 * size * normals
         pts = np.concatenate([x + lift, x - lift])
-        idx = np.concatenate([e, e + len(x)]).astype(np.int32)
-        pos, = self._fields(key + ".v", len(pts), [(3, ti.f32)])
-        ind = self._buffers.get(key + ".i")
-        if ind is None or ind.shape[0] < idx.size:
-            ind = ti.field(ti.i32, max(idx.size, 16) * 3 // 2)
-            self._buffers[key + ".i"] = ind
-        self._upload(pos, pts)
-        full = np.zeros(ind.shape[0], np.int32)
-        full[: idx.size] = idx.reshape(-1)
-        ind.from_numpy(full)
-        self.scene.lines(pos, width=1.0, indices=ind, color=WIRE, vertex_count=len(pts),
-                         index_count=idx.size)
+        idx = np.concatenate([e, e + len(x)])
+        draw_lines(self.scene, self._buffers, key, pts, WIRE, indices=idx)
 
     def add_points(self, key, pts, radius, color):
         pts = np.asarray(pts, float).reshape(-1, 3)
-        pos, = self._fields(key, len(pts), [(3, ti.f32)])
-        self._upload(pos, pts)
-        self.scene.particles(pos, radius=radius, color=tuple(color), index_count=len(pts))
+        draw_particles(self.scene, self._buffers, key, pts, radius, color)
 
     def begin(self):
         self.orbit.apply(self.camera)
@@ -341,15 +310,12 @@ class ClothRenderer:
         self.scene.ambient_light((0.35, 0.35, 0.38))
         self.scene.point_light(pos=(2.0, 4.0, 3.0), color=(0.9, 0.9, 0.9))
         self.scene.point_light(pos=(-3.0, 3.0, -2.0), color=(0.35, 0.35, 0.4))
-        self.scene.lines(self.ground, width=1.0, color=tuple(GROUND))
+        draw_lines(self.scene, self._buffers, "ground", self.ground, GROUND)
 
     def finish(self, legend=None, bar_rect=(0.70, 0.075, 0.27, 0.025)):
         """Render the scene into the canvas (call before every capture) and draw the colour
         bar of ``legend`` (rect x, y, w, h in window fractions, y up)."""
         self.canvas.set_background_color(BACKGROUND)
-        # The colour bar first: it may allocate Taichi fields, and a field allocated after
-        # canvas.scene() in the same frame lost the scene's meshes from the capture when the
-        # kernels were compiled fresh (no offline cache; seen in CI, reproduced).
         self._legend = (legend, bar_rect) if legend is not None else None
         if legend is not None:
             self.draw_colorbar(legend, bar_rect)
@@ -375,11 +341,8 @@ class ClothRenderer:
                 tris += [[xm - tw, y0 - 0.3 * h], [xm + tw, y0 - 0.3 * h], [xm + tw, y0 + 1.3 * h],
                          [xm - tw, y0 - 0.3 * h], [xm + tw, y0 + 1.3 * h], [xm - tw, y0 + 1.3 * h]]
                 cols += [np.array(WIRE)] * 6
-        pos, col = self._fields("colorbar", len(tris), [(2, ti.f32), (3, ti.f32)])
-        self._upload(pos, np.array(tris))
-        self._upload(col, np.array(cols))
-        # Unused rows are degenerate triangles at the origin (zero area): nothing is drawn.
-        self.canvas.triangles(pos, per_vertex_color=col)
+        draw_triangles_2d(self.canvas, self._buffers, "colorbar", np.array(tris),
+                          np.array(cols))
 
     def image(self, annotate=True):
         """The last drawn frame as (H, W, 3) uint8, top row first; with a heat map the colour
@@ -436,15 +399,10 @@ def draw_cloth(renderer, sim, key="cloth", color="shading", wireframe=False, smo
     rgb, legend = face_colors_legend(color, x, m.uv, m.faces, m.grain, sim.cfg.get("strain"),
                                      m.rest_area, strains=strains)
     renderer.add_mesh(key, x, m.faces, rgb, wireframe=wireframe, smooth=smooth, offset=offset)
-    # Obstacle buffers made before the first step are not reused after it: with strain
-    # limiting and obstacles, the first substeps allocate Taichi memory (the collider's contact
-    # scratch), after which GGUI drew nothing from buffers made earlier (the dress form of
-    # scenes/examples/garment.toml vanished from every frame after frame 0).
-    late = ".run" if sim.frame > 0 else ""
     for k, o in enumerate(sim.setup.obstacles):
         v, f = o.mesh_at(sim.time)
         f = np.asarray(f)
-        renderer.add_mesh(f"{key}.obstacle{k}{late}", v, f, np.tile(OBSTACLE, (len(f), 1)),
+        renderer.add_mesh(f"{key}.obstacle{k}", v, f, np.tile(OBSTACLE, (len(f), 1)),
                           smooth=False, offset=offset)
     return legend
 
