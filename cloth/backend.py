@@ -15,6 +15,19 @@ class BackendError(RuntimeError):
     """Raised when Taichi cannot start with the requested settings."""
 
 
+# LOOM_FAST_COMPILE=1 switches off Taichi's advanced IR optimisation. Measured on this 2-core
+# VM (hanging, resolution 7, mapping, empty offline cache): building the simulator compiles the
+# one-launch AL solve (strain/workspace.py solve_al) in 158 s with it and 12 s without; the
+# compiled solve then runs ~1.4x slower per CG iteration (0.28 -> 0.39 ms at 4k triangles).
+# The test suite sets it (tests/conftest.py): its meshes are small and compiles dominate.
+FAST_COMPILE_ENV = "LOOM_FAST_COMPILE"
+
+
+def fast_compile():
+    import os
+    return os.environ.get(FAST_COMPILE_ENV, "") not in ("", "0")
+
+
 def init(arch="cpu", precision="f64", debug=False):
     """Start Taichi once per process. Calling again with the same settings is a no-op;
     with different settings Taichi is reset (all fields are lost)."""
@@ -28,7 +41,7 @@ def init(arch="cpu", precision="f64", debug=False):
         ti.reset()
     fp = ti.f64 if precision == "f64" else ti.f32
     ti.init(arch=getattr(ti, ARCHES[arch]), default_fp=fp, log_level=ti.ERROR,
-            debug=debug, offline_cache=True)
+            debug=debug, offline_cache=True, advanced_optimization=not fast_compile())
     _state.update(arch=arch, precision=precision)
 
 
