@@ -17,6 +17,25 @@ def run_main(*args, cwd=None):
                           capture_output=True, text=True, cwd=cwd or ROOT, env=env, timeout=600)
 
 
+def run_main_here(*args):
+    """``main.main(args)`` in this test process, reported like ``run_main`` (returncode,
+    stdout, stderr), without a display. The strain solver's kernels, compiled once per process
+    (ndarray arguments), are then reused from earlier tests; a subprocess compiles them again
+    (10-20 s each on 2 cores). Use ``run_main`` where the entry point itself is under test."""
+    import contextlib
+    import io
+    from types import SimpleNamespace
+    import main as loom_main
+    out, err = io.StringIO(), io.StringIO()
+    saved = {k: os.environ.pop(k) for k in ("DISPLAY", "WAYLAND_DISPLAY") if k in os.environ}
+    try:
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            code = loom_main.main([str(a) for a in args])
+    finally:
+        os.environ.update(saved)
+    return SimpleNamespace(returncode=code, stdout=out.getvalue(), stderr=err.getvalue())
+
+
 def assert_clear_error(res, *words):
     assert res.returncode == 2, res.stderr
     assert "Traceback" not in res.stderr

@@ -263,10 +263,10 @@ def test_example_files_repeat_the_builtin_first_frames():
 
 @pytest.mark.parametrize("path", sorted(p for p in os.listdir(EXAMPLES) if p.endswith(".toml")))
 def test_example_file_runs_headless(path, tmp_path):
-    from tests.test_cli import run_main
+    from tests.test_cli import run_main_here
     out = tmp_path / "out"
-    res = run_main(os.path.join(EXAMPLES, path), "--headless", "--frames", "2", "--no-images",
-                   "--quiet", "--out", str(out))
+    res = run_main_here(os.path.join(EXAMPLES, path), "--headless", "--frames", "2",
+                        "--no-images", "--quiet", "--out", str(out))
     assert res.returncode == 0, res.stderr[-2000:]
     assert "final check: ok" in res.stdout
     assert len(list((out / "meshes").glob("frame_*.obj"))) == 3
