@@ -17,7 +17,8 @@ class BackendError(RuntimeError):
 
 # LOOM_FAST_COMPILE=1 switches off Taichi's advanced IR optimisation. Measured on this 2-core
 # VM (hanging, resolution 7, mapping, empty offline cache): building the simulator compiles the
-# one-launch AL solve (strain/workspace.py solve_al) in 158 s with it and 12 s without; the
+# one-launch AL solve (strain/workspace.py solve_al) in 158 s with it and 12 s without (the
+# build took 170 s; 118 s once choose_start had one call site per ti.func); the
 # compiled solve then runs ~1.4x slower per CG iteration (0.28 -> 0.39 ms at 4k triangles).
 # The test suite sets it (tests/conftest.py): its meshes are small and compiles dominate.
 FAST_COMPILE_ENV = "LOOM_FAST_COMPILE"
