@@ -557,8 +557,8 @@ def choose_start(method: ti.template(), K, nv, nf, ns, mu, x: T, x_hat: T, x_tri
     Newton has to travel back across the constraints' curvature. Pinned vertices stay at
     x_hat (their targets). Leaves the constraints assembled at the chosen start."""
     # One call site each for assemble_all and merit (a ti.func is inlined at every call, and
-    # solve_al's compile time grows with its size): pass 0 evaluates x_hat, pass 1 x_prev,
-    # pass 2 re-assembles at x_hat when it wins.
+    # solve_al's compile time grows with its size): pass 0 evaluates x_hat (the caller left the
+    # constraints assembled there), pass 1 x_prev, pass 2 re-assembles at x_hat when it wins.
     L_hat = 0.0
     take = 0
     for attempt in range(3):
@@ -567,8 +567,9 @@ def choose_start(method: ti.template(), K, nv, nf, ns, mu, x: T, x_hat: T, x_tri
                 x_trial[n] = x[n]
                 if attempt == 1 and pinned[n] == 0:
                     x_trial[n] = ti.Vector([fric[n][0], fric[n][1], fric[n][2]])
-            assemble_all(method, nf, x_trial, face_verts, Dm_inv, grain, rest_area, params, g,
-                         grad, cm, what, kappa, twist)
+            if attempt > 0:
+                assemble_all(method, nf, x_trial, face_verts, Dm_inv, grain, rest_area, params,
+                             g, grad, cm, what, kappa, twist)
             if attempt < 2:
                 L = merit(K, nv, nf, ns, mu, x_trial, x_hat, w_ptr, w_col, w_val, w_diag, lam,
                           g, contact, lam_c, stitch, lam_s, fric, lam_t)
