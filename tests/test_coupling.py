@@ -61,6 +61,43 @@ def test_sparse_cholesky_solves_the_system_and_reuses_its_analysis():
     assert chol.backend == ("cholmod" if linalg.HAVE_CHOLMOD else "superlu")
 
 
+def test_reused_factor_preconditions_a_nearby_matrix_and_refactors_a_far_one():
+    """solve_reusing: the first call factorises; a matrix a little off the factored one is
+    solved by CG preconditioned with the old factor (no new factorisation, a few iterations,
+    to the requested accuracy); one far off (another time step: h^2 K 16x larger) is
+    refactorised and solved exactly."""
+    model = _bent_model()
+    dyn = ImplicitEuler(model)
+    dyn.forces()
+    B = system_matrix.build_pattern(model.n_verts, model.faces,
+                                    model.edge_verts.to_numpy()[: model.n_edges],
+                                    model.edge_opp.to_numpy()[: model.n_edges], [])
+    chol = linalg.SparseCholesky(B.ptr_np, B.col_np, B.n)
+    rng = np.random.default_rng(4)
+    x = rng.standard_normal(3 * model.n_verts)
+    dyn.system_matrix(1.0 / 120.0, B)
+    val = B.val.to_numpy()[: B.nnz]
+    A = B.to_scipy()
+    got, iters, fresh = chol.solve_reusing(val, A @ x)
+    assert fresh and iters == 0
+    np.testing.assert_allclose(got, x, rtol=1e-8, atol=1e-10)
+    # Near: every diagonal block 2 % stiffer (as when a few constraints switch on).
+    near = val.copy()
+    near[B.diag_np] *= 1.02
+    A_near = chol.matrix(near)
+    b = A_near @ x
+    got, iters, fresh = chol.solve_reusing(near, b, rtol=1e-8, max_iters=20)
+    assert not fresh and 0 < iters <= 20
+    assert np.linalg.norm(A_near @ got - b) <= 1e-8 * np.linalg.norm(b)
+    # Far: the matrix of a 4x longer step, beyond a 3-iteration budget.
+    dyn.system_matrix(1.0 / 30.0, B)
+    far = B.val.to_numpy()[: B.nnz]
+    A_far = B.to_scipy()
+    got, iters, fresh = chol.solve_reusing(far, A_far @ x, rtol=1e-10, max_iters=3)
+    assert fresh
+    np.testing.assert_allclose(got, x, rtol=1e-8, atol=1e-10)
+
+
 def _hanging(method, coupling, linear_solver="pcg", res=6):
     import scenes
     from cloth.simulator import Simulator

@@ -70,7 +70,9 @@ class StrainLimiter:
     (or projection sweeps for the baselines).
 
     After each ``project`` call: ``last_iterations``, ``last_violation_max`` (strain units),
-    ``last_converged``, ``last_ms``, and for the AL ``last_newton`` / ``last_cg`` totals.
+    ``last_converged``, ``last_ms``, and for the AL ``last_newton`` / ``last_cg`` totals (on the
+    Cholesky path ``last_cg`` counts the CG iterations preconditioned by a reused factor, and
+    ``last_factorizations`` the numeric factorisations).
 
     AL settings: ``max_newton`` Newton steps per round, each a PCG solve of at most
     ``max_cg`` iterations (times sqrt(n_faces / 1000) above 1000 faces) to the relative
@@ -168,7 +170,7 @@ class StrainLimiter:
         self.set_method(method)
         self.last_iterations, self.last_violation_max = 0, 0.0
         self.last_converged, self.last_ms = True, 0.0
-        self.last_newton = self.last_cg = 0
+        self.last_newton = self.last_cg = self.last_factorizations = 0
         self.last_reverted, self.reverted_count = False, 0
 
     # ---- settings ------------------------------------------------------------------------
