@@ -4,6 +4,7 @@ still.
 
     python -m benchmarks.solver --out docs/speed                  # rest + speed, ~25 min
     python -m benchmarks.solver --quick --out /tmp/solver         # a few minutes
+    python -m benchmarks.solver --probe 25 mapping --frames 150   # one row, printed as JSON
 
 Variants (``strain.coupling`` / ``strain.linear_solver``):
   projection/pcg     the paper's split step (eq. 6: project x_hat in the mass metric) with the
@@ -30,7 +31,9 @@ import numpy as np
 VARIANTS = (("projection", "pcg"), ("implicit", "pcg"), ("implicit", "cholesky"))
 
 
-def child(res, method, coupling, linear_solver, frames, ke_from):
+def child(res, method, coupling, linear_solver, frames, ke_from, overrides=None):
+    """One configuration: ``overrides`` sets StrainLimiter attributes after the build (e.g.
+    {"active_margin": 0.005}, a probe of a setting the scene files do not expose)."""
     from cloth import backend
     backend.init("cpu", "f64")
     import scenes
@@ -42,7 +45,13 @@ def child(res, method, coupling, linear_solver, frames, ke_from):
                                   "strain": {"method": method, "coupling": coupling,
                                              "linear_solver": linear_solver}}])
     sim = Simulator(mod.build(cfg), cfg)
+    for key, value in (overrides or {}).items():
+        if not hasattr(sim.strain, key):
+            raise SystemExit(f"--set: StrainLimiter has no setting '{key}'")
+        setattr(sim.strain, key, value)
+    sim.strain._upload_params()
     ke, ms, rounds, newton, conv, viol = [], [], [], [], [], []
+    cg, factorizations = [], []
     for _ in range(frames):
         sim.step_frame()
         m = sim.model
@@ -52,6 +61,8 @@ def child(res, method, coupling, linear_solver, frames, ke_from):
         newton.append(sim.strain.last_newton)
         conv.append(bool(sim.strain.last_converged))
         viol.append(sim.strain.last_violation_max)
+        cg.append(sim.strain.last_cg)
+        factorizations.append(sim.strain.last_factorizations)
     ms, rounds = np.array(ms[1:]), np.array(rounds[1:])
     return dict(commit=_commit(), res=res, faces=sim.model.n_faces, method=method,
                 coupling=coupling,
@@ -60,7 +71,10 @@ def child(res, method, coupling, linear_solver, frames, ke_from):
                 ms_median=float(np.median(ms)), ms_p90=float(np.percentile(ms, 90)),
                 rounds_median=float(np.median(rounds)), rounds_max=int(rounds.max()),
                 newton_median=float(np.median(newton[1:])),
-                converged=float(np.mean(conv[1:])), viol_max=float(max(viol[1:])))
+                converged=float(np.mean(conv[1:])), viol_max=float(max(viol[1:])),
+                cg_median=float(np.median(cg[1:])),
+                factorizations_mean=float(np.mean(factorizations[1:])),
+                overrides=overrides or {})
 
 
 def run_child(*args):
@@ -138,7 +152,24 @@ def main():
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--rerun-rest", metavar="COUPLING/SOLVER",
                     help="re-measure only those rest rows in OUT/solver.json, e.g. implicit/pcg")
+    ap.add_argument("--probe", nargs=2, metavar=("RES", "METHOD"),
+                    help="measure one configuration and print its row (JSON), e.g. "
+                         "--probe 25 mapping --frames 150 --ke-from 120")
+    ap.add_argument("--coupling", default="implicit")
+    ap.add_argument("--linear-solver", default="pcg")
+    ap.add_argument("--frames", type=int, default=40)
+    ap.add_argument("--ke-from", type=int, default=120)
+    ap.add_argument("--set", action="append", default=[], metavar="ATTR=JSON",
+                    help="StrainLimiter attribute for --probe, e.g. --set active_margin=0.005")
     args = ap.parse_args()
+    if args.probe:
+        overrides = {}
+        for item in args.set:
+            key, _, value = item.partition("=")
+            overrides[key] = json.loads(value)
+        print(json.dumps(child(int(args.probe[0]), args.probe[1], args.coupling,
+                               args.linear_solver, args.frames, args.ke_from, overrides)))
+        return
     if args.child:
         print(json.dumps(child(*json.loads(args.child))))
         return
