@@ -40,7 +40,6 @@ def main():
     from cloth.dynamics_sparse import SparseImplicitEuler
     from cloth.simulator import Simulator
     from scenes.common import resolve
-    from tests.helpers import set_positions, set_velocities
 
     module = scenes.get("hanging")
     rows = []
@@ -63,8 +62,8 @@ def main():
         analyze = {}
 
         def timed(dyn, x0, v0, dv0):
-            set_positions(m, x0)
-            set_velocities(m, v0)
+            m.set_positions(x0)
+            m.set_velocities(v0)
             if dv0 is not None:
                 dyn.dv.from_numpy(dv0)
             ti.sync()

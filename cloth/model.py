@@ -348,6 +348,17 @@ class ClothModel:
     def velocities(self):
         return self.state.v.to_numpy()[: self.n_verts].astype(np.float64)
 
+    def set_positions(self, x):
+        """Overwrite the first n_verts positions (spare capacity keeps its values)."""
+        full = self.state.x.to_numpy()
+        full[: self.n_verts] = x
+        self.state.x.from_numpy(full)
+
+    def set_velocities(self, v):
+        full = self.state.v.to_numpy()
+        full[: self.n_verts] = v
+        self.state.v.from_numpy(full)
+
     def mesh_arrays(self):
         """The current mesh and state as numpy arrays (the input a remesh needs)."""
         return MeshArrays(uv=self.uv, x=self.positions(), faces=self.faces, v=self.velocities(),

@@ -15,12 +15,8 @@ def sheet_model(n=6, size=0.5, pattern="alternating", material=None, pinned=None
 
 
 def set_positions(model, x):
-    full = model.state.x.to_numpy()
-    full[: model.n_verts] = x
-    model.state.x.from_numpy(full)
+    model.set_positions(x)
 
 
 def set_velocities(model, v):
-    full = model.state.v.to_numpy()
-    full[: model.n_verts] = v
-    model.state.v.from_numpy(full)
+    model.set_velocities(v)
