@@ -84,7 +84,7 @@ def claim_lines(m5, w5, w3, alike=0.10):
 
 def table2(args):
     import scenes
-    from benchmarks.reproduce_paper import label, measure, render_pair, settle
+    from benchmarks.paper_common import label, measure, render_pair, settle
     module = scenes.get("tshirt")
     frames = 30 if args.quick else args.frames
     renderer = None
