@@ -58,8 +58,9 @@ def parse_args(argv):
                    help="Taichi backend to simulate on: cpu (any machine), gpu (the best GPU "
                    "backend available), cuda, vulkan or metal; one that cannot start stops with "
                    "a message")
-    p.add_argument("--precision", default="f64", choices=["f64", "f32"],
-                   help="floating-point precision of the simulation")
+    p.add_argument("--precision", default=None, choices=["f64", "f32"],
+                   help="floating-point precision of the simulation (default f64; f32 on "
+                        "vulkan and metal, which have no f64 kernels)")
     p.add_argument("--config", help="TOML file with settings (same keys as --show-config)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override one setting, e.g. --set material.k_warp=50 (repeatable)")

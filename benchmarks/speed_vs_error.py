@@ -61,14 +61,16 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-FULL = dict(methods=["svd", "warp-weft", "mapping"], solvers=["al", "jacobi"],
+from cloth.strain.constraints import METHODS  # noqa: E402
+
+FULL = dict(methods=list(METHODS), solvers=["al", "jacobi"],
             # Budgets per solver: an AL round (several Newton steps with PCG) does far more work
             # than a Jacobi sweep, so the two get different ranges of the same axis.
             iters={"al": [2, 8, 32], "jacobi": [20, 200, 2000]},
             substeps=[1, 2], resolutions=[9, 13, 21], frames=30, repeats=2,
             compare_frames=[3, 10], ref_substeps=64, ref_iters=100, ref_tol=1e-7,
             chaos_check=True)
-QUICK = dict(methods=["svd", "warp-weft", "mapping"], solvers=["al", "jacobi"],
+QUICK = dict(methods=list(METHODS), solvers=["al", "jacobi"],
              iters={"al": [2, 32], "jacobi": [20, 2000]},
              substeps=[1], resolutions=[9, 13], frames=10, repeats=1,
              compare_frames=[3], ref_substeps=32, ref_iters=100, ref_tol=1e-7,

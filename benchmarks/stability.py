@@ -32,6 +32,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
+from cloth.strain.constraints import METHODS  # noqa: E402
 from benchmarks.speed_vs_error import SimulatorPool, commit, configure, machine, \
     nudge_start, snapshot  # noqa: E402
 
@@ -155,7 +156,7 @@ def cases():
                         note="no feasible state: bounded violation, and once the corner is "
                              "held (0.5 s) the cloth must come to rest (mean KE of the last "
                              f"{SETTLE} frames < 0.01 J)"))
-    for method in ("svd", "warp-weft", "mapping"):
+    for method in METHODS:
         out.append(Case(f"exactly isotropic 4 % stretch, free sheet ({method})", "hanging",
                         dict(hang, strain={"method": method}), frames=15,
                         prepare=_isotropic_prestretch, fast=method == "mapping",

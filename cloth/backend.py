@@ -7,6 +7,14 @@ import taichi as ti
 
 ARCHES = {"cpu": "cpu", "gpu": "gpu", "cuda": "cuda", "vulkan": "vulkan", "metal": "metal"}
 PRECISIONS = ("f64", "f32")
+# Taichi's SPIR-V back ends (Vulkan, Metal) have no 64-bit float math (the strain kernels' atan2
+# fails to compile: "the operand type of instruction Atan2 must <= 32bits"), so they run in f32.
+F32_ONLY = ("vulkan", "metal")
+# Back ends where the one-launch AL solve (strain/workspace.py solve_al: one serial thread
+# running the whole projection) is not used. Measured on lavapipe (Debian's software Vulkan):
+# it crashes the process (segmentation fault at the next read-back); the Cholesky path, whose
+# loop runs on the host between small kernels, runs (hanging, resolution 9, 5 frames).
+HOST_LOOP_AL = ("vulkan", "metal")
 
 _state = {"arch": None, "precision": None}
 
@@ -29,13 +37,24 @@ def fast_compile():
     return os.environ.get(FAST_COMPILE_ENV, "") not in ("", "0")
 
 
-def init(arch="cpu", precision="f64", debug=False):
+def default_precision(arch):
+    return "f32" if arch in F32_ONLY else "f64"
+
+
+def init(arch="cpu", precision=None, debug=False):
     """Start Taichi once per process. Calling again with the same settings is a no-op;
-    with different settings Taichi is reset (all fields are lost)."""
+    with different settings Taichi is reset (all fields are lost). ``precision`` None: f64,
+    or f32 on Vulkan and Metal (``F32_ONLY``)."""
     if arch not in ARCHES:
         raise BackendError(f"unknown --arch '{arch}': use one of {', '.join(ARCHES)}")
+    if precision is None:
+        precision = default_precision(arch)
     if precision not in PRECISIONS:
         raise BackendError(f"unknown --precision '{precision}': use f64 or f32")
+    if arch in F32_ONLY and precision == "f64":
+        raise BackendError(f"--arch {arch} has no 64-bit float kernels in Taichi (its SPIR-V "
+                           f"back end cannot compile f64 atan2): use --precision f32, or "
+                           f"--arch cpu / cuda for f64")
     if _state["arch"] == arch and _state["precision"] == precision:
         return
     if _state["arch"] is not None:
@@ -48,6 +67,10 @@ def init(arch="cpu", precision="f64", debug=False):
 
 def precision():
     return _state["precision"]
+
+
+def arch():
+    return _state["arch"]
 
 
 def is_initialised():

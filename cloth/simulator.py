@@ -24,8 +24,9 @@ import taichi as ti
 from . import metrics
 from .dynamics import DynamicsSettings, ImplicitEuler
 from .model import CapacityExceeded, ClothModel, Material, MeshArrays
+from .strain.constraints import METHODS
 
-STRAIN_METHODS = ("svd", "warp-weft", "mapping", "none")
+STRAIN_METHODS = METHODS + ("none",)
 
 
 class SimulationDiverged(RuntimeError):

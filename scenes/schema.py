@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from typing import Optional
 
 from cloth.config import ConfigError, NUMBER_OR_WORD, to_toml
+from cloth.simulator import STRAIN_METHODS
 
 
 @dataclass(frozen=True)
@@ -59,8 +60,7 @@ SCHEMA = {
         "damp_stiff": Key("s", "stiffness-proportional damping", lo=0),
     },
     "strain": {
-        "method": Key("", "strain-limiting method", choices=("svd", "warp-weft", "mapping",
-                                                                "none")),
+        "method": Key("", "strain-limiting method", choices=STRAIN_METHODS),
         "warp": Key(**STRAIN_BAND, doc="strain band [min, max] along the warp (material u "
                     "unless the mesh says otherwise)"),
         "weft": Key(**STRAIN_BAND, doc="strain band [min, max] along the weft"),

@@ -9,7 +9,7 @@ from cloth.strain import constraints as C
 from cloth.strain.solver import StrainLimiter, StrainLimitError
 
 H = 1.0 / 60.0
-METHODS = ("svd", "warp-weft", "mapping")
+from cloth.strain.constraints import METHODS
 
 
 def stretched_sheet(n=8, warp=0.10, weft=0.03, noise=0.002, seed=0, pins=True):

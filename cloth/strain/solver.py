@@ -20,12 +20,13 @@ import taichi as ti
 
 from .. import metrics
 from .. import system_matrix
-from .constraints import MAPPING_DELTA, MAPPING_ISO, METHOD_IDS, N_CONSTRAINTS, SVD_DELTA
+from .constraints import (MAPPING_DELTA, MAPPING_ISO, METHOD_IDS, METHODS, N_CONSTRAINTS,
+                          SVD_DELTA)
 from . import workspace as W
 from .workspace import (ST_CG, ST_CONVERGED, ST_ITERS, ST_NEWTON, ST_START_VIOL, ST_VIOL,
                         Workspace)
 
-METHOD_NAMES = ("svd", "warp-weft", "mapping", "none")
+METHOD_NAMES = METHODS + ("none",)
 SOLVERS = ("al", "jacobi", "gauss-seidel")
 COUPLINGS = ("implicit", "projection")
 # Initial AL penalty per coupling, x the metric's mean diagonal (``_mean_mass``). Under
@@ -37,6 +38,25 @@ COUPLINGS = ("implicit", "projection")
 # 4e-8 J. svd and warp-weft rest at 1e2-1e3 m. The split projection keeps 1e2 x the mass.
 MU_SCALE = {"implicit": 1e3, "projection": 1e2}
 LINEAR_SOLVERS = ("cholesky", "pcg")
+
+
+_host_loop_noted = False
+
+
+def _host_loop_only():
+    """On Vulkan and Metal the one-launch PCG solve is replaced by the Cholesky path, whose AL
+    loop runs on the host (``backend.HOST_LOOP_AL``); said once per process."""
+    global _host_loop_noted
+    from .. import backend
+    if backend.arch() not in backend.HOST_LOOP_AL:
+        return False
+    if not _host_loop_noted:
+        _host_loop_noted = True
+        import sys
+        print(f"loom: on --arch {backend.arch()} strain limiting uses the Cholesky Newton path "
+              "(its AL loop runs on the host; the one-kernel PCG solve crashes Vulkan)",
+              file=sys.stderr)
+    return True
 
 
 class StrainLimitError(ValueError):
@@ -416,7 +436,7 @@ class StrainLimiter:
                 for a in (ws.lam, ws.lam_c, ws.lam_s, ws.lam_t):
                     a.fill(0.0)
             use_system = self.coupling == "implicit" and h > 0 and self._system_ready
-            if self.linear_solver == "cholesky":
+            if self.linear_solver == "cholesky" or _host_loop_only():
                 rounds, newton, converged = self._solve_direct(mid, K, use_system)
             else:
                 metric = self._system if use_system else self._mass_metric
