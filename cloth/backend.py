@@ -13,7 +13,8 @@ F32_ONLY = ("vulkan", "metal")
 # Back ends where the one-launch AL solve (strain/workspace.py solve_al: one serial thread
 # running the whole projection) is not used. Measured on lavapipe (Debian's software Vulkan):
 # it crashes the process (segmentation fault at the next read-back); the Cholesky path, whose
-# loop runs on the host between small kernels, runs (hanging, resolution 9, 5 frames).
+# loop runs on the host between small kernels, runs (hanging, resolution 9, 5 frames). Metal
+# (Taichi's other SPIR-V back end) was not available to test and is treated the same way.
 HOST_LOOP_AL = ("vulkan", "metal")
 
 _state = {"arch": None, "precision": None}

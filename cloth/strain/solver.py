@@ -54,7 +54,8 @@ def _host_loop_only():
         _host_loop_noted = True
         import sys
         print(f"loom: on --arch {backend.arch()} strain limiting uses the Cholesky Newton path "
-              "(its AL loop runs on the host; the one-kernel PCG solve crashes Vulkan)",
+              "(its AL loop runs on the host; the one-kernel PCG solve crashed Debian's software "
+              "Vulkan driver)",
               file=sys.stderr)
     return True
 
