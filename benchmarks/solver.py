@@ -51,12 +51,13 @@ def child(res, method, coupling, linear_solver, frames, ke_from, overrides=None)
         setattr(sim.strain, key, value)
     sim.strain._upload_params()
     ke, ms, rounds, newton, conv, viol = [], [], [], [], [], []
-    cg, factorizations = [], []
+    cg, factorizations, frame_ms = [], [], []
     for _ in range(frames):
         sim.step_frame()
         m = sim.model
         ke.append(metrics.kinetic_energy(m.velocities(), m.mass))
         ms.append(sim.stage("strain_limit").ms)
+        frame_ms.append(sum(s.ms for s in sim.stages if s.enabled))
         rounds.append(sim.strain.last_iterations)
         newton.append(sim.strain.last_newton)
         conv.append(bool(sim.strain.last_converged))
@@ -73,6 +74,7 @@ def child(res, method, coupling, linear_solver, frames, ke_from, overrides=None)
                 newton_median=float(np.median(newton[1:])),
                 converged=float(np.mean(conv[1:])), viol_max=float(max(viol[1:])),
                 cg_median=float(np.median(cg[1:])),
+                frame_ms_median=float(np.median(frame_ms[1:])),
                 factorizations_mean=float(np.mean(factorizations[1:])),
                 overrides=overrides or {})
 
