@@ -43,14 +43,20 @@ def test_system_matrix_is_the_implicit_steps_operator():
                                atol=1e-12 * np.abs(want).max())
 
 
-def test_sparse_cholesky_solves_the_system_and_reuses_its_analysis():
+def _system_and_cholesky():
+    """The bent sheet, its dynamics (forces evaluated), the implicit step's block pattern and a
+    SparseCholesky of that pattern."""
     model = _bent_model()
     dyn = ImplicitEuler(model)
     dyn.forces()
     B = system_matrix.build_pattern(model.n_verts, model.faces,
                                     model.edge_verts.to_numpy()[: model.n_edges],
                                     model.edge_opp.to_numpy()[: model.n_edges], [])
-    chol = linalg.SparseCholesky(B.ptr_np, B.col_np, B.n)
+    return model, dyn, B, linalg.SparseCholesky(B.ptr_np, B.col_np, B.n)
+
+
+def test_sparse_cholesky_solves_the_system_and_reuses_its_analysis():
+    model, dyn, B, chol = _system_and_cholesky()
     rng = np.random.default_rng(2)
     for h in (1.0 / 30.0, 1.0 / 120.0):        # new values, same pattern
         dyn.system_matrix(h, B)
@@ -66,13 +72,7 @@ def test_reused_factor_preconditions_a_nearby_matrix_and_refactors_a_far_one():
     solved by CG preconditioned with the old factor (no new factorisation, a few iterations,
     to the requested accuracy); one far off (another time step: h^2 K 16x larger) is
     refactorised and solved exactly."""
-    model = _bent_model()
-    dyn = ImplicitEuler(model)
-    dyn.forces()
-    B = system_matrix.build_pattern(model.n_verts, model.faces,
-                                    model.edge_verts.to_numpy()[: model.n_edges],
-                                    model.edge_opp.to_numpy()[: model.n_edges], [])
-    chol = linalg.SparseCholesky(B.ptr_np, B.col_np, B.n)
+    model, dyn, B, chol = _system_and_cholesky()
     rng = np.random.default_rng(4)
     x = rng.standard_normal(3 * model.n_verts)
     dyn.system_matrix(1.0 / 120.0, B)
