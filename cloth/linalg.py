@@ -78,7 +78,9 @@ class SparseCholesky:
         return sp.csc_matrix((data, self._indices, self._indptr), shape=(3 * self.n,) * 2)
 
     def factorize(self, val):
-        A = self.matrix(val)
+        self._factorize_matrix(self.matrix(val))
+
+    def _factorize_matrix(self, A):
         if self.backend == "cholmod":
             try:
                 if self._factor is None:
@@ -115,7 +117,7 @@ class SparseCholesky:
             x, iters, ok = pcg(A, b, self.solve, rtol, max_iters)
             if ok:
                 return x, iters, False
-        self.factorize(val)
+        self._factorize_matrix(A)
         return self.solve(b), 0, True
 
 
