@@ -153,8 +153,9 @@ def main(argv=None):
         if not cfg["sim"]["frames"] >= 1:
             raise ConfigError(f"sim.frames must be 1 or more (got {cfg['sim']['frames']}): "
                               "give --frames N with N >= 1")
-        from scenes.schema import show_config, validate
-        validate(cfg)        # ranges and choices (types and unknown keys: at the merge)
+        from cloth.settings import Settings
+        from scenes.schema import show_config
+        settings = Settings(cfg)   # ranges and choices (types and unknown keys: at the merge)
     except (KeyError, ConfigError, ValueError) as err:
         # KeyError's str() adds quotes around the message; the others are the message.
         return fail(err.args[0] if isinstance(err, KeyError) and err.args else str(err))
@@ -183,7 +184,7 @@ def main(argv=None):
         return fail(f"Taichi could not start on --arch {args.arch} ({err}); use --arch cpu")
     try:
         setup = module.build(cfg)
-        sim = Simulator(setup, cfg)
+        sim = Simulator(setup, settings)
     except (ModelError, ConfigError, ValueError) as err:
         return fail(str(err))
 

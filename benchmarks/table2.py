@@ -134,7 +134,7 @@ def table2(args):
     lines = [f"# Paper Table 2: T-shirt at rest ({rows[0]['faces']} triangles, {frames} frames)",
              "", f"Command: `python -m benchmarks.reproduce_paper --table 2 --frames {frames} "
              f"--seeds {seeds} --out {args.out}` at commit {rev}; mapping with its isotropy closure "
-             f"(`strain.isotropy` = {sim.cfg['strain'].get('isotropy', 0.0)}); ms/frame on a "
+             f"(`strain.isotropy` = {sim.settings.strain.isotropy}); ms/frame on a "
              "2-core CPU (often shared with other jobs: +-30 %). Chest = front panel, world "
              "height 1.15-1.40 m, |x| < 0.15 m.",
              "", "| " + " | ".join(c[1] for c in cols) + " |", "|" + "---|" * len(cols)]

@@ -428,12 +428,22 @@ class Collider:
             self.self_solver = SelfCollision(
                 model, thickness=self.thickness if self_thickness is None else self_thickness,
                 iterations=self_iterations)
+        self._self_built = self.self_solver    # kept while switched off (building compiles)
+
+    def set_self_collision(self, on):
+        """Switch cloth-cloth repulsion on or off live. Only a collider built with
+        ``self_collision=True`` can switch it on (its spatial hash is built once)."""
+        if on and self._self_built is None:
+            raise CollisionError("this scene was built without self-collision: set "
+                                 "self_collision in the scene to switch it on")
+        self.self_solver = self._self_built if on else None
+        self.self_collision = bool(on)
 
     def on_mesh_changed(self):
         """Call after the model was refilled (remeshing): nothing per vertex is kept between
         substeps, so this only re-checks the self-collision buffers against the capacities."""
-        if self.self_solver is not None:
-            self.self_solver.on_mesh_changed()
+        if self._self_built is not None:
+            self._self_built.on_mesh_changed()
 
     def add(self, obstacle):
         if not isinstance(obstacle, Obstacle):

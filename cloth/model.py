@@ -378,6 +378,14 @@ class ClothModel:
                     ok = 0
         return ok
 
+    def set_vertex_pin(self, v, pinned, target=None):
+        """Pin vertex ``v`` to ``target`` (m) or free it. The field the kernels read and the
+        ``pinned`` array the host reads change together."""
+        self.vert_pinned[v] = int(bool(pinned))
+        self._np_cache["pinned"][v] = bool(pinned)
+        if target is not None:
+            self.vert_pin_target[v] = [float(c) for c in target]
+
     def set_pin_targets(self, targets):
         full = self.vert_pin_target.to_numpy()
         full[: self.n_verts] = targets

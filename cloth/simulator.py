@@ -10,8 +10,11 @@ the projection cannot push cloth into a body and contact cannot undo the limits;
 linearisation leaves on curved bodies (issue #5; tested in tests/test_all_scenes.py). Seams
 (stitch pairs) are equality constraints of the same projection.
 
-``Simulator.set_method`` and ``set_bands`` switch strain limiting live: they take effect at the
-next substep.
+The Simulator reads its settings from one ``cloth.settings.Settings`` (``self.settings``) and owns
+every live control: ``set_method``, ``set_bands``, ``set_iterations``, ``set_substeps``,
+``set_material``, ``set_remesh``, ``set_self_collision``, ``hold_vertex`` / ``release_vertex`` and
+``reset``. Each takes effect at the next substep and keeps ``settings`` in step, so a window, a
+script and a test change a run the same way.
 """
 import sys
 import time
@@ -24,9 +27,7 @@ import taichi as ti
 from . import metrics
 from .dynamics import DynamicsSettings, ImplicitEuler
 from .model import CapacityExceeded, ClothModel, Material, MeshArrays
-from .strain.constraints import METHODS
-
-STRAIN_METHODS = METHODS + ("none",)
+from .settings import STRAIN_METHODS, Settings
 
 
 class SimulationDiverged(RuntimeError):
@@ -65,23 +66,22 @@ class Stage:
 
 @ti.data_oriented
 class Simulator:
-    def __init__(self, setup: SceneSetup, cfg: dict):
-        self.cfg = cfg
+    def __init__(self, setup: SceneSetup, settings):
+        """``settings``: a ``Settings``, or the resolved nested dict of a scene (checked here;
+        a bad value raises ``ConfigError`` naming the key)."""
+        self.settings = Settings.of(settings)
         self.setup = setup
-        sim = cfg["sim"]
-        if not sim["fps"] > 0 or not sim["substeps"] >= 1:
-            raise ValueError(f"the time step must be positive: sim.fps ({sim['fps']}) must be "
-                             f"> 0 and sim.substeps ({sim['substeps']}) >= 1")
-        self.h = 1.0 / (sim["fps"] * sim["substeps"])
-        self.substeps = int(sim["substeps"])
+        sim = self.settings.sim
         self.frame, self.time = 0, 0.0
         self.grow_count = 0
         self.model = ClothModel(setup.mesh, setup.material,
-                                capacity_factor=self._capacity_factor(setup.mesh, cfg))
+                                capacity_factor=self._capacity_factor(setup.mesh,
+                                                                      self.settings.remesh))
         self._pin_rest = setup.mesh.pin_target.copy()
+        self._held = None          # (vertex, was pinned, its own target, uv) while held
         self.dynamics_settings = DynamicsSettings(
-            gravity=tuple(sim["gravity"]), stitch_stiffness=float(sim.get("stitch_stiffness", 0.0)),
-            cg_tol=float(sim.get("cg_tol", 1e-4)), cg_max_iters=int(sim.get("cg_iters", 500)))
+            gravity=tuple(sim.gravity), stitch_stiffness=float(sim.stitch_stiffness),
+            cg_tol=float(sim.cg_tol), cg_max_iters=int(sim.cg_iters))
         self.dynamics = self._make_dynamics(setup.stitches)
         self.strain = None
         self.collider = None
@@ -93,18 +93,26 @@ class Simulator:
             Stage("collision_final", self._collide_final, enabled=False),
             Stage("remesh", self._remesh, enabled=False, per_substep=False),
         ]
-        strain = cfg.get("strain")
-        if strain is not None and strain["method"] != "none":
-            self._make_strain_limiter(strain)
+        if self.settings.strain.method != "none":
+            self._make_strain_limiter()
         if self.stage("collision").enabled:
             self._make_collider()
-        if cfg.get("remesh", {}).get("enabled", False):
-            self._make_remesher(cfg["remesh"])
+        if self.settings.remesh.enabled:
+            self._make_remesher()
         self._relax_initial_state()
         self.last_good = self.model.mesh_arrays()
         self.remesh_stats = {}
 
-    def can_restart(self, setup: SceneSetup, cfg: dict):
+    @property
+    def substeps(self):
+        return int(self.settings.sim.substeps)
+
+    @property
+    def h(self):
+        """The time step (s): 1 / (fps x substeps)."""
+        return 1.0 / (float(self.settings.sim.fps) * self.substeps)
+
+    def can_restart(self, setup: SceneSetup, cfg):
         """Whether ``restart`` may reuse this Simulator for ``setup``: the same mesh topology,
         no stitches, self-collision, moving obstacles or remeshing (their solvers hold state
         that ``restart`` does not reset; obstacles must be equal, which the caller knows)."""
@@ -113,9 +121,9 @@ class Simulator:
                 and np.array_equal(setup.mesh.faces, m.faces) and setup.stitches is None
                 and self.setup.stitches is None and not setup.self_collision
                 and all(o.path is None for o in setup.obstacles)
-                and not cfg.get("remesh", {}).get("enabled", False) and self.remesher is None)
+                and not Settings.of(cfg).remesh.enabled and self.remesher is None)
 
-    def restart(self, setup: SceneSetup, cfg: dict):
+    def restart(self, setup: SceneSetup, cfg):
         """Start again from ``setup``'s initial state with the settings of ``cfg`` without
         compiling anything: state, pins, material, time step, dynamics and strain-limiting
         settings, clock. Everything a run carries over (the CG warm start, the AL multipliers)
@@ -125,48 +133,66 @@ class Simulator:
         if not self.can_restart(setup, cfg):
             raise ValueError("restart needs the same mesh and no stitches, self-collision, "
                              "moving obstacles or remeshing: build a new Simulator")
-        s_cfg, st_cfg = cfg["sim"], cfg.get("strain", {"method": "none"})
-        self.cfg, self.setup = cfg, setup
+        settings = Settings.of(cfg)
+        self.settings, self.setup = settings, setup
         self.model.material = setup.material          # load() recomputes the masses from it
-        self.model.load(setup.mesh)
-        self._pin_rest = setup.mesh.pin_target.copy()
         ds = self.dynamics.settings                   # the object the dynamics reads each step
-        ds.gravity = tuple(s_cfg["gravity"])
-        ds.cg_tol, ds.cg_max_iters = float(s_cfg["cg_tol"]), int(s_cfg["cg_iters"])
-        self.dynamics.on_mesh_changed()               # forgets the CG warm start
-        self.substeps = int(s_cfg["substeps"])
-        self.h = 1.0 / (s_cfg["fps"] * self.substeps)
-        self.frame, self.time = 0, 0.0
-        if st_cfg["method"] != "none":
-            self.set_method(st_cfg["method"])         # builds the limiter if there was none
+        ds.gravity = tuple(settings.sim.gravity)
+        ds.cg_tol, ds.cg_max_iters = float(settings.sim.cg_tol), int(settings.sim.cg_iters)
+        st = settings.strain
+        if st.method != "none":
+            self.set_method(st.method)                # builds the limiter if there was none
             lim = self.strain
-            lim.solver, lim.tol, lim.max_iters = st_cfg["solver"], float(st_cfg["tol"]), \
-                int(st_cfg["iters"])
-            lim.mapping_iso = float(st_cfg.get("isotropy", lim.mapping_iso))
-            lim._explicit_bias = bool(st_cfg["bias"])
-            lim.set_coupling(st_cfg.get("coupling", "projection"))
-            lim.linear_solver = st_cfg.get("linear_solver", "pcg")
-            lim.set_bands(warp=st_cfg["warp"], weft=st_cfg["weft"],
-                          bias=st_cfg["bias"] if st_cfg["bias"] else None)
-            lim.on_mesh_changed()                     # multipliers back to zero
+            lim.solver, lim.tol, lim.max_iters = st.solver, float(st.tol), int(st.iters)
+            lim.mapping_iso = float(st.isotropy)
+            lim.set_coupling(st.coupling)
+            lim.linear_solver = st.linear_solver
+            lim.set_bands(warp=st.warp, weft=st.weft, bias=st.bias if st.bias else "auto")
         elif self.strain is not None:
             self.set_method("none")
+        self.reset()
+        return self
+
+    def reset(self):
+        """Back to the scene's initial state at time 0 with the current settings (method,
+        bands, material, substeps kept). Nothing compiles; everything a run carries over (the
+        CG warm start, the AL multipliers) is reset, so a reset run repeats a fresh one."""
+        self._held = None
+        self.model.load(self.setup.mesh)
+        self._pin_rest = self.setup.mesh.pin_target.copy()
+        self.dynamics.stitches_np = self._initial_stitches()
+        self._mesh_changed()
+        self.frame, self.time = 0, 0.0
+        for s in self.stages:
+            s.ms = 0.0
         self._relax_initial_state()
         self.last_good = self.model.mesh_arrays()
         self.remesh_stats = {}
-        return self
+
+    def _initial_stitches(self):
+        st = self.setup.stitches
+        return np.zeros((0, 2), np.int32) if st is None else np.asarray(st, np.int32).reshape(-1, 2)
+
+    def _mesh_changed(self):
+        """The model's fields were refilled (reset, remesh): every solver forgets what it kept
+        per vertex or face and re-reads the mesh. The one place that tells them all."""
+        self.dynamics.on_mesh_changed()
+        if self.strain is not None:
+            self.strain.set_stitches(self.dynamics.stitches_np)
+            self.strain.on_mesh_changed()
+        if self.collider is not None:
+            self.collider.on_mesh_changed()
 
     @staticmethod
-    def _capacity_factor(mesh, cfg, cap_faces=200_000):
+    def _capacity_factor(mesh, remesh_settings, cap_faces=200_000):
         """Spare room in the fields. With remeshing, room for the finest mesh the sizing
         allows (2.5 x the count of equilateral triangles of edge size_min that tile it), so a
         refining cloth rarely outgrows its fields (growing means recompiling the kernels)."""
-        rcfg = cfg.get("remesh", {})
-        if not rcfg.get("enabled", False):
+        if not remesh_settings.enabled:
             return 1.2
         from .metrics import material_areas
         area = material_areas(mesh.uv, mesh.faces).sum()
-        finest = 2.5 * area / (0.433 * rcfg["size_min"] ** 2)
+        finest = 2.5 * area / (0.433 * remesh_settings.size_min ** 2)
         return max(2.0, min(finest, cap_faces) / len(mesh.faces))
 
     def _relax_initial_state(self):
@@ -181,7 +207,7 @@ class Simulator:
         """Backward Euler with the linear solver the config asks for: ``cg`` (matrix-free
         PCG, the default: fastest for soft cloth and up to ~10k triangles) or ``direct``
         (assembled sparse Cholesky: exact, cheaper for stiff cloth from ~10k triangles)."""
-        kind = self.cfg["sim"].get("linear_solver", "cg")
+        kind = self.settings.sim.linear_solver
         if kind == "cg":
             return ImplicitEuler(self.model, self.dynamics_settings, stitches=stitches)
         if kind == "direct":
@@ -196,18 +222,17 @@ class Simulator:
                 return s
         raise KeyError(name)
 
-    def _make_strain_limiter(self, strain):
-        # imported here: scenes may not limit strain
-        from .strain.constraints import MAPPING_ISO
-        from .strain.solver import StrainLimiter
+    def _make_strain_limiter(self, method=None):
+        """The strain limiter of ``settings.strain`` (with ``method`` instead of its own)."""
+        from .strain.solver import StrainLimiter     # here: scenes may not limit strain
+        st = self.settings.strain
+        method = st.method if method is None else method
         self.strain = StrainLimiter(
-            self.model, method=strain["method"], warp=tuple(strain["warp"]),
-            weft=tuple(strain["weft"]), bias=tuple(strain["bias"]) if strain["bias"] else None,
-            solver=strain["solver"], tol=strain["tol"], max_iters=strain["iters"],
-            mapping_iso=strain.get("isotropy", MAPPING_ISO), stitches=self.dynamics.stitches_np,
-            coupling=strain.get("coupling", "projection"),
-            linear_solver=strain.get("linear_solver", "pcg"))
-        self._enable_strain_limit(strain["method"] != "none")
+            self.model, method=method, warp=tuple(st.warp), weft=tuple(st.weft),
+            bias=tuple(st.bias) if st.bias else None, solver=st.solver, tol=st.tol,
+            max_iters=st.iters, mapping_iso=st.isotropy, stitches=self.dynamics.stitches_np,
+            coupling=st.coupling, linear_solver=st.linear_solver)
+        self._enable_strain_limit(method != "none")
 
     def _enable_strain_limit(self, on):
         self.stage("strain_limit").enabled = on
@@ -238,9 +263,9 @@ class Simulator:
 
     def _make_collider(self):
         from .collision import Collider
-        c = self.cfg.get("collision", {})
+        c = self.settings.section("collision")
         self.collider = Collider(self.model, self.setup.obstacles,
-                                 thickness=c.get("thickness", 0.005),
+                                 thickness=c.thickness if c is not None else 0.005,
                                  self_collision=self.setup.self_collision)
 
     def _collide(self):
@@ -262,8 +287,9 @@ class Simulator:
         m = self.model
         return float(np.sqrt(np.mean(m.rest_area[:m.n_faces])))
 
-    def _make_remesher(self, rcfg):
+    def _make_remesher(self):
         from . import remesh
+        rcfg = self.settings.to_dict()["remesh"]
         params = remesh.RemeshParams(**{k: v for k, v in rcfg.items() if k != "enabled"})
         params.validate()
         self.remesher = (remesh, params)
@@ -291,14 +317,11 @@ class Simulator:
             self._rebuild_for(new)
             stats["grown"] = True
         self.remesh_stats = stats
-        self.dynamics.on_mesh_changed()
-        if self.strain is not None:
-            self.strain.set_stitches(self.dynamics.stitches_np)
-            self.strain.on_mesh_changed()
-            if new_face_data:           # only with remesh.warm_multipliers (off: slower)
-                self.strain.set_face_state(new_face_data)
-        if self.collider is not None:
-            self.collider.on_mesh_changed()
+        self._mesh_changed()
+        if self.strain is not None and new_face_data:   # only with remesh.warm_multipliers
+            self.strain.set_face_state(new_face_data)
+        if self._held is not None:
+            self._find_held_again()
         # Flips and collapses change some triangles' deformation; project once more so the
         # limits hold on the new mesh at the end of every frame (nearly free when they do).
         if self.strain is not None and self.stage("strain_limit").enabled:
@@ -317,53 +340,151 @@ class Simulator:
         self.model = ClothModel(mesh, self.setup.material, capacity_factor=2.0)
         self.dynamics = self._make_dynamics(self.dynamics.stitches_np)
         if self.strain is not None:
-            self._make_strain_limiter(self.cfg["strain"])
+            self._make_strain_limiter(self.strain.method)
         if self.collider is not None:
+            on = self.collider.self_collision
             self._make_collider()
+            self.collider.set_self_collision(on)
 
-    # -- live switches ------------------------------------------------------------------------
+    # -- live controls: each takes effect at the next substep and keeps ``settings`` in step --
+    def _change(self, section, **changes):
+        """Check ``changes`` against the schema (ConfigError names the key) and adopt them."""
+        self.settings = self.settings.replace(section, **changes)
+        return getattr(self.settings, section)
+
     def set_method(self, name):
-        """Switch strain limiting (``svd``, ``warp-weft``, ``mapping`` or ``none``); it takes
-        effect at the next substep."""
+        """Switch strain limiting (``svd``, ``warp-weft``, ``mapping`` or ``none``)."""
         if name not in STRAIN_METHODS:
             raise ValueError(f"unknown strain-limiting method '{name}': use one of "
                              f"{', '.join(STRAIN_METHODS)}")
         if self.strain is None and name != "none":
-            self._make_strain_limiter(dict(self.cfg["strain"], method=name))
+            self._make_strain_limiter(name)
         elif self.strain is not None:
             self.strain.set_method(name)
-        self.cfg["strain"]["method"] = name
+        self._change("strain", method=name)
         self._enable_strain_limit(name != "none")
 
     def set_bands(self, warp=None, weft=None, bias=None):
+        """Change the strain bands ([min, max], strain). ``bias="auto"`` makes the bias band
+        follow the warp and weft bands again (``metrics.default_bias_band``)."""
         if self.strain is None:
-            self._make_strain_limiter(self.cfg["strain"])
+            self._make_strain_limiter()
         self.strain.set_bands(warp=warp, weft=weft, bias=bias)
-        for key, val in (("warp", warp), ("weft", weft), ("bias", bias)):
-            if val is not None:
-                self.cfg["strain"][key] = list(val)
+        changes = {k: list(v) for k, v in (("warp", warp), ("weft", weft)) if v is not None}
+        if bias is not None:
+            changes["bias"] = [] if isinstance(bias, str) else list(bias)
+        self._change("strain", **changes)
+
+    def bands(self):
+        """The (warp, weft, bias) bands in force, the automatic bias band worked out."""
+        st = self.settings.strain
+        warp, weft = tuple(st.warp), tuple(st.weft)
+        bias = tuple(st.bias) if st.bias else metrics.default_bias_band(warp, weft)
+        return {"warp": warp, "weft": weft, "bias": bias}
+
+    def set_iterations(self, n):
+        """The AL round budget per projection."""
+        self._change("strain", iters=int(n))
+        if self.strain is not None:
+            self.strain.max_iters = int(n)
+
+    def set_substeps(self, n):
+        """Time steps per frame (h = 1 / (fps x substeps))."""
+        self._change("sim", substeps=int(n))
+
+    def set_material(self, **values):
+        """Change stiffnesses or damping (``k_warp=...``); the dynamics reads the material
+        every step. Stretch moduli must stay positive."""
+        for key in ("k_warp", "k_weft"):
+            if key in values and not float(values[key]) > 0:
+                raise ValueError(f"material.{key} must be > 0 N/m (got {values[key]})")
+        self._change("material", **{k: float(v) for k, v in values.items()})
+        for key, value in values.items():
+            setattr(self.model.material, key, float(value))
+
+    def set_remesh(self, on):
+        """Switch the per-frame remeshing stage (its settings: ``settings.remesh``)."""
+        if on and self.remesher is None:
+            self._make_remesher()
+        self.stage("remesh").enabled = bool(on)
+        self._change("remesh", enabled=bool(on))
+
+    @property
+    def can_self_collide(self):
+        return self.setup.self_collision
+
+    def set_self_collision(self, on):
+        """Switch cloth-cloth repulsion (scenes built with self-collision only)."""
+        if self.collider is None:
+            raise ValueError("this scene was built without self-collision")
+        self.collider.set_self_collision(on)
+        if not self.setup.obstacles:
+            self.stage("collision").enabled = bool(on)
+
+    @property
+    def self_collision_on(self):
+        return self.collider is not None and self.collider.self_solver is not None
+
+    def hold_vertex(self, v, target):
+        """Hold vertex ``v`` at ``target`` (m), as a pin, until ``release_vertex``; call again
+        to move it. Holding another vertex releases the first. The hold follows its material
+        point through remeshing (``held_vertex``)."""
+        if self._held is not None and self._held[0] != v:
+            self.release_vertex()
+        m = self.model
+        if self._held is None:
+            self._held = (int(v), bool(m.pinned[v]), np.array(m.vert_pin_target[v], float),
+                          m.uv[v].copy(), None)
+        self._held = self._held[:4] + (np.asarray(target, float).copy(),)
+        m.set_vertex_pin(v, True, target)
+
+    @property
+    def held_vertex(self):
+        return None if self._held is None else self._held[0]
+
+    def release_vertex(self):
+        """Give the held vertex back its own pin state and target."""
+        if self._held is None:
+            return
+        v, was, old = self._held[:3]
+        if v < self.model.n_verts:
+            self.model.set_vertex_pin(v, was, old)
+        self._held = None
+
+    def _find_held_again(self):
+        """After a remesh the vertex numbers change: hold the same material point again."""
+        _, _, _, uv, target = self._held
+        m = self.model
+        v = int(np.argmin(np.linalg.norm(m.uv - uv, axis=1)))
+        self._held = (v, bool(m.pinned[v]), np.array(m.vert_pin_target[v], float), uv, target)
+        m.set_vertex_pin(v, True, target)
 
     @property
     def method(self):
-        return self.cfg["strain"]["method"] if self.stage("strain_limit").enabled else "none"
+        return self.settings.strain.method if self.stage("strain_limit").enabled else "none"
 
     # -- the frame loop -----------------------------------------------------------------------
     def _update_pins(self, t):
+        """Move the scene's scripted pins to their targets at time t (a held vertex stays
+        where it is held)."""
         if self.setup.pin_motion is None:
             return
-        pinned = self.model.pinned
+        pinned = self.model.pinned.copy()
+        if self._held is not None:
+            pinned[self._held[0]] = False
         if not np.any(pinned):
             return
         targets = self.model.vert_pin_target.to_numpy()[: self.model.n_verts].astype(np.float64)
-        targets[pinned] = self.setup.pin_motion(t, self.model.uv[pinned], self._pin_rest_of())
+        targets[pinned] = self.setup.pin_motion(t, self.model.uv[pinned], self._pin_rest_of(pinned))
         self.model.set_pin_targets(targets)
 
-    def _pin_rest_of(self):
-        """Rest positions of the pinned vertices (the scene's initial targets), looked up by
-        material point so they survive remeshing."""
+    def _pin_rest_of(self, pinned=None):
+        """Rest positions of the ``pinned`` vertices (default: all pinned ones; the scene's
+        initial targets), looked up by material point so they survive remeshing."""
+        pinned = self.model.pinned if pinned is None else pinned
         uv0 = self.setup.mesh.uv[self.setup.mesh.pinned]
         rest0 = self._pin_rest[self.setup.mesh.pinned]
-        uv = self.model.uv[self.model.pinned]
+        uv = self.model.uv[pinned]
         d = np.linalg.norm(uv[:, None, :] - uv0[None, :, :], axis=2)
         return rest0[np.argmin(d, axis=1)]
 
@@ -402,7 +523,7 @@ class Simulator:
         x, v = m.positions(), m.velocities()
         st = metrics.face_strains(x, m.uv, m.faces, m.grain)
         area = m.rest_area
-        cfg_s = self.cfg.get("strain", {})
+        bands = self.bands()
         row = {"frame": self.frame, "time": round(self.time, 9), "vertices": m.n_verts,
                "faces": m.n_faces,
                "ms_total": sum(s.ms for s in self.stages)}
@@ -412,7 +533,7 @@ class Simulator:
         # Kinetic + elastic + gravitational (J): what metrics.energy_drift reads.
         row["total_energy"] = (row["kinetic_energy"] + self.dynamics.energy()
                                + metrics.gravitational_energy(x, m.mass,
-                                                              self.cfg["sim"]["gravity"]))
+                                                              self.settings.sim.gravity))
         for name in ("warp", "weft"):
             row[f"{name}_strain_max"], row[f"{name}_strain_rms"] = metrics.summarize(st[name], area)
         row["nan"] = int(not (np.all(np.isfinite(x)) and np.all(np.isfinite(v))))
@@ -424,9 +545,8 @@ class Simulator:
         own_v = np.max(np.maximum(own, 0.0), axis=1) if own.size else np.zeros(m.n_faces)
         row["own_violation_max"], row["own_violation_rms"] = metrics.summarize(own_v, area)
         row["bias_strain_max"] = float(np.max(np.abs(st["bias"])))
-        warp_band = tuple(cfg_s.get("warp", (-np.inf, np.inf)))
-        weft_band = tuple(cfg_s.get("weft", (-np.inf, np.inf)))
-        row["warp_violation_max"] = float(np.max(metrics.band_violation(st["warp"], warp_band)))
-        row["weft_violation_max"] = float(np.max(metrics.band_violation(st["weft"], weft_band)))
+        for name in ("warp", "weft"):
+            row[f"{name}_violation_max"] = float(np.max(metrics.band_violation(st[name],
+                                                                                bands[name])))
         row["cg_iterations"] = self.dynamics.last_cg_iters
         return row

@@ -149,6 +149,10 @@ def test_scripted_vertex_drag_moves_the_cloth_and_releases_it(st):
     assert hit == (0, target_v)
     assert not st.sim.model.pinned[target_v]
     st.begin_drag(*hit)
+    # The host's pin array and the kernels' pin field agree while held (the strain
+    # limiter and remeshing read the first, the dynamics the second).
+    assert st.sim.model.pinned[target_v] and st.sim.model.vert_pinned[target_v] == 1
+    assert st.sim.held_vertex == target_v
     goal = x[target_v] + np.array([0.0, 0.3, 0.4])
     st.drag(goal)
     run(st, 3)
@@ -157,9 +161,56 @@ def test_scripted_vertex_drag_moves_the_cloth_and_releases_it(st):
     neighbours = np.linalg.norm(st.sim.model.uv - st.sim.model.uv[target_v], axis=1) < 0.2
     assert xd[neighbours, 2].mean() > x[neighbours, 2].mean() + 0.05   # the cloth follows
     st.end_drag()
-    assert st.sim.model.vert_pinned[target_v] == 0
+    assert st.sim.model.vert_pinned[target_v] == 0 and not st.sim.model.pinned[target_v]
+    assert st.sim.held_vertex is None
     run(st, 5)
     assert np.linalg.norm(st.sim.model.positions()[target_v] - goal) > 0.02   # let go: it falls
+
+
+def test_a_held_vertex_stays_at_its_target_under_strain_limiting(st):
+    """The strain projection treats the held vertex as pinned: it does not move it off the
+    target the dynamics put it on, while the limits pull the cloth after it."""
+    st.switch_method("mapping")
+    run(st, 3)
+    x = st.sim.model.positions()
+    v = int(np.argmin(x[:, 1]))
+    st.begin_drag(0, v)
+    goal = x[v] + np.array([0.0, 0.05, 0.3])
+    st.drag(goal)
+    run(st, 4)
+    assert np.allclose(st.sim.model.positions()[v], goal, atol=1e-9)
+    assert st.sim.strain.last_converged
+    st.end_drag()
+
+
+def test_live_controls_refuse_bad_values_and_keep_the_settings(st):
+    from cloth.config import ConfigError
+    sim = st.sim
+    before = sim.settings.to_dict()
+    with pytest.raises(ConfigError, match="sim.substeps"):
+        sim.set_substeps(0)
+    with pytest.raises(ConfigError, match="strain.iters"):
+        sim.set_iterations(0)
+    with pytest.raises(ValueError, match="k_warp"):
+        sim.set_material(k_warp=0.0)
+    assert sim.settings.to_dict() == before and sim.substeps == before["sim"]["substeps"]
+    assert not st.set_material("k_weft", -1.0) and "k_weft" in st.message
+    sim.set_substeps(3)
+    assert sim.settings.sim.substeps == 3 and np.isclose(sim.h, 1 / (3 * before["sim"]["fps"]))
+
+
+def test_ui_changes_the_simulator_only_through_its_public_controls():
+    """#15: nothing in ui/ assigns to a simulator's attributes, writes a model's fields or
+    calls a private ``_make_`` method; the Simulator owns its live state."""
+    import re
+    bad = re.compile(r"\bs\.\w+ =|\bsim\.\w+ =|\bm\.vert_\w+\[|\._make_")
+    hits = []
+    for name in sorted(os.listdir(os.path.join(ROOT, "ui"))):
+        if name.endswith(".py"):
+            with open(os.path.join(ROOT, "ui", name)) as fh:
+                hits += [f"ui/{name}:{i}: {line.strip()}" for i, line in enumerate(fh, 1)
+                         if bad.search(line)]
+    assert not hits, "\n".join(hits)
 
 
 def test_orbit_camera_rays_hit_the_projected_points():
@@ -311,7 +362,7 @@ def test_comparison_view_is_reached_from_the_panel_and_left_again():
     assert st.set_compare(True), st.message
     assert st.compare and st.labels == ["svd", "warp-weft", "mapping"]
     assert [s.method for s in st.sims] == ["svd", "warp-weft", "mapping"]
-    assert all(s.cfg["strain"]["warp"] == [-0.02, 0.02] for s in st.sims)
+    assert all(s.settings.strain.warp == [-0.02, 0.02] for s in st.sims)
     run(st, 1)
     assert all(s.frame == 1 for s in st.sims)
     assert st.set_compare(False), st.message

@@ -88,3 +88,22 @@ def test_validate_rejects_a_bad_value_directly():
     cfg["pull"]["duration"] = 0.0
     with pytest.raises(ConfigError, match="pull.duration = 0.0 must be > 0 s"):
         validate(cfg)
+
+
+def test_settings_are_the_typed_checked_view_the_simulator_reads():
+    from cloth.settings import Settings
+    cfg = resolve(scenes.get("hanging").DEFAULTS, [])
+    cfg["scene"] = "hanging"
+    s = Settings(cfg)
+    assert s.strain.method == "mapping" and s.sim.substeps == 1 and "cloth" in s
+    assert s.to_dict() == cfg                       # nothing lost or added on the way
+    assert Settings.of(s) is s
+    t = s.replace("strain", iters=7, warp=[-0.02, 0.02])
+    assert (t.strain.iters, t.strain.warp) == (7, [-0.02, 0.02])
+    assert s.strain.iters == 100                    # the original is unchanged
+    with pytest.raises(ConfigError, match="strain.iters = 0 must be >= 1"):
+        s.replace("strain", iters=0)
+    with pytest.raises(ConfigError, match="unknown setting 'strain.itres'"):
+        s.replace("strain", itres=3)
+    with pytest.raises(AttributeError, match="no settings section 'pul'"):
+        s.pul

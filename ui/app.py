@@ -215,8 +215,9 @@ class App:
                 if st.set_compare(not st.compare):
                     self.reset_view()
             if not st.compare:
+                current = st.method
                 for m in STRAIN_METHODS:
-                    if g.checkbox(m, st.sim.method == m) and st.sim.method != m:
+                    if g.checkbox(m, m == current) and m != current:
                         st.switch_method(m)
             b = st.bands()
             for name in ("warp", "weft", "bias"):

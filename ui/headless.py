@@ -38,7 +38,7 @@ class HeadlessRun:
             window = open_window("Loom (offscreen)", self.size, show_window=False)
             self.renderer = ClothRenderer(window, self.sim.setup.camera)
         from scenes.schema import commented_toml
-        config_text = commented_toml(self.cfg)
+        config_text = commented_toml(self.sim.settings.to_dict())
         os.makedirs(self.out, exist_ok=True)
         self._clear_earlier_output()
         if self.meshes:

@@ -155,16 +155,17 @@ class Legend:
         return f"{v:.3g}"
 
 
-def strain_bands(strain_cfg):
-    """(warp, weft, bias) bands from a ``strain`` config section (bias automatic if [])."""
-    s = strain_cfg or {}
+def strain_bands(bands):
+    """(warp, weft, bias) from a mapping with any of those keys (``Simulator.bands()``, or a
+    ``strain`` settings section); a missing or empty bias band is the automatic one."""
+    s = bands or {}
     warp = tuple(s.get("warp") or (-0.01, 0.01))
     weft = tuple(s.get("weft") or (-0.05, 0.05))
     bias = tuple(s["bias"]) if s.get("bias") else metrics.default_bias_band(warp, weft)
     return warp, weft, bias
 
 
-def face_colors_legend(mode, x, uv, faces, grain, strain_cfg=None, rest_area=None,
+def face_colors_legend(mode, x, uv, faces, grain, bands=None, rest_area=None,
                        strains=None):
     """Per-face RGB for a colour mode and its ``Legend`` (None for shading). Heat maps come
     from ``cloth.metrics`` (one definition); pass ``strains`` if already computed."""
@@ -181,7 +182,7 @@ def face_colors_legend(mode, x, uv, faces, grain, strain_cfg=None, rest_area=Non
         colors = lambda v: _ramp((np.asarray(v) - lo) / (hi - lo), SEQ_SIZE)  # noqa: E731
         return colors(edge), Legend("triangle size (rest edge)", lo, hi, colors, unit="mm")
     st = strains if strains is not None else metrics.face_strains(x, uv, faces, grain)
-    warp, weft, bias = strain_bands(strain_cfg)
+    warp, weft, bias = strain_bands(bands)
     if mode == "violation":
         viol = np.maximum(metrics.band_violation(st["warp"], warp),
                           metrics.band_violation(st["weft"], weft))
@@ -204,9 +205,9 @@ def face_colors_legend(mode, x, uv, faces, grain, strain_cfg=None, rest_area=Non
                                    colors, marks=[band[0], 0.0, band[1]])
 
 
-def face_colors(mode, x, uv, faces, grain, strain_cfg=None, rest_area=None):
+def face_colors(mode, x, uv, faces, grain, bands=None, rest_area=None):
     """Per-face RGB for a colour mode and the legend as one line of text."""
-    rgb, legend = face_colors_legend(mode, x, uv, faces, grain, strain_cfg, rest_area)
+    rgb, legend = face_colors_legend(mode, x, uv, faces, grain, bands, rest_area)
     return rgb, (legend.text if legend else "")
 
 
@@ -241,7 +242,7 @@ class ClothRenderer:
         self._buffers = VertexBuffers()   # alive until the next frame (see ggui_buffers)
         self.ground_y, self.ground_half = ground_y, ground_half
         self.set_camera_cfg(camera_cfg)
-        self._make_ground()
+        self._add_ground()
         self._legend = None
 
     def set_camera_cfg(self, camera_cfg):
@@ -260,7 +261,7 @@ class ClothRenderer:
         w, h = self.window.get_window_shape()
         return w / max(h, 1)
 
-    def _make_ground(self, n=13):
+    def _add_ground(self, n=13):
         half = self.ground_half
         s = np.linspace(-half, half, n)
         lines = []
@@ -396,8 +397,8 @@ def draw_cloth(renderer, sim, key="cloth", color="shading", wireframe=False, smo
     x = m.positions()
     if strains is None and color not in ("shading", "size"):
         strains = sim.face_strains()
-    rgb, legend = face_colors_legend(color, x, m.uv, m.faces, m.grain, sim.cfg.get("strain"),
-                                     m.rest_area, strains=strains)
+    rgb, legend = face_colors_legend(color, x, m.uv, m.faces, m.grain, sim.bands(), m.rest_area,
+                                     strains=strains)
     renderer.add_mesh(key, x, m.faces, rgb, wireframe=wireframe, smooth=smooth, offset=offset)
     for k, o in enumerate(sim.setup.obstacles):
         v, f = o.mesh_at(sim.time)

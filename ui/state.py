@@ -3,7 +3,9 @@ and mouse gesture of ``ui/app.py`` is one method here, so tests drive it without
 
 One ``AppState`` holds one simulator, or three in the comparison view (the same scene with
 the methods svd, warp-weft and mapping side by side). Controls that change settings apply to
-every simulator; ``switch_method`` applies to the single view only.
+every simulator; ``switch_method`` applies to the single view only. The state changes a
+simulator only through its public controls (``Simulator.set_*``, ``hold_vertex``, ``reset``);
+its own ``cfg`` is the app's record of the settings, from which the simulators are rebuilt.
 
     state = AppState.from_scene("hanging")
     state.switch_method("mapping"); state.set_band("warp", hi=0.02)
@@ -43,7 +45,7 @@ class AppState:
         self.failed = False         # the simulation diverged or a stage raised: reset first
         self.render_ms = 0.0
         self.fps = 0.0
-        self.grab = None            # (sim index, vertex, was_pinned, old_target, uv) while held
+        self.grab = None            # (sim index, vertex) while a vertex is held
         self.grab_target = None
         self._strain_cache = {}
         self.auto_bias = not cfg.get("strain", {}).get("bias")
@@ -75,8 +77,6 @@ class AppState:
             self.labels = [self.sims[0].method]
         self.offsets = self._layout()
         self.grab = None
-        self._self_solvers = [s.collider.self_solver if s.collider is not None else None
-                              for s in self.sims]
         self._strain_cache.clear()
 
     def _layout(self):
@@ -142,8 +142,8 @@ class AppState:
                                 f" {first[0][:160] if first else ''} (traceback on stderr). "
                                 "Press reset.")
                 return False
-            if self.grab is not None and self.grab[0] == i and s.stage("remesh").enabled:
-                self._regrab()
+            if self.grab is not None and self.grab[0] == i:
+                self.grab = (i, s.held_vertex)      # renumbered by a remesh
         self._strain_cache.clear()
         return True
 
@@ -155,25 +155,11 @@ class AppState:
         self.message, self.failed = "", False
         try:
             for s in self.sims:
-                self._restart(s)
+                s.reset()
         except Exception:       # anything unexpected: the slow, sure way
             traceback.print_exc()
             self._install(None, copy.deepcopy(self.cfg))
         self._strain_cache.clear()
-
-    @staticmethod
-    def _restart(s):
-        m = s.model
-        m.load(s.setup.mesh)                 # the builder's mesh: the initial state
-        s.dynamics.on_mesh_changed()
-        if s.strain is not None:
-            s.strain.on_mesh_changed()       # cold multipliers
-        if s.collider is not None and hasattr(s.collider, "on_mesh_changed"):
-            s.collider.on_mesh_changed()
-        s.frame, s.time = 0, 0.0
-        s.last_good = m.mesh_arrays()
-        for stage in s.stages:
-            stage.ms = 0.0
 
     def switch_scene(self, name):
         """Load another scene with its defaults (the colour mode is kept)."""
@@ -231,11 +217,7 @@ class AppState:
 
     def bands(self):
         """Current (warp, weft, bias) bands; bias from the automatic rule when auto."""
-        s = self.cfg["strain"]
-        warp, weft = tuple(s["warp"]), tuple(s["weft"])
-        bias = metrics.default_bias_band(warp, weft) if self.auto_bias or not s["bias"] \
-            else tuple(s["bias"])
-        return {"warp": warp, "weft": weft, "bias": bias}
+        return self.sim.bands()
 
     def set_band(self, which, lo=None, hi=None):
         """Move one edge (or both) of the warp, weft or bias band; min stays <= 0 <= max.
@@ -250,19 +232,11 @@ class AppState:
         if which == "bias":
             self.auto_bias = False
         elif self.auto_bias:
-            b = self.bands()
-            b[which] = (lo, hi)
-            new["bias"] = metrics.default_bias_band(b["warp"], b["weft"])
+            new["bias"] = "auto"
         ok = self._each(lambda s: s.set_bands(**new))
         if ok:
             for k, v in new.items():
-                if k != "bias" or not self.auto_bias:
-                    self.cfg["strain"][k] = list(v)
-                for s in self.sims:
-                    if k != "bias" or not self.auto_bias:
-                        s.cfg["strain"][k] = list(v)
-                    else:
-                        s.cfg["strain"]["bias"] = []
+                self.cfg["strain"][k] = [] if v == "auto" else list(v)
         self._strain_cache.clear()
         return ok
 
@@ -270,41 +244,29 @@ class AppState:
         self.auto_bias = bool(on)
         if on:
             self.cfg["strain"]["bias"] = []
-            b = self.bands()
-            return self._each(lambda s: (s.set_bands(bias=b["bias"]),
-                                         s.cfg["strain"].__setitem__("bias", [])))
+            return self._each(lambda s: s.set_bands(bias="auto"))
         return True
 
     def set_iterations(self, n):
         n = max(1, int(n))
-        self.cfg["strain"]["iters"] = n
-        for s in self.sims:
-            s.cfg["strain"]["iters"] = n
-            if s.strain is not None:
-                s.strain.max_iters = n
+        if self._each(lambda s: s.set_iterations(n)):
+            self.cfg["strain"]["iters"] = n
 
     # -- time step and material ---------------------------------------------------------------
     def set_substeps(self, n):
         n = max(1, int(n))
-        self.cfg["sim"]["substeps"] = n
-        for s in self.sims:
-            s.cfg["sim"]["substeps"] = n
-            s.substeps = n
-            s.h = 1.0 / (s.cfg["sim"]["fps"] * n)
+        if self._each(lambda s: s.set_substeps(n)):
+            self.cfg["sim"]["substeps"] = n
 
     def set_material(self, key, value):
         """Change a stiffness or damping live (the dynamics reads the material every step)."""
         if key not in MATERIAL_KEYS:
             raise ValueError(f"material key must be one of {MATERIAL_KEYS}")
         value = float(value)
-        if value < 0 or (key in ("k_warp", "k_weft") and value <= 0):
-            self.message = f"material.{key} must be positive"
-            return False
-        self.cfg["material"][key] = value
-        for s in self.sims:
-            s.cfg["material"][key] = value
-            setattr(s.model.material, key, value)
-        return True
+        ok = self._each(lambda s: s.set_material(**{key: value}))
+        if ok:
+            self.cfg["material"][key] = value
+        return ok
 
     # -- optional stages ----------------------------------------------------------------------
     @property
@@ -320,35 +282,24 @@ class AppState:
             self.message = "this scene has no remeshing settings"
             return False
 
-        def apply(s):
-            if on and s.remesher is None:
-                s._make_remesher(s.cfg["remesh"])
-            s.stage("remesh").enabled = bool(on) and s.remesher is not None
-            s.cfg["remesh"]["enabled"] = bool(on)
-        ok = self._each(apply)
+        ok = self._each(lambda s: s.set_remesh(on))
         if ok:
             self.cfg["remesh"]["enabled"] = bool(on)
         return ok
 
     @property
     def has_self_collision(self):
-        return any(sc is not None for sc in self._self_solvers)
+        return any(s.can_self_collide for s in self.sims)
 
     @property
     def self_collision_on(self):
-        c = self.sim.collider
-        return c is not None and c.self_solver is not None
+        return self.sim.self_collision_on
 
     def set_self_collision(self, on):
         if not self.has_self_collision:
             self.message = "this scene has no self-collision"
             return False
-        for s, solver in zip(self.sims, self._self_solvers):
-            s.collider.self_solver = solver if on else None
-            s.collider.self_collision = bool(on)
-            if not s.setup.obstacles:
-                s.stage("collision").enabled = bool(on)
-        return True
+        return self._each(lambda s: s.set_self_collision(on))
 
     # -- picking and dragging -----------------------------------------------------------------
     def world_positions(self, i):
@@ -385,47 +336,25 @@ class AppState:
         """Hold vertex ``v`` of simulator ``i``: it becomes a pin that follows ``drag``."""
         if self.grab is not None:
             self.end_drag()
-        m = self.sims[i].model
-        was = int(m.vert_pinned[v])
-        old = np.array(m.vert_pin_target[v], float)
-        self.grab = (i, int(v), was, old, m.uv[v].copy())
-        self.grab_target = m.positions()[v] + self.offsets[i]
-        self._pin(i, v, self.grab_target - self.offsets[i])
+        self.grab = (i, int(v))
+        self.grab_target = self.world_positions(i)[v]
+        self.sims[i].hold_vertex(v, self.grab_target - self.offsets[i])
 
     def drag(self, point):
         """Move the held vertex's target to ``point`` (world, as drawn)."""
         if self.grab is None:
             return
-        i, v = self.grab[:2]
+        i, v = self.grab
         self.grab_target = np.asarray(point, float)
-        self._pin(i, v, self.grab_target - self.offsets[i])
+        self.sims[i].hold_vertex(v, self.grab_target - self.offsets[i])
 
     def end_drag(self):
         """Release: the vertex gets back its own pin state and target."""
         if self.grab is None:
             return
-        i, v, was, old, _ = self.grab
-        m = self.sims[i].model
-        if v < m.n_verts:
-            m.vert_pinned[v] = was
-            m.vert_pin_target[v] = old.tolist()
+        self.sims[self.grab[0]].release_vertex()
         self.grab = None
         self.grab_target = None
-
-    def _pin(self, i, v, target):
-        m = self.sims[i].model
-        m.vert_pinned[v] = 1
-        m.vert_pin_target[v] = [float(c) for c in target]
-
-    def _regrab(self):
-        """After a remesh, vertex numbers change: find the held material point again."""
-        i, _, was, old, uv = self.grab
-        m = self.sims[i].model
-        v = int(np.argmin(np.linalg.norm(m.uv - uv, axis=1)))
-        was = int(m.pinned[v])
-        old = np.array(m.vert_pin_target[v], float)
-        self.grab = (i, v, was, old, uv)
-        self._pin(i, v, self.grab_target - self.offsets[i])
 
     def drag_plane_point(self, origin, direction):
         """Where a ray meets the plane through the held point facing the ray (for mouse

@@ -215,12 +215,18 @@ class StrainLimiter:
         self._system_ready = False
 
     def set_bands(self, warp=None, weft=None, bias=None):
-        """Change the warp / weft / bias bands (strains). Without an explicit bias band the
-        bias follows the warp and weft bands (``metrics.default_bias_band``)."""
+        """Change the warp / weft / bias bands (strains). Without an explicit bias band (or
+        with ``bias="auto"``) the bias follows the warp and weft bands
+        (``metrics.default_bias_band``)."""
         if warp is not None:
             self.warp = _check_band("warp", warp)
         if weft is not None:
             self.weft = _check_band("weft", weft)
+        if isinstance(bias, str):
+            if bias != "auto":
+                raise ValueError(f"bias band must be [min, max] or \"auto\" (got {bias!r})")
+            self._explicit_bias = False
+            bias = None
         if bias is not None:
             self.bias = _check_band("bias", bias)
             self._explicit_bias = True
