@@ -30,15 +30,13 @@ mixed      (tr H)^2 / 2 from the cotangent Laplacian at interior vertices (the f
 """
 import argparse
 import os
-import sys
 import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, ROOT)
 
-import numpy as np  # noqa: E402
-import scipy.sparse as sp  # noqa: E402
-import scipy.sparse.linalg as spl  # noqa: E402
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spl
 
 L_HALF, WIDTH = 0.20, 0.08
 PATTERNS = ("regular", "alternating", "random")

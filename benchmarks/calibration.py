@@ -33,13 +33,11 @@ rho g (L - h / 2) / strain alongside.
 """
 import argparse
 import os
-import sys
 import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, ROOT)
 
-import numpy as np  # noqa: E402
+import numpy as np
 
 G_ACC = 9.81
 
@@ -370,7 +368,7 @@ def run(quick=False, log=print):
 
 
 def report(rows, out, seconds, command):
-    from benchmarks.speed_vs_error import commit, machine
+    from benchmarks.harness import commit, machine
     os.makedirs(out, exist_ok=True)
     cant = [r for r in rows if r["kind"] == "cantilever"]
     strip = [r for r in rows if r["kind"] == "strip"]

@@ -3,11 +3,7 @@
     python -m benchmarks.frame_cost --scene hanging --resolutions 23 45 90 --frames 30
 """
 import argparse
-import os
-import sys
 import time
-
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
 def main():

@@ -14,11 +14,8 @@ largest velocity and position difference from a tightly converged matrix-free CG
 medians over the steps.
 """
 import argparse
-import os
 import sys
 import time
-
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
 def main():

@@ -21,13 +21,12 @@ import sys
 import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, ROOT)
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from benchmarks import speed_vs_error  # noqa: E402
+from benchmarks import harness, speed_vs_error
 
-from cloth.strain.constraints import METHODS  # noqa: E402
+from cloth.strain.constraints import METHODS
 
 
 def log(*args):
@@ -40,7 +39,7 @@ def run(scene, method, frames, extra=None):
     overrides = {"remesh": {"enabled": True}, "strain": {"method": method}}
     for k, v in (extra or {}).items():
         overrides.setdefault(k, {}).update(v)
-    module, cfg, setup = speed_vs_error.configure(scene, overrides)
+    module, cfg, setup = harness.configure(scene, overrides)
     sim = Simulator(setup, cfg)
     rows, t0 = [], time.perf_counter()
     for frame in range(1, frames + 1):
@@ -143,7 +142,7 @@ def main(argv=None):
     backend.init("cpu", "f64")
     os.makedirs(args.out, exist_ok=True)
     t0 = time.perf_counter()
-    where = (speed_vs_error.commit(), speed_vs_error.machine())
+    where = (harness.commit(), harness.machine())
     runs, summaries, cfg = {}, [], None
     for method in args.methods.split(","):
         log(f"{args.scene}, {method}, {frames} frames")

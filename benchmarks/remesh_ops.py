@@ -31,11 +31,10 @@ import sys
 import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, ROOT)
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from benchmarks import speed_vs_error  # noqa: E402
+from benchmarks import harness
 
 REMESH_ON = {"remesh": {"enabled": True}}
 SCENES = {                                   # part 1: scene -> overrides besides REMESH_ON
@@ -228,7 +227,7 @@ def warm_cold_row(name, rows):
 def machine():
     """The sweep's machine line plus the load average when the run started."""
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    return f"{speed_vs_error.machine()} (load average {load:.1f} at start)"
+    return f"{harness.machine()} (load average {load:.1f} at start)"
 
 
 def write_doc(path, cmd, seconds, where, p, part1, sweep, wc):
@@ -347,7 +346,7 @@ def main(argv=None):
     p = QUICK if args.quick else FULL
     from cloth import backend
     backend.init("cpu", "f64")
-    t0, where = time.perf_counter(), (speed_vs_error.commit(), machine())
+    t0, where = time.perf_counter(), (harness.commit(), machine())
     part1, sweep, wc = measure(p)
     argv = sys.argv[1:] if argv is None else argv
     cmd = " ".join(["python -m benchmarks.remesh_ops", *argv])

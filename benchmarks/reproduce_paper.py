@@ -11,11 +11,9 @@ time) and ``table1.png`` (shaded and warp-strain images from one camera).
 """
 import argparse
 import os
-import sys
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from benchmarks.paper_common import (BANDS, METHODS, label, measure,  # noqa: E402,F401
+from benchmarks.paper_common import (BANDS, METHODS, label, measure,  # noqa: F401
                                      render_pair, settle)
 
 

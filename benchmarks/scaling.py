@@ -35,11 +35,9 @@ import time
 
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from benchmarks.harness import commit, machine
 
-from benchmarks.speed_vs_error import commit, machine  # noqa: E402
-
-from cloth.strain.constraints import METHODS  # noqa: E402
+from cloth.strain.constraints import METHODS
 STAGES = ("dynamics", "collision", "self_collision", "remesh") + tuple(
     f"strain_limit:{m}" for m in METHODS)
 # Vertices per side: 2 (n - 1)^2 triangles, from 512 to 100352.

@@ -30,11 +30,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-
-from cloth.strain.constraints import METHODS  # noqa: E402
-from benchmarks.speed_vs_error import SimulatorPool, commit, configure, machine, \
-    nudge_start, snapshot  # noqa: E402
+from cloth.strain.constraints import METHODS
+from benchmarks.harness import SimulatorPool, commit, configure, machine
+from benchmarks.speed_vs_error import nudge_start, snapshot
 
 GRAVITY_DROP = 2.0      # m: the pins' height above the ground in every scene used here
 SETTLE = 15             # frames over which ``ke_end_max`` averages

@@ -129,7 +129,7 @@ def table2(args):
             ("curvature_energy", "whole-shirt curv. energy"), ("kinetic_energy", "KE (J)"),
             ("ms_per_frame", "ms/frame")] + [(f"ms_{st}", f"ms {st}") for st in STAGES] + \
         [("check", "check_final")]
-    from benchmarks.speed_vs_error import commit
+    from benchmarks.harness import commit
     rev = commit()
     lines = [f"# Paper Table 2: T-shirt at rest ({rows[0]['faces']} triangles, {frames} frames)",
              "", f"Command: `python -m benchmarks.reproduce_paper --table 2 --frames {frames} "

@@ -7,7 +7,7 @@ substep on the host at the substep's start and end time and sent to the kernel a
 
 The collider runs once per substep (METHOD.md section 1, step 5):
 
-    col = Collider(model, [Plane(...), Sphere(...)], thickness=0.004, self_collision=False)
+    col = Collider(model, [Plane(...), Sphere(...)], thickness=0.005, self_collision=False)
     col.resolve(h, t)          # t = time at the *start* of the substep, h = substep length
 
 With strain limiting the Simulator runs it before the projection and hands the projection the
@@ -44,6 +44,11 @@ from .collision_mesh import SDFGrid
 
 vec3 = ti.types.vector(3, float)
 mat3 = ti.types.matrix(3, 3, float)
+
+
+# The distance cloth keeps from obstacles (m) unless a scene says otherwise: a few
+# millimetres, about a fabric's thickness (scenes' collision.thickness; tshirt uses 4 mm).
+THICKNESS = 0.005
 
 
 class CollisionError(ValueError):
@@ -401,7 +406,7 @@ class Collider:
     After ``resolve``: ``last_ms`` (wall time, ms, with ``last_ms_obstacles`` and
     ``last_ms_self``), ``last_contacts`` (vertex-obstacle contacts), ``last_self_pairs``."""
 
-    def __init__(self, model, obstacles=(), thickness=0.004, self_collision=False,
+    def __init__(self, model, obstacles=(), thickness=THICKNESS, self_collision=False,
                  self_thickness=None, self_iterations=6, ccd_samples=32):
         if not thickness > 0:
             raise CollisionError(f"collision thickness must be > 0 m (got {thickness}); "

@@ -20,6 +20,7 @@ from typing import Optional
 from .config import ConfigError, NUMBER_OR_WORD, merge
 from .remesh import RemeshParams
 from .strain.constraints import METHODS
+from .strain.solver import AL_ROUNDS
 
 STRAIN_METHODS = METHODS + ("none",)
 
@@ -75,12 +76,7 @@ COMMON_DEFAULTS = {
         # Newton steps of the AL: "cholesky" (sparse direct, CHOLMOD) or "pcg" (block-Jacobi
         # PCG in one kernel, the earlier solver).
         "linear_solver": "pcg",
-        # Outer-iteration budget per projection: a cap for solves that stall, since converged
-        # solves stop at `tol` (2-8 AL rounds on hanging). 50 was too tight: svd on hanging with
-        # remeshing ran out once in 300 frames (violation 1.3e-3); that solve, continued,
-        # converged 84 rounds later, and with 100 all 300 frames pass
-        # (docs/remesh/remesh_limits.md).
-        "iters": 100,
+        "iters": AL_ROUNDS,       # outer-round budget per projection (why 100: strain/solver.py)
         "tol": 1e-4,              # largest violation accepted, in strain
         # mapping only: width (in eta1^2 - eta2^2) of the closure of its feasible set at
         # isotropy, where the paper's constraint depends on an arbitrary principal frame;

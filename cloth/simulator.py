@@ -262,10 +262,10 @@ class Simulator:
         self.strain.project(h, contacts=with_contacts, warm=warm)
 
     def _make_collider(self):
-        from .collision import Collider
+        from .collision import THICKNESS, Collider
         c = self.settings.section("collision")
         self.collider = Collider(self.model, self.setup.obstacles,
-                                 thickness=c.thickness if c is not None else 0.005,
+                                 thickness=c.thickness if c is not None else THICKNESS,
                                  self_collision=self.setup.self_collision)
 
     def _collide(self):

@@ -1,6 +1,7 @@
 """The classic draping test: a square sheet falls onto a sphere and the ground."""
 import numpy as np
 
+from cloth.collision import THICKNESS
 from cloth.model import MeshArrays
 from cloth.sheet import make_sheet
 from cloth.simulator import SceneSetup
@@ -17,7 +18,7 @@ DEFAULTS = scene_defaults({
     },
     "sphere": {"center": [0.0, 0.55, 0.0], "radius": 0.3, "mu": 0.4},
     "ground": {"mu": 0.6},
-    "collision": {"thickness": 0.005},
+    "collision": {"thickness": THICKNESS},
     "strain": {"method": "mapping"},
     "sim": {"frames": 120},
 })

@@ -41,6 +41,7 @@ import os
 
 import numpy as np
 
+from cloth.collision import THICKNESS
 from cloth.config import ConfigError, load_toml
 
 from .common import material_from, resolve, scene_defaults
@@ -58,7 +59,7 @@ FILE_SECTIONS = {
     },
     "pins": [],                   # moving pin groups: {box = [...], motion = {...}}
     "obstacles": [],              # [[obstacles]] tables, see OBSTACLE_KEYS
-    "collision": {"thickness": 0.005, "self_collision": False},
+    "collision": {"thickness": THICKNESS, "self_collision": False},
     "camera": {"position": [0.0, 1.5, 3.0], "lookat": [0.0, 1.0, 0.0], "fov": 40.0},
 }
 

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from benchmarks import stability
-from benchmarks.speed_vs_error import (RESOLUTION, SimulatorPool, overrides_for, run, sweep,
-                                       write_outputs)
+from benchmarks.harness import SimulatorPool
+from benchmarks.speed_vs_error import RESOLUTION, overrides_for, run, sweep, write_outputs
 
 # Two resolutions a factor 4 apart in triangles; 13 is also the stability cases' mesh, so
 # its Simulator is compiled once for both. svd is left to the documented sweep (and the

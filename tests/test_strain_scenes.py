@@ -33,7 +33,9 @@ def test_switching_method_mid_run_takes_effect_next_substep():
         sim.set_method(method)
         sim.step_frame()
         row = sim.metrics_row()
-        assert row["method"] == method and row["sl_iterations"] >= 0
+        # Each new method starts outside its own bands (the last one's solution or the free
+        # sheet), so the projection works in this very frame.
+        assert row["method"] == method and row["sl_iterations"] >= 1
         assert row["own_violation_max"] < TOL
     sim.set_bands(warp=(-0.02, 0.02))
     sim.step_frame()

@@ -81,6 +81,13 @@ def _check_band(name, band, lower_limit=-1.0):
     return lo, hi
 
 
+# The AL's outer-round budget per projection, the one default (settings strain.iters too): a
+# cap for solves that stall, since converged solves stop at tol (2-8 rounds on hanging). 50
+# was too tight: svd on hanging with remeshing ran out once in 300 frames (violation 1.3e-3);
+# that solve, continued, converged 84 rounds later, and with 100 all 300 frames pass
+# (docs/remesh/remesh_limits.md).
+AL_ROUNDS = 100
+
 class StrainLimiter:
     """Strain-limiting projection of a ``ClothModel``'s state.
 
@@ -138,7 +145,7 @@ class StrainLimiter:
         if not tol > 0:
             raise StrainLimitError(f"tol must be > 0 (got {tol}); 1e-4 is 0.01 % strain")
         if max_iters is None:
-            max_iters = 40 if solver == "al" else 2000
+            max_iters = AL_ROUNDS if solver == "al" else 2000
         for name, val in (("max_iters", max_iters), ("max_newton", max_newton),
                           ("max_cg", max_cg)):
             if int(val) < 1:
