@@ -292,7 +292,7 @@ def test_picking_matches_what_ggui_draws(rendered):
 
 
 def test_heat_map_marks_the_band_edges():
-    from ui.render import face_colors_legend
+    from ui.colormap import face_colors_legend
     from cloth.sheet import make_sheet
     uv, faces = make_sheet(1, 1, 3, 3)
     grain = np.tile(np.eye(2), (len(faces), 1, 1))

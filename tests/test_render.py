@@ -2,7 +2,8 @@
 import numpy as np
 import pytest
 
-from ui.render import RenderUnavailable, face_colors
+from ui.colormap import face_colors
+from ui.render import RenderUnavailable
 
 
 @pytest.fixture(scope="module")
@@ -17,7 +18,7 @@ def renderer():
 
 def test_offscreen_frame_shows_the_cloth(renderer):
     from tests.test_scenes import make_sim
-    from ui.render import CLOTH_FRONT, draw_simulation
+    from ui.render import draw_simulation
     sim, _ = make_sim(cloth={"resolution": 7}, strain={"method": "none"})
     for _ in range(3):
         sim.step_frame()

@@ -22,7 +22,8 @@ import taichi as ti
 
 from cloth.simulator import STRAIN_METHODS
 
-from .render import COLOR_MODES, ClothRenderer, draw_cloth, open_window
+from .colormap import COLOR_MODES
+from .render import ClothRenderer, draw_cloth, open_window
 from .state import AppState
 
 PANEL = (0.0, 0.0, 0.26, 1.0)            # controls: x, y (top-down), width, height

@@ -5,41 +5,15 @@ The cloth is drawn "exploded" (three render vertices per face) so a face can car
 (a strain heat map per triangle). Normals are per vertex (smooth shading, the default) or per
 face (flat). GGUI's two-sided lighting uses |n . l|, so both sides of the cloth are lit.
 
-Heat maps are diverging (blue negative, white zero, red positive) and centred on zero; the
-colour steps from pale to saturated at the band edges, so where a face leaves its strain band
-shows on the cloth as a contour, and the colour bar marks the edges with ticks.
+Colours and legends come from ``ui/colormap.py``.
 """
-from dataclasses import dataclass, field
-
 import numpy as np
 import taichi as ti
 
-from cloth import metrics
-
 from .camera import OrbitCamera
+from .colormap import BACKGROUND, GROUND, OBSTACLE, WIRE, face_colors_legend
 from .ggui_buffers import (VertexBuffers, draw_lines, draw_mesh, draw_particles,
                            draw_triangles_2d)
-
-COLOR_MODES = ("shading", "warp-strain", "weft-strain", "bias-strain", "principal-strain",
-               "violation", "size")
-CLOTH_FRONT = np.array([0.80, 0.45, 0.30])
-OBSTACLE = np.array([0.62, 0.66, 0.72])
-GROUND = np.array([0.55, 0.57, 0.60])
-BACKGROUND = (0.96, 0.96, 0.97)
-WIRE = (0.15, 0.15, 0.18)
-
-# Diverging ramp (value / edge, colour): pale up to the band edge, saturated past it.
-WHITE = np.array([0.95, 0.95, 0.95])
-PALE_RED, RED, DARK_RED = np.array([0.97, 0.66, 0.55]), np.array([0.86, 0.22, 0.14]), \
-    np.array([0.45, 0.0, 0.05])
-PALE_BLUE, BLUE, DARK_BLUE = np.array([0.62, 0.74, 0.95]), np.array([0.17, 0.38, 0.86]), \
-    np.array([0.04, 0.08, 0.42])
-# Sequential ramp (violation, triangle size).
-SEQ = [(0.0, np.array([0.99, 0.93, 0.55])), (0.5, np.array([0.93, 0.45, 0.15])),
-       (1.0, np.array([0.45, 0.02, 0.10]))]
-SEQ_SIZE = [(0.0, np.array([0.23, 0.30, 0.75])), (0.5, np.array([0.55, 0.80, 0.60])),
-            (1.0, np.array([0.98, 0.85, 0.25]))]
-INSIDE = np.array([0.82, 0.86, 0.88])     # violation mode: faces inside every band
 
 
 class RenderUnavailable(RuntimeError):
@@ -93,124 +67,6 @@ def open_window(title, size, show_window, vsync=None):
 
 
 # -- colours ---------------------------------------------------------------------------------
-def diverging(values, scale):
-    """Blue (negative) - white (0) - red (positive) colours for ``values / scale`` in [-1, 1]."""
-    t = np.clip(np.asarray(values) / max(scale, 1e-12), -1.0, 1.0)[:, None]
-    white = np.array([0.95, 0.95, 0.95])
-    red, blue = np.array([0.80, 0.10, 0.10]), np.array([0.15, 0.30, 0.85])
-    return np.where(t >= 0, white + t * (red - white), white - t * (blue - white))
-
-
-def _ramp(t, stops):
-    t = np.clip(np.asarray(t, float), 0.0, 1.0)
-    pos = np.array([s[0] for s in stops])
-    cols = np.array([s[1] for s in stops])
-    return np.stack([np.interp(t, pos, cols[:, c]) for c in range(3)], axis=-1)
-
-
-def band_diverging(values, band):
-    """Zero-centred diverging colours with a step at the band edges ``band = (lo, hi)``
-    (lo < 0 < hi): white at 0, pale up to the edge, saturated from the edge to full colour at
-    twice the edge. Returns (N, 3)."""
-    lo, hi = band
-    hi = max(hi, 1e-6)
-    lo = min(lo, -1e-6)
-    s = np.asarray(values, float)
-    out = np.empty(s.shape + (3,))
-    pos = s >= 0
-    tp = s[pos] / hi                                  # 1 at the band edge
-    out[pos] = np.where((tp <= 1.0)[:, None], _ramp(tp, [(0, WHITE), (1, PALE_RED)]),
-                        _ramp(tp - 1.0, [(0, RED), (1, DARK_RED)]))
-    tn = s[~pos] / lo
-    out[~pos] = np.where((tn <= 1.0)[:, None], _ramp(tn, [(0, WHITE), (1, PALE_BLUE)]),
-                         _ramp(tn - 1.0, [(0, BLUE), (1, DARK_BLUE)]))
-    return out
-
-
-@dataclass
-class Legend:
-    """What a colour mode means: a colour bar from ``lo`` to ``hi`` with tick ``marks`` (band
-    edges), for the panel (numbers) and the canvas (the bar)."""
-    title: str
-    lo: float
-    hi: float
-    colors: callable                     # values (N,) -> rgb (N, 3)
-    marks: list = field(default_factory=list)
-    unit: str = "strain"
-    note: str = ""
-
-    @property
-    def text(self):
-        fmt = self.fmt
-        s = f"{self.title}: {fmt(self.lo)} .. {fmt(self.hi)}"
-        if self.marks:
-            s += " | band edges " + ", ".join(fmt(m) for m in self.marks)
-        return s + (f" ({self.note})" if self.note else "")
-
-    def fmt(self, v):
-        if self.unit == "strain":
-            return f"{100 * v:+.2f}%"
-        if self.unit == "mm":
-            return f"{v:.1f} mm"
-        return f"{v:.3g}"
-
-
-def strain_bands(bands):
-    """(warp, weft, bias) from a mapping with any of those keys (``Simulator.bands()``, or a
-    ``strain`` settings section); a missing or empty bias band is the automatic one."""
-    s = bands or {}
-    warp = tuple(s.get("warp") or (-0.01, 0.01))
-    weft = tuple(s.get("weft") or (-0.05, 0.05))
-    bias = tuple(s["bias"]) if s.get("bias") else metrics.default_bias_band(warp, weft)
-    return warp, weft, bias
-
-
-def face_colors_legend(mode, x, uv, faces, grain, bands=None, rest_area=None,
-                       strains=None):
-    """Per-face RGB for a colour mode and its ``Legend`` (None for shading). Heat maps come
-    from ``cloth.metrics`` (one definition); pass ``strains`` if already computed."""
-    if mode == "shading":
-        return np.tile(CLOTH_FRONT, (len(faces), 1)), None
-    if mode not in COLOR_MODES:
-        raise ValueError(f"unknown colour mode '{mode}': use one of {', '.join(COLOR_MODES)}")
-    if mode == "size":
-        area = metrics.material_areas(uv, faces) if rest_area is None else rest_area
-        edge = 1e3 * np.sqrt(2.0 * np.asarray(area))      # mm: leg of a right triangle
-        lo, hi = float(edge.min()), float(edge.max())
-        if hi - lo < 1e-9:
-            lo, hi = lo - 0.5, hi + 0.5
-        colors = lambda v: _ramp((np.asarray(v) - lo) / (hi - lo), SEQ_SIZE)  # noqa: E731
-        return colors(edge), Legend("triangle size (rest edge)", lo, hi, colors, unit="mm")
-    st = strains if strains is not None else metrics.face_strains(x, uv, faces, grain)
-    warp, weft, bias = strain_bands(bands)
-    if mode == "violation":
-        viol = np.maximum(metrics.band_violation(st["warp"], warp),
-                          metrics.band_violation(st["weft"], weft))
-        scale = 0.01
-
-        def colors(v):
-            v = np.asarray(v, float)
-            return np.where((v <= 0)[:, None], INSIDE, _ramp(v / scale, SEQ))
-        return colors(viol), Legend("band violation (warp, weft)", 0.0, scale, colors,
-                                    note="grey: inside both bands")
-    key, band, title = {
-        "warp-strain": ("warp", warp, "warp strain"),
-        "weft-strain": ("weft", weft, "weft strain"),
-        "bias-strain": ("bias", bias, "bias strain"),
-        "principal-strain": ("principal_max", (min(warp[0], weft[0]), max(warp[1], weft[1])),
-                             "max principal strain"),
-    }[mode]
-    colors = lambda v: band_diverging(v, band)  # noqa: E731
-    return colors(st[key]), Legend(title, 2 * min(band[0], -1e-6), 2 * max(band[1], 1e-6),
-                                   colors, marks=[band[0], 0.0, band[1]])
-
-
-def face_colors(mode, x, uv, faces, grain, bands=None, rest_area=None):
-    """Per-face RGB for a colour mode and the legend as one line of text."""
-    rgb, legend = face_colors_legend(mode, x, uv, faces, grain, bands, rest_area)
-    return rgb, (legend.text if legend else "")
-
-
 def vertex_normals(x, faces):
     """Area-weighted unit vertex normals (V, 3)."""
     n = np.cross(x[faces[:, 1]] - x[faces[:, 0]], x[faces[:, 2]] - x[faces[:, 0]])
