@@ -400,7 +400,7 @@ class SceneFile:
     @staticmethod
     def _make_obstacle(s):
         from cloth import collision as col
-        from cloth.collision_union import CapsuleUnion
+        from cloth.collision import CapsuleUnion
         kind, mu = s["kind"], s["mu"]
         R0 = np.eye(3)
         if kind == "sphere":

@@ -18,7 +18,7 @@ DEFAULTS = scene_defaults({
 def build(cfg):
     from assets import load_mannequin, load_tshirt_mesh
     from cloth.collision import Plane
-    from cloth.collision_union import CapsuleUnion
+    from cloth.collision import CapsuleUnion
     from .common import material_from
     mesh = load_tshirt_mesh()
     stitches = np.asarray(mesh.extras["stitches"], np.int32)

@@ -425,7 +425,7 @@ def test_self_collision_follows_a_refilled_mesh():
 def test_capsule_union_reports_its_two_nearest_parts():
     """Contact planes come from the two nearest primitives (a concave corner needs both)."""
     from cloth.collision import Collider
-    from cloth.collision_union import CapsuleUnion
+    from cloth.collision import CapsuleUnion
     from tests.helpers import sheet_model
     body = CapsuleUnion([{"kind": "sphere", "center": [0.0, 0.0, 0.0], "radius": 0.1},
                          {"kind": "sphere", "center": [0.3, 0.0, 0.0], "radius": 0.1}])

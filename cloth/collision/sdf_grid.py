@@ -28,7 +28,7 @@ import numpy as np
 import taichi as ti
 from taichi.lang.util import to_numpy_type
 
-from .collision_geom import closest_on_triangle
+from .geom import closest_on_triangle
 
 
 @ti.func

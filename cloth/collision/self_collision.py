@@ -1,6 +1,6 @@
 """Cloth self-collision by repulsion impulses (Bridson, Fedkiw, Anderson 2002, section 7.2).
 
-Per substep [t, t + h], with ``x_start = x - h v`` (see collision.py):
+Per substep [t, t + h], with ``x_start = x - h v`` (see collider.py):
 1. broad phase: a spatial hash (cell size ~ the mean edge length; built in Taichi every substep:
    count, prefix sum, fill) holds every triangle and every edge under its bounding box *swept*
    over the substep (start to predicted end) and grown by 1.5 x thickness; a vertex (or edge)
@@ -30,7 +30,7 @@ import time
 
 import taichi as ti
 
-from .collision_geom import closest_on_triangle, closest_segments, safe_normalize
+from .geom import closest_on_triangle, closest_segments, safe_normalize
 
 
 def _pow2(n):

@@ -10,7 +10,7 @@ import numpy as np
 import taichi as ti
 import trimesh
 
-from .collision import CollisionError, Obstacle
+from .obstacles import CollisionError, Obstacle
 
 
 @ti.data_oriented

@@ -1,0 +1,361 @@
+"""Obstacles: rigid bodies as signed distance functions (SDF, metres, negative inside) in
+their own local frame; a pose ``(c, R)`` maps local to world, ``x = R p + c``. A static
+obstacle has a fixed pose; a scripted one gets its pose from ``path(t)`` (a Python callable
+of time), evaluated once per substep on the host and sent to the kernels as arguments.
+"""
+import numpy as np
+import taichi as ti
+import trimesh
+
+from .. import backend
+from .geom import (sdf_box, sdf_capsule, sdf_plane, sdf_sphere, safe_normalize)
+from .sdf_grid import SDFGrid
+
+vec3 = ti.types.vector(3, float)
+mat3 = ti.types.matrix(3, 3, float)
+
+
+# The distance cloth keeps from obstacles (m) unless a scene says otherwise: a few
+# millimetres, about a fabric's thickness (scenes' collision.thickness; tshirt uses 4 mm).
+THICKNESS = 0.005
+
+
+class CollisionError(ValueError):
+    """Bad obstacle or collider settings; the message names the fix."""
+
+
+def _rotation_between(a, b):
+    """A rotation matrix taking unit vector a to unit vector b."""
+    a = np.asarray(a, float) / np.linalg.norm(a)
+    b = np.asarray(b, float) / np.linalg.norm(b)
+    v = np.cross(a, b)
+    c = float(np.dot(a, b))
+    if c < -1 + 1e-12:                       # opposite: rotate pi about any perpendicular axis
+        axis = np.cross(a, [1.0, 0.0, 0.0])
+        if np.linalg.norm(axis) < 1e-6:
+            axis = np.cross(a, [0.0, 1.0, 0.0])
+        axis /= np.linalg.norm(axis)
+        return 2.0 * np.outer(axis, axis) - np.eye(3)
+    vx = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    return np.eye(3) + vx + vx @ vx / (1.0 + c)
+
+
+def rotation_about(axis, angle):
+    """Rotation matrix for ``angle`` radians about ``axis`` (Rodrigues)."""
+    k = np.asarray(axis, float)
+    k = k / np.linalg.norm(k)
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
+
+
+def _rotvec(R):
+    """Axis * angle of a rotation matrix (log map), robust near 0 and pi."""
+    c = np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)
+    angle = np.arccos(c)
+    w = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    if angle < 1e-8:
+        return 0.5 * w
+    if np.pi - angle < 1e-6:
+        # near pi: axis from the symmetric part
+        M = (R + np.eye(3)) / 2.0
+        axis = np.sqrt(np.clip(np.diag(M), 0, None))
+        i = int(np.argmax(axis))
+        axis = M[:, i] / np.sqrt(max(M[i, i], 1e-300))
+        return axis / np.linalg.norm(axis) * angle
+    return w * angle / (2.0 * np.sin(angle))
+
+
+# -- obstacles ---------------------------------------------------------------------------------
+
+@ti.data_oriented
+class Obstacle:
+    """Base class: a rigid solid with a local signed distance ``sdf_local(p)`` (a ti.func).
+
+    position, rotation: the static pose (rotation a 3x3 world-from-local matrix).
+    path: optional ``path(t) -> position`` or ``-> (position, rotation)``; overrides the
+        static pose (rotation None keeps the static rotation).
+    mu: Coulomb friction coefficient against the cloth.
+    Shape parameters are compile-time constants of the kernels: do not change them after the
+    first substep (make a new obstacle instead)."""
+
+    kind = "obstacle"
+
+    def __init__(self, mu=0.3, position=(0.0, 0.0, 0.0), rotation=None, path=None):
+        if mu < 0:
+            raise CollisionError(f"friction coefficient mu must be >= 0 (got {mu})")
+        self.mu = float(mu)
+        self.position = np.asarray(position, dtype=np.float64).reshape(3)
+        self.rotation = np.eye(3) if rotation is None else np.asarray(rotation, np.float64)
+        if self.rotation.shape != (3, 3):
+            raise CollisionError("rotation must be a 3x3 matrix (world from local)")
+        if path is not None and not callable(path):
+            raise CollisionError("path must be a callable t -> position or (position, rotation)")
+        self.path = path
+        # Finite-difference step of the gradient: relative to the obstacle's size, larger in f32.
+        rel = 1e-6 if backend.precision() != "f32" else 1e-3
+        self.fd_eps = rel * max(self.size(), 1e-3)
+
+    # shape interface, overridden ------------------------------------------------------------
+    def size(self):
+        """A length scale of the shape (m), for finite-difference steps."""
+        return 1.0
+
+    def ccd_step(self, thickness):
+        """Spacing (m) at which the continuous test samples a vertex's motion relative to the
+        obstacle. A segment between two samples that are both outside the thickened surface may
+        still cut a chord through it; the spacing is chosen so such a chord cannot reach the
+        solid itself (it stays within the thickness shell) and cannot jump over the solid."""
+        return np.inf
+
+    def local_mesh(self):
+        """(vertices, faces) of the surface in the local frame, for drawing and export."""
+        raise NotImplementedError
+
+    @ti.func
+    def sdf_local(self, p):
+        return 0.0
+
+    @ti.func
+    def grad_local(self, p):
+        """Unit gradient of the SDF by central differences (exact SDFs have |grad| = 1 almost
+        everywhere; on a medial surface this picks a consistent average)."""
+        e = self.fd_eps
+        g = ti.Vector([
+            self.sdf_local(p + ti.Vector([e, 0.0, 0.0])) - self.sdf_local(p - ti.Vector([e, 0.0, 0.0])),
+            self.sdf_local(p + ti.Vector([0.0, e, 0.0])) - self.sdf_local(p - ti.Vector([0.0, e, 0.0])),
+            self.sdf_local(p + ti.Vector([0.0, 0.0, e])) - self.sdf_local(p - ti.Vector([0.0, 0.0, e])),
+        ])
+        return safe_normalize(g, ti.Vector([0.0, 0.0, 1.0]))
+
+    @ti.func
+    def nearest_two(self, p):
+        """The two nearest parts of the shape as (sdf1, normal1, sdf2, normal2), for contact
+        planes; a single solid has one part (sdf2 = 1e30). Unions override it: near a
+        concave corner the second part's plane keeps the cloth out of it."""
+        return self.sdf_local(p), self.grad_local(p), 1e30, ti.Vector([0.0, 0.0, 1.0])
+
+    # pose --------------------------------------------------------------------------------------
+    @property
+    def moving(self):
+        """True when a scripted path drives the obstacle."""
+        return self.path is not None
+
+    def pose(self, t):
+        """(c, R) at time t: world position of the local origin and world-from-local rotation."""
+        if self.path is None:
+            return self.position, self.rotation
+        out = self.path(t)
+        if isinstance(out, tuple) and len(out) == 2:
+            c, R = out
+        else:
+            c, R = out, None
+        c = np.asarray(c, np.float64).reshape(3)
+        R = self.rotation if R is None else np.asarray(R, np.float64).reshape(3, 3)
+        return c, R
+
+    def velocity(self, t, h):
+        """(linear, angular) velocity over [t, t + h] from the scripted path."""
+        if self.path is None or h <= 0:
+            return np.zeros(3), np.zeros(3)
+        c0, R0 = self.pose(t)
+        c1, R1 = self.pose(t + h)
+        return (c1 - c0) / h, _rotvec(R1 @ R0.T) / h
+
+    def mesh_at(self, t=0.0):
+        """Surface triangle mesh in world coordinates at time t: (vertices (N,3), faces (M,3))."""
+        v, f = self.local_mesh()
+        c, R = self.pose(t)
+        return np.asarray(v, np.float64) @ R.T + c, np.asarray(f, np.int32)
+
+    # host evaluation (tests, tools) --------------------------------------------------------
+    def sdf(self, points, t=0.0):
+        """Signed distance at world points (N,3) at time t, via the same Taichi code the
+        collider uses. Returns (phi (N,), grad (N,3))."""
+        pts = np.ascontiguousarray(np.asarray(points, np.float64).reshape(-1, 3))
+        phi = np.zeros(len(pts))
+        grad = np.zeros((len(pts), 3))
+        c, R = self.pose(t)
+        self._eval(pts, phi, grad, ti.Matrix(R), ti.Vector(c))
+        return phi, grad
+
+    @ti.kernel
+    def _eval(self, pts: ti.types.ndarray(), phi: ti.types.ndarray(), grad: ti.types.ndarray(),
+              R: mat3, c: vec3):
+        for i in range(pts.shape[0]):
+            x = ti.Vector([pts[i, 0], pts[i, 1], pts[i, 2]])
+            p = R.transpose() @ (x - c)
+            phi[i] = self.sdf_local(p)
+            g = R @ self.grad_local(p)
+            for d in ti.static(range(3)):
+                grad[i, d] = g[d]
+
+
+@ti.data_oriented
+class Plane(Obstacle):
+    """The half-space behind a plane through ``point`` with outward unit ``normal``.
+    Drawn as a square of side ``draw_size`` (m)."""
+
+    kind = "plane"
+
+    def __init__(self, point=(0.0, 0.0, 0.0), normal=(0.0, 0.0, 1.0), mu=0.3, path=None,
+                 draw_size=4.0):
+        n = np.asarray(normal, np.float64)
+        if not np.linalg.norm(n) > 0:
+            raise CollisionError("plane normal must be non-zero")
+        self.draw_size = float(draw_size)
+        super().__init__(mu=mu, position=point, rotation=_rotation_between([0, 0, 1], n),
+                         path=path)
+
+    def size(self):
+        return 1.0
+
+    def local_mesh(self):
+        s = self.draw_size / 2
+        v = np.array([[-s, -s, 0], [s, -s, 0], [s, s, 0], [-s, s, 0]], float)
+        return v, np.array([[0, 1, 2], [0, 2, 3]])
+
+    @ti.func
+    def sdf_local(self, p):
+        return sdf_plane(p)
+
+    @ti.func
+    def grad_local(self, p):
+        return ti.Vector([0.0, 0.0, 1.0])
+
+
+@ti.data_oriented
+class Sphere(Obstacle):
+    kind = "sphere"
+
+    def __init__(self, center=(0.0, 0.0, 0.0), radius=0.25, mu=0.3, path=None):
+        if not radius > 0:
+            raise CollisionError(f"sphere radius must be > 0 (got {radius})")
+        self.radius = float(radius)
+        super().__init__(mu=mu, position=center, path=path)
+
+    def size(self):
+        return self.radius
+
+    def ccd_step(self, thickness):
+        # A chord of length c through a ball of radius R + th dips c^2 / (8 (R + th)) below
+        # its surface: keep that under the thickness.
+        return min(self.radius, np.sqrt(8.0 * self.radius * thickness))
+
+    def local_mesh(self):
+        m = trimesh.creation.icosphere(subdivisions=3, radius=self.radius)
+        return m.vertices, m.faces
+
+    @ti.func
+    def sdf_local(self, p):
+        return sdf_sphere(p, self.radius)
+
+    @ti.func
+    def grad_local(self, p):
+        return safe_normalize(p, ti.Vector([0.0, 0.0, 1.0]))
+
+
+@ti.data_oriented
+class Capsule(Obstacle):
+    """A segment of length ``length`` along the local z axis, inflated by ``radius``;
+    ``rotation`` (or the path) orients it."""
+
+    kind = "capsule"
+
+    def __init__(self, center=(0.0, 0.0, 0.0), length=0.5, radius=0.1, rotation=None, mu=0.3,
+                 path=None):
+        if not (radius > 0 and length >= 0):
+            raise CollisionError("capsule needs radius > 0 and length >= 0")
+        self.radius, self.length = float(radius), float(length)
+        super().__init__(mu=mu, position=center, rotation=rotation, path=path)
+
+    def size(self):
+        return self.radius
+
+    def ccd_step(self, thickness):
+        # A chord of length c through a ball of radius R + th dips c^2 / (8 (R + th)) below
+        # its surface: keep that under the thickness.
+        return min(self.radius, np.sqrt(8.0 * self.radius * thickness))
+
+    def local_mesh(self):
+        m = trimesh.creation.capsule(height=self.length, radius=self.radius, count=[24, 24])
+        return m.vertices, m.faces
+
+    @ti.func
+    def sdf_local(self, p):
+        return sdf_capsule(p, 0.5 * self.length, self.radius)
+
+
+@ti.data_oriented
+class Box(Obstacle):
+    """An oriented box with full side lengths ``extents`` (m)."""
+
+    kind = "box"
+
+    def __init__(self, center=(0.0, 0.0, 0.0), extents=(0.5, 0.5, 0.5), rotation=None, mu=0.3,
+                 path=None):
+        e = np.asarray(extents, np.float64).reshape(3)
+        if not np.all(e > 0):
+            raise CollisionError(f"box extents must be > 0 (got {extents})")
+        self.half = tuple(float(x) for x in e / 2)
+        super().__init__(mu=mu, position=center, rotation=rotation, path=path)
+
+    def size(self):
+        return min(self.half)
+
+    def ccd_step(self, thickness):
+        # Cutting across a right-angled edge or corner, a chord of length c reaches c / 2 deep.
+        return min(min(self.half), 2.0 * thickness)
+
+    def local_mesh(self):
+        m = trimesh.creation.box(extents=[2 * h for h in self.half])
+        return m.vertices, m.faces
+
+    @ti.func
+    def sdf_local(self, p):
+        return sdf_box(p, ti.Vector([self.half[0], self.half[1], self.half[2]]))
+
+
+@ti.data_oriented
+class MeshObstacle(Obstacle):
+    """A closed triangle mesh (OBJ/PLY/STL/GLB via trimesh, or given arrays) turned once into a
+    signed-distance grid (see ``sdf_grid``). ``resolution`` is the number of cells along
+    the longest side. ``scale`` and ``offset`` are applied to the file's vertices first."""
+
+    kind = "mesh"
+
+    def __init__(self, source, resolution=64, mu=0.3, position=(0.0, 0.0, 0.0), rotation=None,
+                 path=None, scale=1.0, offset=(0.0, 0.0, 0.0)):
+        if isinstance(source, trimesh.Trimesh):
+            mesh = source
+        elif isinstance(source, (tuple, list)) and len(source) == 2:
+            mesh = trimesh.Trimesh(vertices=source[0], faces=source[1], process=True)
+        else:
+            mesh = trimesh.load(source, force="mesh")
+            if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+                raise CollisionError(f"could not read a triangle mesh from {source!r}; "
+                                     "use an OBJ, PLY, STL or GLB file with faces")
+        self.vertices = np.asarray(mesh.vertices, np.float64) * scale + np.asarray(offset, float)
+        self.faces = np.asarray(mesh.faces, np.int64)
+        self.watertight = bool(mesh.is_watertight)
+        self.grid = SDFGrid(self.vertices, self.faces, resolution=resolution)
+        self.build_seconds = self.grid.build_seconds
+        self._size = float(np.ptp(self.vertices, axis=0).max())
+        super().__init__(mu=mu, position=position, rotation=rotation, path=path)
+        # Gradient from central differences of the interpolated grid, one cell apart.
+        self.fd_eps = 0.5 * self.grid.dx
+
+    def size(self):
+        return self._size
+
+    def ccd_step(self, thickness):
+        return min(self.grid.dx, 2.0 * thickness)
+
+    def local_mesh(self):
+        return self.vertices, self.faces
+
+    @ti.func
+    def sdf_local(self, p):
+        return self.grid.lookup(p)
+
+
+# -- the collider ------------------------------------------------------------------------------
