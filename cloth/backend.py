@@ -10,7 +10,7 @@ PRECISIONS = ("f64", "f32")
 # Taichi's SPIR-V back ends (Vulkan, Metal) have no 64-bit float math (the strain kernels' atan2
 # fails to compile: "the operand type of instruction Atan2 must <= 32bits"), so they run in f32.
 F32_ONLY = ("vulkan", "metal")
-# Back ends where the one-launch AL solve (strain/workspace.py solve_al: one serial thread
+# Back ends where the one-launch AL solve (strain/al.py solve_al: one serial thread
 # running the whole projection) is not used. Measured on lavapipe (Debian's software Vulkan):
 # it crashes the process (segmentation fault at the next read-back); the Cholesky path, whose
 # loop runs on the host between small kernels, runs (hanging, resolution 9, 5 frames). Metal
@@ -26,7 +26,7 @@ class BackendError(RuntimeError):
 
 # LOOM_FAST_COMPILE=1 switches off Taichi's advanced IR optimisation. Measured on this 2-core
 # VM (hanging, resolution 7, mapping, empty offline cache): building the simulator compiles the
-# one-launch AL solve (strain/workspace.py solve_al) in 158 s with it and 12 s without (the
+# one-launch AL solve (strain/al.py solve_al) in 158 s with it and 12 s without (the
 # build took 170 s; 118 s once choose_start had one call site per ti.func); the
 # compiled solve then runs ~1.4x slower per CG iteration (0.28 -> 0.39 ms at 4k triangles).
 # The test suite sets it (tests/conftest.py): its meshes are small and compiles dominate.

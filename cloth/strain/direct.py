@@ -10,7 +10,7 @@ its inexact steps never let a round's inner loop converge (5 Newton steps every 
 rounds every substep even at rest). An exact step converges the inner loop in 1-3 steps and a
 warm-started cloth at rest in one round.
 
-The AL itself is the one of ``workspace.solve_al`` (same merit function, residual, line search,
+The AL itself is the one of ``al.solve_al`` (same merit function, residual, line search,
 multiplier step, stopping rule); only the loop runs on the host, so a library can do the
 factorisation. Per Newton step: one kernel assembles the residual and the matrix values, the
 host solves (``SparseCholesky.solve_reusing``: CG preconditioned by the last factorisation,
@@ -25,11 +25,10 @@ import os
 import numpy as np
 import taichi as ti
 
-from .workspace import (CONTACT_SLOTS, P_CONTACT_SCALE, P_MARGIN, P_SVD_DELTA, ST_CG, ST_COMP,
-                        ST_CONVERGED, ST_ITERS, ST_NEWTON, ST_START_VIOL, ST_VIOL, A, T,
-                        assemble_all, choose_start, contact_g, contact_normal, friction_state,
-                        merit, near_weight, residual, update_multipliers, vertex_violation,
-                        violation_of)
+from .al import (assemble_all, choose_start, contact_g, contact_normal, friction_state, merit,
+                 near_weight, residual, update_multipliers, vertex_violation, violation_of)
+from .buffers import (CONTACT_SLOTS, P_CONTACT_SCALE, P_MARGIN, P_SVD_DELTA, ST_CG, ST_COMP,
+                      ST_CONVERGED, ST_ITERS, ST_NEWTON, ST_START_VIOL, ST_VIOL, A)
 
 # LOOM_DEBUG_DIRECT=1 prints every Newton step (residual, step, line-search alpha).
 _DEBUG = bool(os.environ.get("LOOM_DEBUG_DIRECT"))
@@ -66,7 +65,7 @@ def newton_system(K: int, nv: int, nf: int, ns: int, mu: float, x: A, x_hat: A, 
                   twist: A, contact: A, lam_c: A, stitch: A, lam_s: A, fric: A, lam_t: A,
                   face_slot: A, stitch_slot: A, H: A, r: A):
     """r = -grad L_A and the projected-Newton matrix H (the operator of
-    ``workspace.apply_hessian`` written out in W's block pattern, which must hold every face
+    ``al.apply_hessian`` written out in W's block pattern, which must hold every face
     pair and seam pair: ``system_matrix.build_pattern``). Pinned rows and columns become the
     identity (their step is zero)."""
     ti.loop_config(serialize=True)
@@ -179,7 +178,7 @@ def multipliers(K: int, nv: int, nf: int, ns: int, mu: float, mu_max: float, x: 
 
 
 def solve(lim, mid, K, metric, chol, mu, mu_max, step_tol):
-    """The AL loop of ``workspace.solve_al`` with exact Newton steps, for the StrainLimiter
+    """The AL loop of ``al.solve_al`` with exact Newton steps, for the StrainLimiter
     ``lim`` (its work arrays, settings and model). ``metric``: a BlockMatrix holding every face
     and seam pair; ``chol``: a ``linalg.SparseCholesky`` for that pattern. Returns (rounds,
     Newton steps, converged) and fills ``ws.stats`` like ``solve_al``."""

@@ -22,9 +22,9 @@ from .. import metrics
 from .. import system_matrix
 from .constraints import (MAPPING_DELTA, MAPPING_ISO, METHOD_IDS, METHODS, N_CONSTRAINTS,
                           SVD_DELTA)
-from . import workspace as W
-from .workspace import (ST_CG, ST_CONVERGED, ST_ITERS, ST_NEWTON, ST_START_VIOL, ST_VIOL,
-                        Workspace)
+from . import al, buffers, pbd
+from .buffers import (ST_CG, ST_CONVERGED, ST_ITERS, ST_NEWTON, ST_START_VIOL, ST_VIOL,
+                      Workspace)
 
 METHOD_NAMES = METHODS + ("none",)
 SOLVERS = ("al", "jacobi", "gauss-seidel")
@@ -248,17 +248,17 @@ class StrainLimiter:
     def _upload_params(self):
         if self._ws is None or self.warp is None or self.weft is None:
             return
-        params = np.zeros(W.N_PARAMS)
-        params[W.P_WARP:W.P_WARP + 2] = self.warp
-        params[W.P_WEFT:W.P_WEFT + 2] = self.weft
-        params[W.P_SHEAR:W.P_SHEAR + 2] = self.shear_band()
-        params[W.P_MARGIN] = self.active_margin
-        params[W.P_DELTA] = self.mapping_delta
-        params[W.P_SVD_DELTA] = self.svd_delta
-        params[W.P_ISO] = self.mapping_iso
+        params = np.zeros(buffers.N_PARAMS)
+        params[buffers.P_WARP:buffers.P_WARP + 2] = self.warp
+        params[buffers.P_WEFT:buffers.P_WEFT + 2] = self.weft
+        params[buffers.P_SHEAR:buffers.P_SHEAR + 2] = self.shear_band()
+        params[buffers.P_MARGIN] = self.active_margin
+        params[buffers.P_DELTA] = self.mapping_delta
+        params[buffers.P_SVD_DELTA] = self.svd_delta
+        params[buffers.P_ISO] = self.mapping_iso
         # Contact violations are metres; divided by the typical edge they read like strains.
         m = self.model
-        params[W.P_CONTACT_SCALE] = self._edge_scale()
+        params[buffers.P_CONTACT_SCALE] = self._edge_scale()
         self._ws.params.from_numpy(params)
 
     def set_stitches(self, pairs):
@@ -297,7 +297,7 @@ class StrainLimiter:
         ws.lam_t.fill(0.0)
         ws.contact_mu.fill(0.0)
         self.set_stitches(self._stitches)
-        W.clear_contacts(m.v_cap, ws.contact)
+        buffers.clear_contacts(m.v_cap, ws.contact)
         self._upload_params()                  # the contact scale follows the mesh
         # The model's rest data, copied once per mesh (kernels read only the work arrays).
         ws.face_verts.from_numpy(m.face_verts.to_numpy())
@@ -394,7 +394,7 @@ class StrainLimiter:
     def contact_planes(self):
         """The per-vertex contact half-spaces (n, d), n.x >= d, as a Taichi ndarray of vec4 to
         be filled by the caller (``Collider.contact_planes``) before ``project(h,
-        contacts=True)``; (0, 0, 0, workspace.NO_CONTACT) where a vertex has none."""
+        contacts=True)``; (0, 0, 0, buffers.NO_CONTACT) where a vertex has none."""
         self._sync_mesh()
         return self._ws.contact
 
@@ -435,13 +435,13 @@ class StrainLimiter:
         mid, K = METHOD_IDS[self.method], N_CONSTRAINTS[self.method]
         ws.pinned.from_numpy(m.vert_pinned.to_numpy())      # a scene may re-pin at any time
         if not contacts:
-            W.clear_contacts(nv, ws.contact)
-        W.field_to_array(m.state.x, ws.x, nv)
-        W.field_to_array(m.state.v, ws.v, nv)
+            buffers.clear_contacts(nv, ws.contact)
+        buffers.field_to_array(m.state.x, ws.x, nv)
+        buffers.field_to_array(m.state.v, ws.v, nv)
         # Friction holds contact vertices against sliding over the substep (from x - h v).
-        W.set_friction(nv, float(h), int(contacts and h > 0 and self.friction), ws.x, ws.v,
+        al.set_friction(nv, float(h), int(contacts and h > 0 and self.friction), ws.x, ws.v,
                        ws.contact_mu, ws.fric)
-        W.begin_solve(nv, ws.x, ws.x_hat, ws.x_start, ws.stats)
+        al.begin_solve(nv, ws.x, ws.x_hat, ws.x_start, ws.stats)
         self.last_reverted = False
         if self.solver == "al":
             saved = None
@@ -460,28 +460,28 @@ class StrainLimiter:
                     a.from_numpy(val)
             stats = ws.stats.to_numpy()
             if not converged and stats[ST_VIOL] > max(stats[ST_START_VIOL], self.tol):
-                W.copy_vectors(nv, ws.x_start, ws.x)
+                al.copy_vectors(nv, ws.x_start, ws.x)
                 stats[ST_VIOL] = stats[ST_START_VIOL]
                 self.last_reverted = True
                 self.reverted_count += 1
         else:
-            W.pbd_solve(mid, int(self.solver == "jacobi"), nv, nf, self.tol, self.max_iters,
+            pbd.pbd_solve(mid, int(self.solver == "jacobi"), nv, nf, self.tol, self.max_iters,
                         self.jacobi_omega, ws.x, ws.face_verts, ws.Dm_inv, ws.grain,
                         ws.rest_area, ws.params, ws.mass, ws.pinned, ws.contact,
                         len(self._stitches), ws.stitch, ws.acc, ws.cnt, ws.stats)
             # Measure the final positions (a sweep sees each face before moving it).
             self._assemble(mid, ws.x)
             stats = ws.stats.to_numpy()
-            stats[ST_VIOL] = W.max_violation(K, nf, ws.rest_area, ws.g)
+            stats[ST_VIOL] = al.max_violation(K, nf, ws.rest_area, ws.g)
             rounds, newton, converged = int(stats[ST_ITERS]), 0, stats[ST_VIOL] < self.tol
         # Only an unconverged AL iterate is capped, and only where it moved a vertex further
         # than half a typical edge (a budget-limited solve is a legitimate answer; capping
         # every unconverged one raised the band error of 8-round svd from 3.6e-4 to 6.9e-2).
         kick = 0.5 * self._edge_scale() / h if (self.solver == "al" and not converged
                                                 and h > 0) else -1.0
-        W.finish_solve(nv, float(h), kick, ws.x, ws.x_start, ws.v)
-        W.array_to_field(ws.x, m.state.x, nv)
-        W.array_to_field(ws.v, m.state.v, nv)
+        al.finish_solve(nv, float(h), kick, ws.x, ws.x_start, ws.v)
+        buffers.array_to_field(ws.x, m.state.x, nv)
+        buffers.array_to_field(ws.v, m.state.v, nv)
         self.last_iterations = int(rounds)
         self.last_violation_max = float(max(stats[ST_VIOL], 0.0))
         self.last_converged = bool(converged)
@@ -493,7 +493,7 @@ class StrainLimiter:
 
     def _assemble(self, mid, pos):
         ws = self._ws
-        W.assemble(mid, self.model.n_faces, pos, ws.face_verts, ws.Dm_inv, ws.grain,
+        al.assemble(mid, self.model.n_faces, pos, ws.face_verts, ws.Dm_inv, ws.grain,
                    ws.rest_area, ws.params, ws.g, ws.grad, ws.cm, ws.what, ws.kappa,
                    ws.twist)
 
@@ -507,7 +507,7 @@ class StrainLimiter:
         return direct.solve(self, mid, K, metric, chol, mu, mu_max, step_tol)
 
     def _solve_al(self, mid, K, metric):
-        """The AL loop (METHOD 4), one kernel launch (workspace.solve_al): rounds of inexact
+        """The AL loop (METHOD 4), one kernel launch (al.solve_al): rounds of inexact
         minimisation of L_A by projected Newton with a backtracking line search, then the
         multiplier step of eq. 27 and mu *= mu_grow. Returns (rounds, Newton steps,
         converged)."""
@@ -521,7 +521,7 @@ class StrainLimiter:
         # hanging scene at 3.9k faces: 50 iterations left 3-7 of 20 substeps unconverged,
         # ~100 none (mapping) and 2 (warp-weft), at half the time of the old defaults.
         max_cg = int(round(self.max_cg * max(1.0, np.sqrt(m.n_faces / 1000.0))))
-        W.solve_al(mid, K, m.n_verts, m.n_faces, len(self._stitches), mu, self.mu_grow,
+        al.solve_al(mid, K, m.n_verts, m.n_faces, len(self._stitches), mu, self.mu_grow,
                    mu_max, self.max_iters,
                    self.max_newton, max_cg, self.cg_rtol, self.tol, step_tol,
                    int(self.adaptive_margin),
@@ -546,7 +546,7 @@ class StrainLimiter:
             return np.zeros((n, 0))
         self._sync_mesh()
         ws, K = self._ws, N_CONSTRAINTS[self.method]
-        W.field_to_array(self.model.state.x, ws.x_trial, self.model.n_verts)
+        buffers.field_to_array(self.model.state.x, ws.x_trial, self.model.n_verts)
         self._assemble(METHOD_IDS[self.method], ws.x_trial)
         g = ws.g.to_numpy()[:n, :K].astype(np.float64)
         return g / np.sqrt(self.model.rest_area[:n])[:, None]

@@ -1,0 +1,118 @@
+"""The Taichi side of strain limiting, part 1: the work arrays (``Workspace``), the indices
+into its ``params`` and ``stats`` arrays, and copies between the model's fields and the arrays.
+The solves are in ``al.py`` (augmented Lagrangian, one kernel) and ``pbd.py`` (the per-triangle
+baselines); ``direct.py`` is the Cholesky path.
+
+Design notes (measured on this 2-core CPU, Taichi 1.7.4, f64):
+- Every array is a Taichi *ndarray* passed as a kernel argument, never a field captured by a
+  kernel: kernels that capture fields are recompiled for every new field (every model, every
+  reallocation), and compiling the mapping constraints plus the Newton kernels costs ~10-40 s.
+  With ndarray arguments each kernel compiles once per process (and is then found in Taichi's
+  offline cache by later processes).
+- Launch overhead is ~15 us per kernel and ~50-60 us per parallel top-level loop, while one
+  PCG iteration over 1k triangles costs ~50 us. So each solve phase (a whole PCG solve, a
+  whole constraint assembly, a whole Jacobi / Gauss-Seidel run) is one kernel whose top-level
+  loop is serialized; all face and vertex loops are then plain serial loops without atomics.
+  Launching from Python also costs ~0.1-0.4 ms per kernel in argument handling with ~20
+  ndarray arguments (measured with cProfile: half of a 1k-triangle projection), so the whole
+  augmented-Lagrangian solve is a single kernel (``solve_al``).
+- The constraint loop inside the Newton kernels runs over c < K at run time (not unrolled with
+  ti.static): unrolling 8 constraints x 9 gradient entries made one kernel take 30 s to compile.
+"""
+import taichi as ti
+
+from .constraints import K_MAX
+
+A = ti.types.ndarray()          # any ndarray; kernels compile once per dtype / dimension
+T = ti.template()               # how a ti.func takes an array (by reference)
+
+# Indices into the ``stats`` array (read back once per solve).
+ST_ITERS, ST_VIOL, ST_CONVERGED, ST_CG, ST_NEWTON, ST_COMP, ST_START_VIOL = range(7)
+# Indices into the ``params`` array.
+P_WARP, P_WEFT, P_SHEAR, P_MARGIN, P_DELTA, P_SVD_DELTA, P_CONTACT_SCALE = 0, 2, 4, 6, 7, 8, 9
+P_ISO = 10
+N_PARAMS = 11
+# A vertex without a contact half-space: n = 0 and d far below any position, so d - n.x never
+# comes near activating.
+NO_CONTACT = -1e30
+# Contact half-spaces per vertex: the two nearest obstacle parts' planes (in a concave corner of
+# a body, keeping out of one primitive's plane alone walks into the next primitive).
+CONTACT_SLOTS = 2
+
+
+class Workspace:
+    """Per-limiter arrays sized from the model's capacities (f_cap faces, v_cap vertices)."""
+
+    def __init__(self, f_cap, v_cap):
+        self.f_cap, self.v_cap = f_cap, v_cap
+        F, V, K = f_cap, v_cap, K_MAX
+        vec3, vec9 = ti.types.vector(3, float), ti.types.vector(9, float)
+        # Copies of the model (refreshed by StrainLimiter when the mesh changes).
+        self.face_verts = ti.ndarray(ti.types.vector(3, ti.i32), F)
+        self.Dm_inv = ti.ndarray(ti.types.matrix(2, 2, float), F)
+        self.grain = ti.ndarray(ti.types.matrix(2, 2, float), F)
+        self.rest_area = ti.ndarray(float, F)
+        self.mass = ti.ndarray(float, V)
+        self.pinned = ti.ndarray(ti.i32, V)
+        # Multipliers lambda >= 0, one per constraint (warm-started across calls).
+        self.lam = ti.ndarray(float, (F, K))
+        # Contact half-spaces n.x >= d per vertex as (n, d) (see ``contact_g``) and their
+        # multipliers: the obstacles are constraints of the same projection, so a contact
+        # cannot undo the limits afterwards (issue #5).
+        self.contact = ti.ndarray(ti.types.vector(4, float), (V, CONTACT_SLOTS))
+        self.lam_c = ti.ndarray(float, (V, CONTACT_SLOTS))
+        # Coulomb friction at contacts (see ``friction_state``): the obstacle's friction
+        # coefficient per vertex (filled with the planes), the substep's start position and
+        # coefficient as (x_prev, mu), and the tangential multipliers (warm-started).
+        self.contact_mu = ti.ndarray(float, V)
+        self.fric = ti.ndarray(ti.types.vector(4, float), V)
+        self.lam_t = ti.ndarray(vec3, V)
+        # Constraint data at the current iterate (see constraints.py for the meaning).
+        self.g = ti.ndarray(float, (F, K))
+        self.grad = ti.ndarray(vec9, (F, K))
+        self.cm = ti.ndarray(vec3, (F, K))
+        self.what = ti.ndarray(vec3, (F, K))
+        self.kappa = ti.ndarray(float, (F, K))
+        self.twist = ti.ndarray(vec9, (F, K))     # extra rank-1 curvature (svd only)
+        # Per-vertex vectors: positions (x), unconstrained x_hat, start of the call, line-search
+        # trial, Newton direction and PCG vectors; Jacobi accumulators.
+        names = ("x", "v", "x_hat", "x_start", "x_trial", "b", "d", "r", "z", "p", "Ap",
+                 "acc", "force")
+        for name in names:
+            setattr(self, name, ti.ndarray(vec3, V))
+        self.P_inv = ti.ndarray(ti.types.matrix(3, 3, float), V)
+        self.cnt = ti.ndarray(float, V)
+        self.params = ti.ndarray(float, N_PARAMS)  # bands (warp, weft, shear), margin, deltas
+        self.stats = ti.ndarray(float, 8)
+        self.info = ti.ndarray(float, 8)          # the direct solver's per-kernel results
+        self.H = None                             # its Newton matrix values (per pattern)
+        self.set_stitch_capacity(1)
+
+    def set_stitch_capacity(self, n):
+        """Seams: vertex pairs (a, b) held together, x_a = x_b, and their multipliers
+        (vectors: an equality has a multiplier of either sign per component)."""
+        self.s_cap = max(int(n), 1)
+        self.stitch = ti.ndarray(ti.types.vector(2, ti.i32), self.s_cap)
+        self.lam_s = ti.ndarray(ti.types.vector(3, float), self.s_cap)
+
+
+# ---- copies between the model's fields and the work arrays -----------------------------------
+@ti.kernel
+def field_to_array(src: ti.template(), dst: A, n: int):
+    for i in range(n):
+        dst[i] = src[i]
+
+
+@ti.kernel
+def array_to_field(src: A, dst: ti.template(), n: int):
+    for i in range(n):
+        dst[i] = src[i]
+
+
+@ti.kernel
+def clear_contacts(n: int, contact: A):
+    for i in range(n):
+        for j in ti.static(range(CONTACT_SLOTS)):
+            contact[i, j] = ti.Vector([0.0, 0.0, 0.0, NO_CONTACT])
+
+
