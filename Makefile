@@ -1,13 +1,13 @@
 # Two commands do all the set-up on a fresh machine:
 #   make demo   run the default scene (a window with a display, else headless to out/)
-#   make test   run the test suite
+#   make test   run the test suite (make test-quick: the fast subset)
 # Both create .venv and install the pinned requirements on first use.
 PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test vulkan clean
+.PHONY: demo test test-quick vulkan clean
 
 $(STAMP): requirements.txt requirements-cholmod.txt
 	$(PYTHON) -m venv $(VENV)
@@ -24,6 +24,10 @@ demo: $(STAMP) vulkan
 
 test: $(STAMP) vulkan
 	$(PY) -m pytest -n auto $(ARGS)
+
+# The fast subset (no sweeps, windows or long scenes), for a check before each commit.
+test-quick: $(STAMP) vulkan
+	$(PY) -m pytest -n auto -m "not slow" $(ARGS)
 
 clean:
 	rm -rf $(VENV) out

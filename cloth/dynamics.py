@@ -167,17 +167,10 @@ class ImplicitEuler:
                 val[diag[i]] += (1.0 + h * alpha) * self.model.vert_mass[i] * I
             for f in range(nf):
                 A = self.model.face_rest_area[f]
-                fu, fv, E = self.face_fu[f], self.face_fv[f], self.face_E[f]
-                wa, wb = self.face_wa[f], self.face_wb[f]
-                e0, e1 = ti.max(E[0], 0.0), ti.max(E[1], 0.0)
                 for n in ti.static(range(3)):
-                    gn = wa[n] * fv + wb[n] * fu
                     for q in ti.static(range(3)):
-                        gq = wa[q] * fv + wb[q] * fu
-                        blk = kw * wa[n] * wa[q] * (fu.outer_product(fu) + e0 * I) \
-                            + kf * wb[n] * wb[q] * (fv.outer_product(fv) + e1 * I) \
-                            + ks * gn.outer_product(gq)
-                        val[face_slot[f, 3 * n + q]] += scale * A * blk
+                        val[face_slot[f, 3 * n + q]] += scale * A * \
+                            self._face_block(f, n, q, kw, kf, ks)
             for e in range(ne):
                 if self.model.edge_faces[e][1] >= 0:
                     k = scale * kb * self.model.edge_bend_weight[e]
@@ -193,6 +186,22 @@ class ImplicitEuler:
                 val[stitch_slot[s, 1]] -= k * I
                 val[stitch_slot[s, 2]] -= k * I
                 val[stitch_slot[s, 3]] += k * I
+
+    @ti.func
+    def _face_block(self, f, n, q, kw, kf, ks):
+        """Block (n, q) of face f's membrane stiffness K = -d2E / dx_n dx_q per unit rest area,
+        made positive semi-definite: the curvature terms kept where the warp or weft is in
+        tension, the shear's dropped (``_add_K_product`` with exact = 0 applies the same K).
+        The one definition of the block: the CG preconditioner, the assembled matrix and the
+        sparse direct solver all take it from here."""
+        fu, fv, E = self.face_fu[f], self.face_fv[f], self.face_E[f]
+        wa, wb = self.face_wa[f], self.face_wb[f]
+        gn = wa[n] * fv + wb[n] * fu
+        gq = wa[q] * fv + wb[q] * fu
+        aa, bb = wa[n] * wa[q], wb[n] * wb[q]
+        return kw * aa * fu.outer_product(fu) + kf * bb * fv.outer_product(fv) \
+            + ks * gn.outer_product(gq) \
+            + (kw * ti.max(E[0], 0.0) * aa + kf * ti.max(E[1], 0.0) * bb) * ti.Matrix.identity(float, 3)
 
     # -- element kinematics -------------------------------------------------------------------
     @ti.func
@@ -335,15 +344,8 @@ class ImplicitEuler:
         for f in range(nf):
             tri = self.model.face_verts[f]
             A = self.model.face_rest_area[f]
-            fu, fv, E = self.face_fu[f], self.face_fv[f], self.face_E[f]
-            wa, wb = self.face_wa[f], self.face_wb[f]
-            I = ti.Matrix.identity(float, 3)
             for n in ti.static(range(3)):
-                gs = wa[n] * fv + wb[n] * fu
-                blk = kw * wa[n] ** 2 * fu.outer_product(fu) + kf * wb[n] ** 2 * fv.outer_product(fv) \
-                    + ks * gs.outer_product(gs) \
-                    + (kw * ti.max(E[0], 0.0) * wa[n] ** 2 + kf * ti.max(E[1], 0.0) * wb[n] ** 2) * I
-                self.precond[tri[n]] += scale * A * blk
+                self.precond[tri[n]] += scale * A * self._face_block(f, n, n, kw, kf, ks)
         for e in range(ne):
             if self.model.edge_faces[e][1] >= 0:
                 k = kb * self.model.edge_bend_weight[e]

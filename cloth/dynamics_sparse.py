@@ -237,17 +237,11 @@ class SparseImplicitEuler(ImplicitEuler):
             for f in range(nf):
                 tri = self.model.face_verts[f]
                 A = self.model.face_rest_area[f]
-                fu, fv, E = self.face_fu[f], self.face_fv[f], self.face_E[f]
-                wa, wb = self.face_wa[f], self.face_wb[f]
-                E0, E1 = ti.max(E[0], 0.0), ti.max(E[1], 0.0)
-                uu, vv = fu.outer_product(fu), fv.outer_product(fv)
-                for n, q in ti.ndrange(3, 3):
-                    gn = wa[n] * fv + wb[n] * fu
-                    gq = wa[q] * fv + wb[q] * fu
-                    aa, bb = wa[n] * wa[q], wb[n] * wb[q]
-                    blk = kw * aa * uu + kf * bb * vv + ks * gn.outer_product(gq) \
-                        + (kw * E0 * aa + kf * E1 * bb) * I
-                    self._add_block(B, tri[n], tri[q], sc * A * blk, lower, scaled)
+                for n in ti.static(range(3)):
+                    for q in ti.static(range(3)):
+                        self._add_block(B, tri[n], tri[q],
+                                        sc * A * self._face_block(f, n, q, kw, kf, ks), lower,
+                                        scaled)
             for e in range(ne):
                 if self.model.edge_faces[e][1] >= 0:
                     kk = sc * kb * self.model.edge_bend_weight[e]

@@ -72,10 +72,15 @@ def default_bias_band(warp_band, weft_band):
     return float(lo), float(hi)
 
 
+def signed_material_areas(uv, faces):
+    """Rest (material) area per face, m^2, negative where a face is flipped in material space."""
+    e1, e2 = uv[faces[:, 1]] - uv[faces[:, 0]], uv[faces[:, 2]] - uv[faces[:, 0]]
+    return 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+
+
 def material_areas(uv, faces):
     """Rest (material) area per face, m^2."""
-    e1, e2 = uv[faces[:, 1]] - uv[faces[:, 0]], uv[faces[:, 2]] - uv[faces[:, 0]]
-    return 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    return np.abs(signed_material_areas(uv, faces))
 
 
 def wrinkle_measures(x, faces, edges, edge_faces, edge_opp, uv):

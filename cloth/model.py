@@ -17,6 +17,9 @@ import numpy as np
 import taichi as ti
 from taichi.lang.util import to_numpy_type
 
+from . import metrics
+from .metrics import signed_material_areas  # noqa: F401 (the model's users import it here)
+
 
 class ModelError(ValueError):
     """Bad mesh or material input; the message names the fix."""
@@ -121,12 +124,6 @@ def grain_from_angle(angle, n_faces):
     c, s = np.cos(angle), np.sin(angle)
     g = np.array([[c, -s], [s, c]])
     return np.tile(g, (n_faces, 1, 1))
-
-
-def signed_material_areas(uv, faces):
-    a, b, c = uv[faces[:, 0]], uv[faces[:, 1]], uv[faces[:, 2]]
-    e1, e2 = b - a, c - a
-    return 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
 
 
 def build_edges(faces):
@@ -269,9 +266,7 @@ class ClothModel:
         self.n_verts, self.n_faces, self.n_edges = nv, nf, ne
 
         # Per-face rest quantities (METHOD.md section 2).
-        a, b, c = uv[faces[:, 0]], uv[faces[:, 1]], uv[faces[:, 2]]
-        Dm = np.stack([b - a, c - a], axis=2)          # (F, 2, 2), columns are edges
-        Dm_inv = np.linalg.inv(Dm)
+        Dm_inv = metrics.material_Dm_inv(uv, faces)    # (F, 2, 2): inverse of the edge matrix
         grain = mesh.grain / np.linalg.norm(mesh.grain, axis=1, keepdims=True)
         mass = np.zeros(nv)
         np.add.at(mass, faces.reshape(-1), np.repeat(area * self.material.density / 3.0, 3))
@@ -377,6 +372,11 @@ class ClothModel:
                 if not (ti.abs(x[c]) < 1e30 and ti.abs(v[c]) < 1e30):
                     ok = 0
         return ok
+
+    def typical_edge(self):
+        """The typical edge length (m): the square root of the mean rest area. The scale that
+        turns contact and step lengths into strain-like numbers, wherever one is needed."""
+        return float(np.sqrt(np.mean(self.rest_area[:self.n_faces])))
 
     def set_vertex_pin(self, v, pinned, target=None):
         """Pin vertex ``v`` to ``target`` (m) or free it. The field the kernels read and the

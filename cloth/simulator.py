@@ -257,7 +257,7 @@ class Simulator:
             # (measured on drape at 10 cm edges: with a 5 mm reach the final obstacle pass had
             # to push by 8.6 mm, undoing the limits by 1.5e-2; with 5 cm it pushed nothing).
             self.collider.contact_planes(t, self.strain.contact_planes,
-                                         reach=0.5 * self._contact_scale(),
+                                         reach=0.5 * self.model.typical_edge(),
                                          mu_out=self.strain.contact_friction)
         self.strain.project(h, contacts=with_contacts, warm=warm)
 
@@ -275,17 +275,12 @@ class Simulator:
         """The obstacle pass after the projection. Where it still has to move a vertex by more
         than the strain tolerance (a vertex beyond the planes' reach pulled into a body, a
         concave corner of it), project again with the contacts as they are now, and repeat."""
-        tol_m = self.strain.tol * self._contact_scale()
+        tol_m = self.strain.tol * self.model.typical_edge()
         for _ in range(max_rounds):
             if self.collider.resolve_obstacles(self.h, self.time) <= tol_m:
                 return
             self._project_limits(self.h, self.time + self.h, warm=False)
         self.collider.resolve_obstacles(self.h, self.time)
-
-    def _contact_scale(self):
-        """The typical edge length (m): sqrt of the mean rest area."""
-        m = self.model
-        return float(np.sqrt(np.mean(m.rest_area[:m.n_faces])))
 
     def _make_remesher(self):
         from . import remesh

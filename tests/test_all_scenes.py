@@ -11,6 +11,7 @@ SMALL = {"hanging": {"cloth": {"resolution": 9}}, "pull": {"cloth": {"resolution
          "drape": {"cloth": {"resolution": 11}}, "tshirt": {}}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(scenes.SCENES))
 def test_scene_runs_and_passes_its_check(name, tmp_path):
     from ui.headless import HeadlessRun
@@ -58,6 +59,7 @@ def test_scenes_enable_only_what_they_need():
     assert self_coll == {"tshirt"}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name,frames", [("drape", 20)])
 def test_obstacle_contacts_keep_the_strain_limits(name, frames):
     """Contacts are constraints of the projection (issue 5): landing on the sphere and the

@@ -332,6 +332,7 @@ print("frame", st.sim.frame, "message", st.message)
 """
 
 
+@pytest.mark.slow
 def test_window_app_runs_under_xvfb(tmp_path):
     """The real window (panel, legend, recording, screenshot) in a virtual X server; a
     separate process, since a window needs its own GGUI context."""
@@ -352,6 +353,7 @@ def test_window_app_runs_under_xvfb(tmp_path):
     assert len(list((tmp_path / "screenshots").iterdir())) == 1
 
 
+@pytest.mark.slow
 def test_comparison_view_is_reached_from_the_panel_and_left_again():
     """The panel's "compare the three methods" button: AppState.set_compare builds the three
     simulators of the current scene and settings, and switches back."""

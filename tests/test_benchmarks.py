@@ -16,6 +16,9 @@ from benchmarks import stability
 from benchmarks.harness import SimulatorPool
 from benchmarks.speed_vs_error import RESOLUTION, overrides_for, run, sweep, write_outputs
 
+# Whole module: simulation sweeps (make test-quick leaves them out).
+pytestmark = pytest.mark.slow
+
 # Two resolutions a factor 4 apart in triangles; 13 is also the stability cases' mesh, so
 # its Simulator is compiled once for both. svd is left to the documented sweep (and the
 # scene tests): here it would add its runs and a Jacobi kernel to compile.

@@ -101,6 +101,7 @@ def test_list_and_show_config():
     assert "material.k_warp = 3000.0" in res.stdout and "cloth.resolution = 25" in res.stdout
 
 
+@pytest.mark.slow
 def test_headless_writes_the_documented_folder(tmp_path):
     import trimesh
     out = tmp_path / "run"

@@ -397,6 +397,7 @@ def test_folding_sheet_does_not_pass_through_itself():
     assert np.abs(xe[~far, 2] - TH).max() < 1e-9
 
 
+@pytest.mark.slow
 def test_self_collision_follows_a_refilled_mesh():
     """Remeshing refills the model with other counts (within capacity): the collider reads the
     counts at call time, and a model rebuilt larger gets buffers sized from its capacities."""
@@ -447,6 +448,7 @@ def test_capsule_union_reports_its_two_nearest_parts():
         np.testing.assert_allclose(planes[k, 3], n @ centre + 0.1 + 0.004, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_self_collision_is_deterministic():
     """Two identical runs give the same bits: the impulses are applied in the order of the
     pair list, which must not follow thread scheduling. (With parallel bucket fills, this

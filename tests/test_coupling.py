@@ -109,6 +109,7 @@ def _hanging(method, coupling, linear_solver="pcg", res=6):
     return Simulator(mod.build(cfg), cfg)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("linear_solver", ["pcg", "cholesky"])
 def test_direct_and_pcg_newton_give_the_same_projection(linear_solver):
     """The same substep solved with both Newton solvers lands on the same constrained

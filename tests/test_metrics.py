@@ -64,6 +64,7 @@ def test_energy_drift_counts_only_rises_above_the_running_minimum():
     assert energy_drift([], 1.0) == 0.0
 
 
+@pytest.mark.slow
 def test_energy_drift_of_the_hanging_cloth():
     """No energy enters the hanging scene (still pins, no wind). Backward Euler with damping
     only removes it: no rise at all, and the same with the limits as constraints of the

@@ -261,6 +261,7 @@ def test_example_files_repeat_the_builtin_first_frames():
         assert np.array_equal(runs[0], runs[1]), name
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", sorted(p for p in os.listdir(EXAMPLES) if p.endswith(".toml")))
 def test_example_file_runs_headless(path, tmp_path):
     from tests.test_cli import run_main_here
@@ -293,6 +294,7 @@ def winding_numbers(points, verts, faces):
     return w
 
 
+@pytest.mark.slow
 def test_garment_obj_is_split_stitched_scaled_and_drapes_without_penetration():
     """assets/tabard.obj (made by make_assets --garment): two UV islands at 1.6 m per texture
     unit, welded along the shoulder seam; on the dress form (a closed mesh obstacle) it

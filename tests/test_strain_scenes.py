@@ -42,6 +42,7 @@ def test_switching_method_mid_run_takes_effect_next_substep():
     assert sim.metrics_row()["own_violation_max"] < TOL
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method,frames", [("svd", 60), ("warp-weft", 60), ("mapping", 300)])
 def test_remeshing_hanging_keeps_limits_and_invariants(method, frames):
     sim, cfg = make_sim(cloth={"resolution": 9}, strain={"method": method},

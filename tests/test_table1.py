@@ -19,6 +19,9 @@ from benchmarks.reproduce_paper import BANDS, METHODS, measure
 from cloth.simulator import Simulator
 from scenes.common import resolve
 
+# Whole module: simulation sweeps (make test-quick leaves them out).
+pytestmark = pytest.mark.slow
+
 RES = 9            # vertices per side (128 triangles)
 FRAMES = 90        # 3 s at 30 fps; the strain maxima and wrinkle measures plateau from ~40
 WINDOW = 30        # frames summarised at the end of each run

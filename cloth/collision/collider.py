@@ -36,6 +36,8 @@ import time
 
 import taichi as ti
 
+# The contact half-spaces' layout is the strain projection's (its work arrays hold them).
+from ..strain.buffers import CONTACT_SLOTS, NO_CONTACT
 from .obstacles import THICKNESS, CollisionError, Obstacle, mat3, vec3
 
 
@@ -265,7 +267,7 @@ class Collider:
         of vec4 per vertex, ``StrainLimiter.contact_planes``): for the vertex's nearest
         obstacle within ``reach`` (m, at least ``thickness``) of the thickened surface, the
         tangent plane of that surface as (n, d) with n.x >= d on the free side; elsewhere
-        (0, 0, 0, -1e30), which no position violates. ``out`` has two slots per vertex: the
+        (0, 0, 0, NO_CONTACT), which no position violates. ``out`` has two slots per vertex: the
         two nearest planes over the obstacles and their parts (``Obstacle.nearest_two``), so
         a vertex in a concave corner of a body (arm against torso) keeps out of both parts
         instead of being pushed from one into the other by the fix-up passes.
@@ -295,8 +297,8 @@ class Collider:
     def _clear_planes(self, n: ti.i32, out: ti.types.ndarray(), mu_out: ti.types.ndarray()):
         for i in range(n):
             mu_out[i] = 0.0
-            for j in ti.static(range(2)):
-                out[i, j] = ti.Vector([0.0, 0.0, 0.0, -1e30])
+            for j in ti.static(range(CONTACT_SLOTS)):
+                out[i, j] = ti.Vector([0.0, 0.0, 0.0, NO_CONTACT])
 
     @ti.kernel
     def _planes(self, o: ti.template(), x: ti.template(), pinned: ti.template(), n: ti.i32,

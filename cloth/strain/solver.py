@@ -258,7 +258,7 @@ class StrainLimiter:
         params[buffers.P_ISO] = self.mapping_iso
         # Contact violations are metres; divided by the typical edge they read like strains.
         m = self.model
-        params[buffers.P_CONTACT_SCALE] = self._edge_scale()
+        params[buffers.P_CONTACT_SCALE] = self.model.typical_edge()
         self._ws.params.from_numpy(params)
 
     def set_stitches(self, pairs):
@@ -477,7 +477,7 @@ class StrainLimiter:
         # Only an unconverged AL iterate is capped, and only where it moved a vertex further
         # than half a typical edge (a budget-limited solve is a legitimate answer; capping
         # every unconverged one raised the band error of 8-round svd from 3.6e-4 to 6.9e-2).
-        kick = 0.5 * self._edge_scale() / h if (self.solver == "al" and not converged
+        kick = 0.5 * self.model.typical_edge() / h if (self.solver == "al" and not converged
                                                 and h > 0) else -1.0
         al.finish_solve(nv, float(h), kick, ws.x, ws.x_start, ws.v)
         buffers.array_to_field(ws.x, m.state.x, nv)
@@ -487,9 +487,6 @@ class StrainLimiter:
         self.last_converged = bool(converged)
         self.last_newton, self.last_cg = int(newton), int(stats[ST_CG])
         self.last_ms = 1e3 * (time.perf_counter() - t0)
-
-    def _edge_scale(self):
-        return float(np.sqrt(np.mean(self.model.rest_area[:self.model.n_faces])))
 
     def _assemble(self, mid, pos):
         ws = self._ws
@@ -503,7 +500,7 @@ class StrainLimiter:
         m = self.model
         mean_mass = self._mean_mass(metric)
         mu, mu_max = self.mu_scale * mean_mass, self.mu_max_scale * mean_mass
-        step_tol = 0.01 * self.tol * float(np.sqrt(np.mean(m.rest_area[:m.n_faces])))
+        step_tol = 0.01 * self.tol * m.typical_edge()
         return direct.solve(self, mid, K, metric, chol, mu, mu_max, step_tol)
 
     def _solve_al(self, mid, K, metric):
@@ -515,7 +512,7 @@ class StrainLimiter:
         mean_mass = self._mean_mass(metric)
         mu, mu_max = self.mu_scale * mean_mass, self.mu_max_scale * mean_mass
         # An inner loop stops once its steps are far below the tolerance (in metres).
-        step_tol = 0.01 * self.tol * float(np.sqrt(np.mean(m.rest_area[:m.n_faces])))
+        step_tol = 0.01 * self.tol * m.typical_edge()
         # CG iterations grow with the cloth's diameter in triangles (corrections travel across
         # it): above 1000 faces the budget grows like sqrt(n_faces / 1000). Measured on the
         # hanging scene at 3.9k faces: 50 iterations left 3-7 of 20 substeps unconverged,
