@@ -242,7 +242,7 @@ def test_seams_close_inside_the_projection_and_conserve_momentum(solver):
     limiter.project(H)
     x = model.positions()
     assert limiter.last_converged
-    scale = limiter._edge_scale()
+    scale = limiter.model.typical_edge()
     assert np.linalg.norm(x[stitches[:, 0]] - x[stitches[:, 1]], axis=1).max() < \
         limiter.tol * scale
     assert limiter.constraint_values().max() < limiter.tol
@@ -268,7 +268,7 @@ def test_contact_half_spaces_hold_with_the_limits():
     limiter.project(H, contacts=True)
     x = model.positions()
     assert limiter.last_converged
-    assert x[:, 2].min() > -limiter.tol * limiter._edge_scale()
+    assert x[:, 2].min() > -limiter.tol * limiter.model.typical_edge()
     assert limiter.constraint_values().max() < limiter.tol
     # Without contacts the same call clears the planes: the sheet stays where it is in z.
     set_positions(model, x0)
@@ -297,7 +297,7 @@ def test_friction_in_the_projection_follows_coulomb(mu):
     # converge, the sliding one does; see the closing note of issue 5.)
     limiter = StrainLimiter(model, method="warp-weft", warp=(-0.5, 0.5), weft=(-0.5, 0.5),
                             bias=(-0.5, 0.5), max_iters=200)
-    atol = 2 * limiter.tol * limiter._edge_scale()
+    atol = 2 * limiter.tol * limiter.model.typical_edge()
     planes = np.zeros((model.v_cap, 2, 4))
     planes[:, :, 3] = -1e30
     planes[:, 0] = [0.0, 0.0, 1.0, 0.0]
