@@ -26,6 +26,9 @@ curvature terms that are non-negative (the stretch terms in tension). The droppe
 curvature under compression, the indefinite shear curvature, the bending angle's curvature) make
 the one Newton step robust instead of exact; ``force_jacobian_product(exact=True)`` gives the
 exact membrane Jacobian for testing.
+
+Why one module of ~490 lines: forces, their Jacobian product, its diagonal and its assembled
+blocks must stay the same K; they share the element kinematics and ``_face_block``.
 """
 from dataclasses import dataclass
 
