@@ -49,15 +49,18 @@ def test_remeshing_hanging_keeps_limits_and_invariants(method, frames):
                         remesh={"enabled": True, "size_min": 0.06, "size_max": 0.2})
     area0 = sim.model.rest_area.sum()
     pins_uv = sim.model.uv[sim.model.pinned].copy()
-    counts = set()
+    operations = 0
     for _ in range(frames):
         sim.step_frame()
         row = sim.metrics_row()
-        counts.add(row["faces"])
+        operations += sum(sim.remesh_stats[k] for k in ("splits", "flips", "collapses"))
         assert row["nan"] == 0
         assert row["own_violation_max"] < TOL, (method, sim.frame, row["own_violation_max"])
         assert np.isclose(sim.model.rest_area.sum(), area0, rtol=1e-12)
         assert np.all(sim.model.rest_area > 0)
         assert np.array_equal(np.sort(sim.model.uv[sim.model.pinned], axis=0),
                               np.sort(pins_uv, axis=0))
-    assert len(counts) > 1          # the mesh did change
+    # The mesh did change. Counted as operations, not faces: with svd the only changes can be
+    # flips (measured: 2, 8 and 2 in the first three frames), and whether one split happens
+    # too depends on round-off (a 1e-17 change of the metric moved the projection by 0.9 mm).
+    assert operations > 0
