@@ -28,10 +28,15 @@ from typing import Callable, Optional
 import numpy as np
 import taichi as ti
 
-from . import metrics
-from .dynamics import DynamicsSettings, ImplicitEuler
+# Every stage's module (``sim.linear_solver = "direct"`` swaps in dynamics_sparse.py, imported
+# where it is built: it loads scipy).
+from . import metrics                                  # stage "metrics"
+from . import remesh                                   # stage "remesh"
+from .collision import THICKNESS, Collider            # stages "collision", "collision_final"
+from .dynamics import DynamicsSettings, ImplicitEuler  # stage "dynamics"
 from .model import CapacityExceeded, ClothModel, Material, MeshArrays
 from .settings import STRAIN_METHODS, Settings
+from .strain.solver import StrainLimiter              # stage "strain_limit" (cloth/strain/)
 
 
 class SimulationDiverged(RuntimeError):
@@ -194,8 +199,7 @@ class Simulator:
         refining cloth rarely outgrows its fields (growing means recompiling the kernels)."""
         if not remesh_settings.enabled:
             return 1.2
-        from .metrics import material_areas
-        area = material_areas(mesh.uv, mesh.faces).sum()
+        area = metrics.material_areas(mesh.uv, mesh.faces).sum()
         finest = 2.5 * area / (0.433 * remesh_settings.size_min ** 2)
         return max(2.0, min(finest, cap_faces) / len(mesh.faces))
 
@@ -228,7 +232,6 @@ class Simulator:
 
     def _make_strain_limiter(self, method=None):
         """The strain limiter of ``settings.strain`` (with ``method`` instead of its own)."""
-        from .strain.solver import StrainLimiter     # here: scenes may not limit strain
         st = self.settings.strain
         method = st.method if method is None else method
         self.strain = StrainLimiter(
@@ -266,7 +269,6 @@ class Simulator:
         self.strain.project(h, contacts=with_contacts, warm=warm)
 
     def _make_collider(self):
-        from .collision import THICKNESS, Collider
         c = self.settings.section("collision")
         self.collider = Collider(self.model, self.setup.obstacles,
                                  thickness=c.thickness if c is not None else THICKNESS,
@@ -287,7 +289,6 @@ class Simulator:
         self.collider.resolve_obstacles(self.h, self.time)
 
     def _make_remesher(self):
-        from . import remesh
         rcfg = self.settings.to_dict()["remesh"]
         params = remesh.RemeshParams(**{k: v for k, v in rcfg.items() if k != "enabled"})
         params.validate()

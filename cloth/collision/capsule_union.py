@@ -8,7 +8,6 @@ push-out needs.
 """
 import numpy as np
 import taichi as ti
-import trimesh
 
 from .obstacles import CollisionError, Obstacle
 
@@ -56,6 +55,7 @@ class CapsuleUnion(Obstacle):
         return min(r, np.sqrt(8.0 * r * thickness))
 
     def local_mesh(self):
+        import trimesh      # here: 0.7 s to import, and only meshes need it
         parts = []
         for a, b, r in zip(self.seg_a, self.seg_b, self.radii):
             d = b - a

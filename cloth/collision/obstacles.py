@@ -5,7 +5,6 @@ of time), evaluated once per substep on the host and sent to the kernels as argu
 """
 import numpy as np
 import taichi as ti
-import trimesh
 
 from .. import backend
 from .geom import (sdf_box, sdf_capsule, sdf_plane, sdf_sphere, safe_normalize)
@@ -242,6 +241,7 @@ class Sphere(Obstacle):
         return min(self.radius, np.sqrt(8.0 * self.radius * thickness))
 
     def local_mesh(self):
+        import trimesh      # here: 0.7 s to import, and only meshes need it
         m = trimesh.creation.icosphere(subdivisions=3, radius=self.radius)
         return m.vertices, m.faces
 
@@ -277,6 +277,7 @@ class Capsule(Obstacle):
         return min(self.radius, np.sqrt(8.0 * self.radius * thickness))
 
     def local_mesh(self):
+        import trimesh      # here: 0.7 s to import, and only meshes need it
         m = trimesh.creation.capsule(height=self.length, radius=self.radius, count=[24, 24])
         return m.vertices, m.faces
 
@@ -307,6 +308,7 @@ class Box(Obstacle):
         return min(min(self.half), 2.0 * thickness)
 
     def local_mesh(self):
+        import trimesh      # here: 0.7 s to import, and only meshes need it
         m = trimesh.creation.box(extents=[2 * h for h in self.half])
         return m.vertices, m.faces
 
@@ -325,6 +327,7 @@ class MeshObstacle(Obstacle):
 
     def __init__(self, source, resolution=64, mu=0.3, position=(0.0, 0.0, 0.0), rotation=None,
                  path=None, scale=1.0, offset=(0.0, 0.0, 0.0)):
+        import trimesh      # here: 0.7 s to import, and only meshes need it
         if isinstance(source, trimesh.Trimesh):
             mesh = source
         elif isinstance(source, (tuple, list)) and len(source) == 2:
