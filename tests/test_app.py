@@ -404,3 +404,29 @@ if __name__ == "__main__":
         regenerate()
     else:
         print(__doc__)
+
+
+def test_layers_import_only_downwards():
+    """#15: the physics core never imports the window, the scenes, the benchmarks or the
+    tests; scenes never import the window or the benchmarks; benchmarks never import the
+    tests. Checked on every import statement, including those inside functions."""
+    import ast
+    rules = {"cloth": ("ui", "scenes", "benchmarks", "tests"),
+             "scenes": ("ui", "benchmarks", "tests"),
+             "benchmarks": ("tests",), "ui": ("benchmarks", "tests")}
+    bad = []
+    for package, forbidden in rules.items():
+        for folder, _, files in os.walk(os.path.join(ROOT, package)):
+            for name in files:
+                if not name.endswith(".py"):
+                    continue
+                path = os.path.join(folder, name)
+                with open(path) as fh:
+                    tree = ast.parse(fh.read())
+                for node in ast.walk(tree):
+                    names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
+                        [node.module or ""] if isinstance(node, ast.ImportFrom) and node.level == 0 \
+                        else []
+                    bad += [f"{os.path.relpath(path, ROOT)}:{node.lineno} imports {n}"
+                            for n in names if n.split(".")[0] in forbidden]
+    assert not bad, "\n".join(bad)
