@@ -9,6 +9,9 @@ class ConfigError(ValueError):
     """Bad configuration input; the message names the fix."""
 
 
+# List keys whose empty list is a value of its own ("automatic"), settable at any time.
+EMPTY_MEANS_AUTOMATIC = ("strain.bias",)
+
 # Keys that take a number or one of a few words (key path -> the words).
 NUMBER_OR_WORD = {
     "cloth.uv_scale": ("auto",),      # metres per vt unit, or per-island area matching
@@ -56,6 +59,8 @@ def _coerce(old, value, path):
             return float(value) if isinstance(old, float) else _as_int(value, path)
         raise ConfigError(f"'{path}' takes a number (got {value!r})")
     if isinstance(old, (list, tuple)):
+        if path in EMPTY_MEANS_AUTOMATIC and isinstance(value, (list, tuple)) and not value:
+            return []
         # An empty default list means "any length" (e.g. an optional band: [] = automatic).
         if not isinstance(value, (list, tuple)) or (old and len(value) != len(old)):
             raise ConfigError(f"'{path}' takes a list of {len(old)} values like {list(old)} "

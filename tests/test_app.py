@@ -54,6 +54,13 @@ def restore(shared):
         shared.set_material(key, base["material"][key])
     shared.reset()
     shared.resume()
+    # Checked, so a test that changes something restore() does not undo fails here instead
+    # of silently changing the tests after it.
+    from cloth.settings import Settings
+    want, have = Settings(base).to_dict(), shared.sim.settings.to_dict()
+    for section in ("sim", "material", "strain", "remesh"):
+        assert have[section] == want[section], f"restore() left {section} changed"
+    assert shared.sim.frame == 0 and shared.sim.held_vertex is None
     return shared
 
 
@@ -197,6 +204,12 @@ def test_live_controls_refuse_bad_values_and_keep_the_settings(st):
     assert not st.set_material("k_weft", -1.0) and "k_weft" in st.message
     sim.set_substeps(3)
     assert sim.settings.sim.substeps == 3 and np.isclose(sim.h, 1 / (3 * before["sim"]["fps"]))
+    # An explicit bias band, then automatic again: the settings and the limiter follow.
+    from cloth import metrics
+    assert st.set_band("bias", lo=-0.04, hi=0.04) and sim.settings.strain.bias == [-0.04, 0.04]
+    assert st.set_auto_bias(True), st.message
+    assert sim.settings.strain.bias == []
+    assert np.allclose(sim.strain.bias, metrics.default_bias_band(sim.strain.warp, sim.strain.weft))
 
 
 def test_ui_changes_the_simulator_only_through_its_public_controls():

@@ -103,6 +103,12 @@ def test_settings_are_the_typed_checked_view_the_simulator_reads():
     assert s.strain.iters == 100                    # the original is unchanged
     with pytest.raises(ConfigError, match="strain.iters = 0 must be >= 1"):
         s.replace("strain", iters=0)
+    # An explicit bias band and back to automatic ([]), which other list keys do not allow.
+    explicit = s.replace("strain", bias=[-0.04, 0.04])
+    assert explicit.strain.bias == [-0.04, 0.04]
+    assert explicit.replace("strain", bias=[]).strain.bias == []
+    with pytest.raises(ConfigError, match="strain.warp"):
+        s.replace("strain", warp=[])
     with pytest.raises(ConfigError, match="unknown setting 'strain.itres'"):
         s.replace("strain", itres=3)
     with pytest.raises(AttributeError, match="no settings section 'pul'"):
