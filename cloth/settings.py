@@ -304,14 +304,19 @@ def validate(cfg):
         for key, value in section.items():
             check_value(f"{name}.{key}", value, SCHEMA.get(name, {}).get(key, Key()))
         out[name] = section_class(name, section)(**section)
-    sim = cfg.get("sim", {})
-    if not float(sim.get("frames", 1)) == int(sim.get("frames", 1)):
-        raise ConfigError("sim.frames takes a whole number")
-    rm = cfg.get("remesh", {})
-    if rm and rm.get("size_max", 1) < rm.get("size_min", 0):
-        raise ConfigError(f"remesh.size_max = {rm['size_max']} must be >= remesh.size_min "
-                          f"({rm['size_min']}) m: raise size_max or lower size_min")
+    _check_across(out)
     return out
+
+
+def _check_across(sections):
+    """The rules that involve more than one value."""
+    sim, rm = sections.get("sim"), sections.get("remesh")
+    frames = getattr(sim, "frames", 1)
+    if not float(frames) == int(frames):
+        raise ConfigError("sim.frames takes a whole number")
+    if rm is not None and getattr(rm, "size_max", 1) < getattr(rm, "size_min", 0):
+        raise ConfigError(f"remesh.size_max = {rm.size_max} must be >= remesh.size_min "
+                          f"({rm.size_min}) m: raise size_max or lower size_min")
 
 
 class Settings:
@@ -346,12 +351,22 @@ class Settings:
         return self._sections.get(name, default)
 
     def replace(self, section, **changes):
-        """A copy with ``changes`` applied to ``section`` (types and ranges checked)."""
-        cfg = self.to_dict()
-        if section not in cfg:
+        """A copy with ``changes`` applied to ``section`` (types and ranges checked). Only
+        the changed values are checked again; the other sections are shared (a live control
+        calls this on every change)."""
+        old = self._sections.get(section)
+        if old is None:
             raise ConfigError(f"no settings section '{section}'")
-        cfg[section] = merge(cfg[section], changes, section + ".")
-        return Settings(cfg)
+        current = {f.name: getattr(old, f.name) for f in dataclasses.fields(old)}
+        merged = merge(current, changes, section + ".")
+        for key in changes:
+            check_value(f"{section}.{key}", merged[key], SCHEMA.get(section, {}).get(key, Key()))
+        new = object.__new__(Settings)
+        new._extras = self._extras
+        new._sections = dict(self._sections)
+        new._sections[section] = dataclasses.replace(old, **{k: merged[k] for k in changes})
+        _check_across(new._sections)
+        return new
 
     def to_dict(self):
         """The nested dict this was built from (with every change since): what config.toml
