@@ -25,6 +25,7 @@ import os
 import numpy as np
 import taichi as ti
 
+from . import exact_curvature
 from .al import (assemble_all, choose_start, contact_g, contact_normal, friction_state, merit,
                  near_weight, residual, update_multipliers, vertex_violation, violation_of)
 from .buffers import (CONTACT_SLOTS, P_CONTACT_SCALE, P_MARGIN, P_SVD_DELTA, ST_CG, ST_COMP,
@@ -202,11 +203,17 @@ def solve(lim, mid, K, metric, chol, mu, mu_max, step_tol):
     n3 = 3 * nv
     while rounds < lim.max_iters and not converged:
         for _ in range(lim.max_newton):
+            if lim.exact_curvature:
+                ws.kappa.fill(0.0)      # the model's curvature off: the exact one is added
+                ws.twist.fill(0.0)
             newton_system(K, nv, nf, ns, mu, ws.x, ws.x_hat, metric.ptr, metric.col,
                           metric.val, metric.diag, ws.pinned, ws.face_verts, ws.rest_area,
                           ws.params, ws.lam, ws.g, ws.grad, ws.cm, ws.what,
                           ws.kappa, ws.twist, ws.contact, ws.lam_c, ws.stitch, ws.lam_s,
                           ws.fric, ws.lam_t, metric.face_slot, metric.stitch_slot, ws.H, ws.r)
+            if lim.exact_curvature:
+                exact_curvature.add_to_newton_matrix(lim, lim.method, K, mu, metric,
+                                                     lim.exact_curvature)
             rhs = ws.r.to_numpy()[:nv].reshape(n3)
             sol, iters, fresh = chol.solve_reusing(ws.H.to_numpy()[: metric.nnz], rhs)
             cg_total += iters

@@ -187,6 +187,10 @@ class StrainLimiter:
         self.svd_delta = SVD_DELTA
         self.jacobi_omega = float(jacobi_omega)
         self.active_margin = float(active_margin)
+        # The Cholesky path's Newton matrix with the constraints' exact (PSD) curvature instead
+        # of the model: False, "full" or "split" (exact_curvature.py). An experiment,
+        # host-side and slow.
+        self.exact_curvature = False
         self.adaptive_margin = bool(adaptive_margin)
         if not 0 <= active_margin < 1:
             raise StrainLimitError(f"active_margin must be in [0, 1) (got {active_margin})")

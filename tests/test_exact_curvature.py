@@ -1,0 +1,76 @@
+"""The constraints' exact curvature (cloth/strain/exact_curvature.py, issue #13): the strains
+written through C = F^T F reproduce the kernels' values, and the Hessian split through C
+agrees with finite differences of the kernels' analytic gradients."""
+import numpy as np
+import pytest
+
+from cloth.strain import constraints as C
+from cloth.strain import exact_curvature as ec
+from tests.test_constraints import random_triangles
+
+BANDS = ((-0.02, 0.03), (-0.04, 0.05), (1.37, 1.46))
+CASES = [("svd", 0.0), ("warp-weft", 0.0), ("mapping", 0.0), ("mapping", C.MAPPING_ISO),
+         ("mapping", 0.1)]
+
+
+def _triangles(rng, n=30):
+    cases = random_triangles(rng, n)
+    return tuple(np.array([c[k] for c in cases]) for k in range(4))   # X, Dm_inv, area, grain
+
+
+@pytest.mark.parametrize("method, iso", CASES)
+def test_strains_through_c_are_the_kernels_values(method, iso, rng):
+    X, Dm_inv, area, grain = _triangles(rng)
+    g, _ = C.evaluate(method, X, Dm_inv, grain, area, *BANDS, by_alignment=True, iso=iso)
+    Cc, _, _ = ec.c_and_jacobian(X, Dm_inv)
+    mine = ec.strains_of_c(method, Cc, grain, BANDS, iso) * np.sqrt(area)[:, None]
+    assert mine.shape == g.shape
+    assert np.abs(mine - g).max() < 1e-13
+
+
+@pytest.mark.parametrize("method, iso", CASES)
+def test_split_hessian_matches_differences_of_the_gradients(method, iso, rng):
+    """Unprojected, sum_k G_k d2C_k + J^T d2G J is each constraint's full Hessian; both sides
+    are finite differences (of G in C, of the analytic gradient in x), so 1e-3 relative."""
+    X, Dm_inv, area, grain = _triangles(rng)
+    K = C.N_CONSTRAINTS[method]
+    for c in range(K):
+        weights = np.zeros((len(X), K))
+        weights[:, c] = 1.0
+        full = ec.face_hessians(method, X, Dm_inv, grain, area, weights, BANDS,
+                                C.MAPPING_DELTA, iso)
+        split = ec.split_face_hessians(method, X, Dm_inv, grain, area, weights, BANDS, iso,
+                                       project=False)
+        scale = np.abs(full).max(axis=(1, 2))
+        assert np.all(scale > 0)
+        assert (np.abs(full - split).max(axis=(1, 2)) / scale).max() < 1e-3, (method, c)
+
+
+def test_split_projection_is_positive_semidefinite_and_an_upper_bound(rng):
+    """Projected, the matrix has no negative eigenvalue, and it is the exact Hessian plus the
+    negative parts it dropped: projected - exact is positive semi-definite. (For a convex
+    constraint such as ||F e|| the split is stiffer than the exact Hessian: its C-part,
+    -a a^T / 4 ||F e||^3, is negative and dropped, though the sum is convex.)"""
+    X, Dm_inv, area, grain = _triangles(rng)
+    weights = rng.uniform(0.0, 1.0, (len(X), 8))
+    args = ("mapping", X, Dm_inv, grain, area, weights, BANDS, C.MAPPING_ISO)
+    proj = ec.split_face_hessians(*args)
+    raw = ec.split_face_hessians(*args, project=False)
+    scale = np.abs(raw).max()
+    assert np.linalg.eigvalsh(proj).min() > -1e-9 * scale
+    assert np.linalg.eigvalsh(proj - raw).min() > -1e-9 * scale
+    assert np.linalg.eigvalsh(raw).min() < -1e-6 * scale      # there was something to drop
+
+
+@pytest.mark.parametrize("mode", ["full", "split"])
+def test_projection_with_the_exact_curvature_meets_the_limits(mode):
+    """The Cholesky path with the exact curvature converges and holds the bands while the
+    sheet falls and swings (hanging res 9, mapping)."""
+    from tests.test_coupling import _hanging
+    sim = _hanging("mapping", "implicit", "cholesky", res=9)
+    sim.strain.exact_curvature = mode
+    for _ in range(6):
+        sim.step_frame()
+        assert sim.strain.last_converged
+        assert sim.strain.last_violation_max < sim.strain.tol
+        assert np.all(np.isfinite(sim.model.positions()))
