@@ -58,11 +58,7 @@ def main():
         full[:nv] = x
         ws.x.from_numpy(full)
         lim._assemble(mid, ws.x)
-        direct.newton_system(K, nv, nf, ns, mu, ws.x, ws.x_hat, metric.ptr, metric.col,
-                             metric.val, metric.diag, ws.pinned, ws.face_verts, ws.rest_area,
-                             ws.params, ws.lam, ws.g, ws.grad, ws.cm, ws.what, ws.kappa,
-                             ws.twist, ws.contact, ws.lam_c, ws.stitch, ws.lam_s, ws.fric,
-                             ws.lam_t, metric.face_slot, metric.stitch_slot, ws.H, ws.r)
+        direct.fill_newton_system(lim, mid, K, mu, metric)
         v = ws.H.to_numpy()[:metric.nnz]
         H = sp.bsr_matrix((v, metric.col_np, metric.ptr_np), shape=(3 * nv, 3 * nv)).tocsr()
         return ws.r.to_numpy()[:nv].reshape(-1), H

@@ -156,6 +156,7 @@ class Simulator:
             lim.mapping_iso = float(st.isotropy)
             lim.set_coupling(st.coupling)
             lim.linear_solver = st.linear_solver
+            lim.curvature = st.curvature
             lim.set_bands(warp=st.warp, weft=st.weft, bias=st.bias if st.bias else "auto")
         elif self.strain is not None:
             self.set_method("none")
@@ -238,7 +239,7 @@ class Simulator:
             self.model, method=method, warp=tuple(st.warp), weft=tuple(st.weft),
             bias=tuple(st.bias) if st.bias else None, solver=st.solver, tol=st.tol,
             max_iters=st.iters, mapping_iso=st.isotropy, stitches=self.dynamics.stitches_np,
-            coupling=st.coupling, linear_solver=st.linear_solver)
+            coupling=st.coupling, linear_solver=st.linear_solver, curvature=st.curvature)
         self._enable_strain_limit(method != "none")
 
     def _enable_strain_limit(self, on):

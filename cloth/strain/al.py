@@ -7,9 +7,11 @@ algorithm, in the order the kernel runs them.
 """
 import taichi as ti
 
-from .buffers import (CONTACT_SLOTS, NO_CONTACT, P_CONTACT_SCALE, P_DELTA, P_ISO, P_MARGIN,
+from .buffers import (CONTACT_SLOTS, NO_CONTACT, P_C_STEP, P_CONTACT_SCALE, P_CURVATURE,
+                      P_DELTA, P_ISO, P_MARGIN,
                       P_SHEAR, P_SVD_DELTA, P_WARP, P_WEFT, ST_CG, ST_COMP, ST_CONVERGED,
                       ST_ITERS, ST_NEWTON, ST_START_VIOL, ST_VIOL, A, T)
+from .c_curvature import add_c_curvature_product, c_curvature_block, face_c_curvature
 from .constraints import face_constraints
 
 
@@ -232,11 +234,23 @@ def near_weight(s, near):
 
 
 @ti.func
+def fill_c_curvature(method: ti.template(), K, nf, mu, x: T, face_verts: T, Dm_inv: T,
+                     grain: T, rest_area: T, params: T, lam: T, g: T, curv: T):
+    """The exact constraint curvature of every face at x (c_curvature.py), when the
+    params ask for it (P_CURVATURE); the Newton matrix then uses it instead of the model."""
+    if params[P_CURVATURE] > 0.0:
+        params_w = ti.Vector([params[k] for k in ti.static(range(6))])
+        for f in range(nf):
+            face_c_curvature(method, K, f, x, face_verts, Dm_inv, grain, rest_area, params_w,
+                             params[P_ISO], params[P_C_STEP], lam, g, mu, curv)
+
+
+@ti.func
 def build_preconditioner(K, nv, nf, ns, mu, margin, use_twist, w_ptr: T, w_col: T, w_val: T, w_diag: T, pinned: T,
                          face_verts: T, rest_area: T, lam: T, g: T,
                          grad: T, cm: T, what: T, kappa: T, twist: T, x: T, contact: T,
                          lam_c: T, stitch: T, lam_s: T, fric: T, lam_t: T, c_scale,
-                         P_inv: T):
+                         exact, curv: T, P_inv: T):
     """3x3 block Jacobi of the projected-Newton matrix (see apply_hessian)."""
     for n in range(nv):
         P_inv[n] = w_val[w_diag[n]]
@@ -250,6 +264,8 @@ def build_preconditioner(K, nv, nf, ns, mu, margin, use_twist, w_ptr: T, w_col: 
         for c in range(K):
             s = lam[f, c] + mu * g[f, c]
             sc = ti.max(s, 0.0)        # curvature weight (inactive: none)
+            if exact:
+                sc = 0.0               # the exact curvature is added per face below
             if s + near > 0.0:
                 gr, w = grad[f, c], what[f, c]
                 proj = ti.Matrix.identity(float, 3) - w.outer_product(w)
@@ -262,6 +278,9 @@ def build_preconditioner(K, nv, nf, ns, mu, margin, use_twist, w_ptr: T, w_col: 
                     for n in ti.static(range(3)):
                         tn = ti.Vector([tw[3 * n], tw[3 * n + 1], tw[3 * n + 2]])
                         P_inv[ids[n]] += sc * tn.outer_product(tn)
+        if exact:
+            for n in ti.static(range(3)):
+                P_inv[ids[n]] += c_curvature_block(curv, f, n, n)
     for k in range(ns):
         P_inv[stitch[k][0]] += mu * ti.Matrix.identity(float, 3)
         P_inv[stitch[k][1]] += mu * ti.Matrix.identity(float, 3)
@@ -280,7 +299,7 @@ def build_preconditioner(K, nv, nf, ns, mu, margin, use_twist, w_ptr: T, w_col: 
 def apply_hessian(K, nv, nf, ns, mu, margin, use_twist, w_ptr: T, w_col: T, w_val: T, w_diag: T, pinned: T,
                   face_verts: T, rest_area: T, lam: T, g: T, grad: T,
                   cm: T, what: T, kappa: T, twist: T, x: T, contact: T, lam_c: T, stitch: T,
-                  lam_s: T, fric: T, lam_t: T, c_scale, p: T, Ap: T):
+                  lam_s: T, fric: T, lam_t: T, c_scale, exact, curv: T, p: T, Ap: T):
     """Ap = (M + sum_near [mu grad g grad g^T] + sum_active (lam + mu g) curvature(g)) p, the
     projected-Newton matrix applied without forming it. "Near" includes constraints within
     ``margin`` (strain) of activating: a Newton step that ignores them runs straight into
@@ -306,7 +325,7 @@ def apply_hessian(K, nv, nf, ns, mu, margin, use_twist, w_ptr: T, w_col: T, w_va
                 gr = grad[f, c]
                 scatter(Ap, ids, gr, near_weight(s, near) * mu * gr.dot(pf))
                 sc = ti.max(s, 0.0)
-                if sc > 0.0:
+                if sc > 0.0 and not exact:
                     # Curvature of ||F e||: dw = sum_n (M_n.e) p_n, projected off w^.
                     cmv, w = cm[f, c], what[f, c]
                     dw = cmv[0] * p[ids[0]] + cmv[1] * p[ids[1]] + cmv[2] * p[ids[2]]
@@ -316,6 +335,8 @@ def apply_hessian(K, nv, nf, ns, mu, margin, use_twist, w_ptr: T, w_col: T, w_va
                     if use_twist:
                         tw = twist[f, c]
                         scatter(Ap, ids, tw, sc * tw.dot(pf))
+        if exact:
+            add_c_curvature_product(curv, f, ids, p, Ap)
     for k in range(ns):
         t = mu * (p[stitch[k][0]] - p[stitch[k][1]])
         Ap[stitch[k][0]] += t
@@ -338,10 +359,12 @@ def apply_hessian(K, nv, nf, ns, mu, margin, use_twist, w_ptr: T, w_col: T, w_va
 
 
 @ti.func
-def pcg_direction(K, nv, nf, ns, mu, max_cg, rtol, margin, use_twist, x: T, x_hat: T,
-                  w_ptr: T, w_col: T, w_val: T, w_diag: T, pinned: T, face_verts: T, rest_area: T, lam: T, g: T, grad: T,
+def pcg_direction(method: ti.template(), K, nv, nf, ns, mu, max_cg, rtol, margin, use_twist,
+                  x: T, x_hat: T,
+                  w_ptr: T, w_col: T, w_val: T, w_diag: T, pinned: T, face_verts: T, Dm_inv: T,
+                  grain: T, rest_area: T, params: T, lam: T, g: T, grad: T,
                   cm: T, what: T, kappa: T, twist: T, contact: T, lam_c: T, stitch: T,
-                  lam_s: T, fric: T, lam_t: T, c_scale, b: T, d: T, r: T, z: T, p: T,
+                  lam_s: T, fric: T, lam_t: T, c_scale, curv: T, b: T, d: T, r: T, z: T, p: T,
                   Ap: T, P_inv: T):
     """Projected-Newton direction: solve H d = -grad L_A by PCG (block Jacobi) from d = 0 to
     |r| <= rtol |grad L_A| (an inexact Newton step: measured on the hanging scene, rtol = 0.1
@@ -349,9 +372,12 @@ def pcg_direction(K, nv, nf, ns, mu, max_cg, rtol, margin, use_twist, x: T, x_ha
     b = -grad L_A; returns (slope grad L_A . d, CG iterations)."""
     residual(K, nv, nf, ns, mu, x, x_hat, w_ptr, w_col, w_val, w_diag, pinned, face_verts, lam, g, grad,
              contact, lam_c, stitch, lam_s, fric, lam_t, r)
+    exact = params[P_CURVATURE] > 0.0
+    fill_c_curvature(method, K, nf, mu, x, face_verts, Dm_inv, grain, rest_area, params, lam,
+                     g, curv)
     build_preconditioner(K, nv, nf, ns, mu, margin, use_twist, w_ptr, w_col, w_val, w_diag, pinned, face_verts,
                          rest_area, lam, g, grad, cm, what, kappa, twist, x, contact, lam_c,
-                         stitch, lam_s, fric, lam_t, c_scale, P_inv)
+                         stitch, lam_s, fric, lam_t, c_scale, exact, curv, P_inv)
     r0 = ti.sqrt(dot(r, r, nv))
     for n in range(nv):
         b[n] = r[n]
@@ -363,7 +389,7 @@ def pcg_direction(K, nv, nf, ns, mu, max_cg, rtol, margin, use_twist, x: T, x_ha
     while it < max_cg and ti.sqrt(dot(r, r, nv)) > rtol * r0:
         apply_hessian(K, nv, nf, ns, mu, margin, use_twist, w_ptr, w_col, w_val, w_diag, pinned, face_verts,
                       rest_area, lam, g, grad, cm, what, kappa, twist, x, contact, lam_c,
-                      stitch, lam_s, fric, lam_t, c_scale, p, Ap)
+                      stitch, lam_s, fric, lam_t, c_scale, exact, curv, p, Ap)
         pAp = dot(p, Ap, nv)
         if pAp <= 0.0:
             break
@@ -489,8 +515,8 @@ def solve_al(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu0: floa
              x_hat: A,
              x_trial: A, w_ptr: A, w_col: A, w_val: A, w_diag: A, pinned: A, face_verts: A, Dm_inv: A, grain: A,
              rest_area: A, lam: A, g: A, grad: A, cm: A, what: A, kappa: A,
-             twist: A, contact: A, lam_c: A, stitch: A, lam_s: A, fric: A, lam_t: A, b: A, d: A, r: A,
-             z: A, p: A, Ap: A,
+             twist: A, contact: A, lam_c: A, stitch: A, lam_s: A, fric: A, lam_t: A, curv: A,
+             b: A, d: A, r: A, z: A, p: A, Ap: A,
              P_inv: A, stats: A):
     """The whole AL projection (METHOD 4) in one launch (measured: with one launch per
     phase, Python's argument handling cost as much as the solve): rounds of inexact
@@ -503,7 +529,7 @@ def solve_al(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu0: floa
     Newton steps, complementarity)."""
     ti.loop_config(serialize=True)
     for _ in range(1):
-        use_twist = params[P_SVD_DELTA] > 0.0 and K == 4
+        use_twist = params[P_SVD_DELTA] > 0.0 and K == 4 and params[P_CURVATURE] == 0.0
         margin = params[P_MARGIN]
         c_scale = params[P_CONTACT_SCALE]
         mu = mu0
@@ -521,12 +547,13 @@ def solve_al(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu0: floa
                 slope, cg_it = 0.0, 0
                 L0 = 0.0
                 if first == 0:
-                    slope, cg_it = pcg_direction(K, nv, nf, ns, mu, max_cg, rtol, margin,
-                                                 use_twist, x, x_hat, w_ptr, w_col, w_val, w_diag, pinned,
-                                                 face_verts, rest_area, lam, g, grad, cm,
+                    slope, cg_it = pcg_direction(method, K, nv, nf, ns, mu, max_cg, rtol,
+                                                 margin, use_twist, x, x_hat, w_ptr, w_col,
+                                                 w_val, w_diag, pinned, face_verts, Dm_inv,
+                                                 grain, rest_area, params, lam, g, grad, cm,
                                                  what, kappa, twist, contact, lam_c, stitch,
-                                                 lam_s, fric, lam_t, c_scale, b, d, r, z, p,
-                                                 Ap, P_inv)
+                                                 lam_s, fric, lam_t, c_scale, curv, b, d, r,
+                                                 z, p, Ap, P_inv)
                     cg_total += cg_it
                     newton += 1
                     inner += 1

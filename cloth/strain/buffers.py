@@ -31,7 +31,10 @@ ST_ITERS, ST_VIOL, ST_CONVERGED, ST_CG, ST_NEWTON, ST_COMP, ST_START_VIOL = rang
 # Indices into the ``params`` array.
 P_WARP, P_WEFT, P_SHEAR, P_MARGIN, P_DELTA, P_SVD_DELTA, P_CONTACT_SCALE = 0, 2, 4, 6, 7, 8, 9
 P_ISO = 10
-N_PARAMS = 11
+# The Newton matrix's constraint curvature: 0 the model of constraints.py, 1 exact through C
+# (c_curvature.py), with its difference step in C.
+P_CURVATURE, P_C_STEP = 11, 12
+N_PARAMS = 13
 # A vertex without a contact half-space: n = 0 and d far below any position, so d - n.x never
 # comes near activating.
 NO_CONTACT = -1e30
@@ -74,6 +77,7 @@ class Workspace:
         self.what = ti.ndarray(vec3, (F, K))
         self.kappa = ti.ndarray(float, (F, K))
         self.twist = ti.ndarray(vec9, (F, K))     # extra rank-1 curvature (svd only)
+        self.curv = ti.ndarray(vec9, (F, 3))      # exact curvature per face (c_curvature.py)
         # Per-vertex vectors: positions (x), unconstrained x_hat, start of the call, line-search
         # trial, Newton direction and PCG vectors; Jacobi accumulators.
         names = ("x", "v", "x_hat", "x_start", "x_trial", "b", "d", "r", "z", "p", "Ap",

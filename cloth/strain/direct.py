@@ -26,9 +26,12 @@ import numpy as np
 import taichi as ti
 
 from . import exact_curvature
-from .al import (assemble_all, choose_start, contact_g, contact_normal, friction_state, merit,
-                 near_weight, residual, update_multipliers, vertex_violation, violation_of)
-from .buffers import (CONTACT_SLOTS, P_CONTACT_SCALE, P_MARGIN, P_SVD_DELTA, ST_CG, ST_COMP,
+from .c_curvature import c_curvature_block
+from .al import (assemble_all, choose_start, contact_g, contact_normal, fill_c_curvature,
+                 friction_state, merit, near_weight, residual, update_multipliers,
+                 vertex_violation, violation_of)
+from .buffers import (CONTACT_SLOTS, P_CONTACT_SCALE, P_CURVATURE, P_MARGIN, P_SVD_DELTA,
+                      ST_CG, ST_COMP,
                       ST_CONVERGED, ST_ITERS, ST_NEWTON, ST_START_VIOL, ST_VIOL, A)
 
 # LOOM_DEBUG_DIRECT=1 prints every Newton step (residual, step, line-search alpha).
@@ -60,11 +63,11 @@ def start(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: float,
 
 
 @ti.kernel
-def newton_system(K: int, nv: int, nf: int, ns: int, mu: float, x: A, x_hat: A, w_ptr: A,
-                  w_col: A, w_val: A, w_diag: A, pinned: A, face_verts: A, rest_area: A,
-                  params: A, lam: A, g: A, grad: A, cm: A, what: A, kappa: A,
-                  twist: A, contact: A, lam_c: A, stitch: A, lam_s: A, fric: A, lam_t: A,
-                  face_slot: A, stitch_slot: A, H: A, r: A):
+def newton_system(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: float, x: A,
+                  x_hat: A, w_ptr: A, w_col: A, w_val: A, w_diag: A, pinned: A, face_verts: A,
+                  Dm_inv: A, grain: A, rest_area: A, params: A, lam: A, g: A, grad: A, cm: A,
+                  what: A, kappa: A, twist: A, contact: A, lam_c: A, stitch: A, lam_s: A,
+                  fric: A, lam_t: A, curv: A, face_slot: A, stitch_slot: A, H: A, r: A):
     """r = -grad L_A and the projected-Newton matrix H (the operator of
     ``al.apply_hessian`` written out in W's block pattern, which must hold every face
     pair and seam pair: ``system_matrix.build_pattern``). Pinned rows and columns become the
@@ -73,9 +76,12 @@ def newton_system(K: int, nv: int, nf: int, ns: int, mu: float, x: A, x_hat: A, 
     for _ in range(1):
         margin = params[P_MARGIN]
         c_scale = params[P_CONTACT_SCALE]
-        use_twist = params[P_SVD_DELTA] > 0.0 and K == 4
+        exact = params[P_CURVATURE] > 0.0
+        use_twist = params[P_SVD_DELTA] > 0.0 and K == 4 and not exact
         residual(K, nv, nf, ns, mu, x, x_hat, w_ptr, w_col, w_val, w_diag, pinned,
                  face_verts, lam, g, grad, contact, lam_c, stitch, lam_s, fric, lam_t, r)
+        fill_c_curvature(method, K, nf, mu, x, face_verts, Dm_inv, grain, rest_area, params,
+                         lam, g, curv)
         for k in range(w_ptr[nv]):
             H[k] = w_val[k]
         I = ti.Matrix.identity(float, 3)
@@ -99,6 +105,8 @@ def newton_system(K: int, nv: int, nf: int, ns: int, mu: float, x: A, x_hat: A, 
                 if s + near > 0.0:
                     gr, cmv, w = grad[f, c], cm[f, c], what[f, c]
                     sc = ti.max(s, 0.0)
+                    if exact:
+                        sc = 0.0       # the exact curvature is added per face below
                     wn = near_weight(s, near)
                     proj = sc * kappa[f, c] * (I - w.outer_product(w))
                     tw = twist[f, c]
@@ -112,6 +120,10 @@ def newton_system(K: int, nv: int, nf: int, ns: int, mu: float, x: A, x_hat: A, 
                                 tb = ti.Vector([tw[3 * b], tw[3 * b + 1], tw[3 * b + 2]])
                                 blk += sc * ta.outer_product(tb)
                             H[face_slot[f, 3 * a + b]] += blk
+            if exact:
+                for a in ti.static(range(3)):
+                    for b in ti.static(range(3)):
+                        H[face_slot[f, 3 * a + b]] += c_curvature_block(curv, f, a, b)
         for k in range(ns):
             H[stitch_slot[k, 0]] += mu * I
             H[stitch_slot[k, 1]] += -mu * I
@@ -178,6 +190,17 @@ def multipliers(K: int, nv: int, nf: int, ns: int, mu: float, mu_max: float, x: 
         info[I_COMP] = comp
 
 
+def fill_newton_system(lim, mid, K, mu, metric):
+    """``newton_system`` on the limiter's work arrays at ws.x (constraints assembled there):
+    the residual into ws.r, the Newton matrix values into ws.H."""
+    ws, m = lim._ws, lim.model
+    newton_system(mid, K, m.n_verts, m.n_faces, len(lim._stitches), mu, ws.x, ws.x_hat,
+                  metric.ptr, metric.col, metric.val, metric.diag, ws.pinned, ws.face_verts,
+                  ws.Dm_inv, ws.grain, ws.rest_area, ws.params, ws.lam, ws.g, ws.grad, ws.cm,
+                  ws.what, ws.kappa, ws.twist, ws.contact, ws.lam_c, ws.stitch, ws.lam_s,
+                  ws.fric, ws.lam_t, ws.curv, metric.face_slot, metric.stitch_slot, ws.H, ws.r)
+
+
 def solve(lim, mid, K, metric, chol, mu, mu_max, step_tol):
     """The AL loop of ``al.solve_al`` with exact Newton steps, for the StrainLimiter
     ``lim`` (its work arrays, settings and model). ``metric``: a BlockMatrix holding every face
@@ -206,11 +229,7 @@ def solve(lim, mid, K, metric, chol, mu, mu_max, step_tol):
             if lim.exact_curvature:
                 ws.kappa.fill(0.0)      # the model's curvature off: the exact one is added
                 ws.twist.fill(0.0)
-            newton_system(K, nv, nf, ns, mu, ws.x, ws.x_hat, metric.ptr, metric.col,
-                          metric.val, metric.diag, ws.pinned, ws.face_verts, ws.rest_area,
-                          ws.params, ws.lam, ws.g, ws.grad, ws.cm, ws.what,
-                          ws.kappa, ws.twist, ws.contact, ws.lam_c, ws.stitch, ws.lam_s,
-                          ws.fric, ws.lam_t, metric.face_slot, metric.stitch_slot, ws.H, ws.r)
+            fill_newton_system(lim, mid, K, mu, metric)
             if lim.exact_curvature:
                 exact_curvature.add_to_newton_matrix(lim, lim.method, K, mu, metric,
                                                      lim.exact_curvature)

@@ -22,11 +22,12 @@ import time
 import numpy as np
 import taichi as ti
 
-from .. import metrics
+from .. import backend, metrics
 from .. import system_matrix
 from .constraints import (MAPPING_DELTA, MAPPING_ISO, METHOD_IDS, METHODS, N_CONSTRAINTS,
                           SVD_DELTA)
 from . import al, buffers, pbd
+from .c_curvature import C_STEP_F32, C_STEP_F64
 from .buffers import (ST_CG, ST_CONVERGED, ST_ITERS, ST_NEWTON, ST_START_VIOL, ST_VIOL,
                       Workspace)
 
@@ -42,6 +43,9 @@ COUPLINGS = ("implicit", "projection")
 # 4e-8 J. svd and warp-weft rest at 1e2-1e3 m. The split projection keeps 1e2 x the mass.
 MU_SCALE = {"implicit": 1e3, "projection": 1e2}
 LINEAR_SOLVERS = ("cholesky", "pcg")
+# The constraints' curvature in the Newton matrix (c_curvature.py): "exact" through
+# C = F^T F, or "model", the curvature of ||F e|| with e frozen (constraints.py).
+CURVATURES = ("exact", "model")
 
 
 _host_loop_noted = False
@@ -136,7 +140,7 @@ class StrainLimiter:
                  mapping_delta=MAPPING_DELTA, mapping_iso=MAPPING_ISO, jacobi_omega=1.0,
                  active_margin=1e-2,
                  adaptive_margin=False, stitches=None, coupling="projection",
-                 linear_solver="pcg"):
+                 linear_solver="pcg", curvature="model"):
         if solver not in SOLVERS:
             raise StrainLimitError(f"unknown strain-limiting solver '{solver}': use one of "
                                    f"{', '.join(SOLVERS)}")
@@ -146,6 +150,9 @@ class StrainLimiter:
         if linear_solver not in LINEAR_SOLVERS:
             raise StrainLimitError(f"unknown strain linear solver '{linear_solver}': use one of "
                                    f"{', '.join(LINEAR_SOLVERS)}")
+        if curvature not in CURVATURES:
+            raise StrainLimitError(f"unknown strain curvature '{curvature}': use one of "
+                                   f"{', '.join(CURVATURES)}")
         if not tol > 0:
             raise StrainLimitError(f"tol must be > 0 (got {tol}); 1e-4 is 0.01 % strain")
         if max_iters is None:
@@ -191,6 +198,9 @@ class StrainLimiter:
         # of the model: False, "full" or "split" (exact_curvature.py). An experiment,
         # host-side and slow.
         self.exact_curvature = False
+        # The Newton matrix's constraint curvature in the kernels: "model" (constraints.py) or
+        # "exact" (c_curvature.py).
+        self.curvature = curvature
         self.adaptive_margin = bool(adaptive_margin)
         if not 0 <= active_margin < 1:
             raise StrainLimitError(f"active_margin must be in [0, 1) (got {active_margin})")
@@ -264,6 +274,9 @@ class StrainLimiter:
         params[buffers.P_DELTA] = self.mapping_delta
         params[buffers.P_SVD_DELTA] = self.svd_delta
         params[buffers.P_ISO] = self.mapping_iso
+        # The host experiment (exact_curvature.py) replaces the model itself.
+        params[buffers.P_CURVATURE] = float(self.curvature == "exact" and not self.exact_curvature)
+        params[buffers.P_C_STEP] = C_STEP_F32 if backend.precision() == "f32" else C_STEP_F64
         # Contact violations are metres; divided by the typical edge they read like strains.
         m = self.model
         params[buffers.P_CONTACT_SCALE] = self.model.typical_edge()
@@ -535,7 +548,8 @@ class StrainLimiter:
                    ws.pinned, ws.face_verts, ws.Dm_inv, ws.grain, ws.rest_area, ws.lam,
                    ws.g,
                    ws.grad, ws.cm, ws.what, ws.kappa, ws.twist, ws.contact, ws.lam_c,
-                   ws.stitch, ws.lam_s, ws.fric, ws.lam_t, ws.b, ws.d, ws.r, ws.z, ws.p,
+                   ws.stitch, ws.lam_s, ws.fric, ws.lam_t, ws.curv, ws.b, ws.d, ws.r, ws.z,
+                   ws.p,
                    ws.Ap, ws.P_inv,
                    ws.stats)
         stats = ws.stats.to_numpy()
