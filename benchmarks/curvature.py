@@ -12,6 +12,14 @@ For each method: ``hanging`` (implicit coupling, Cholesky path) runs ``--settle`
    the kernels ("kernel", ``strain.curvature = "exact"``), default settings otherwise:
    AL rounds and Newton steps per substep (median) and the mean kinetic energy.
 Each (method, matrix) runs in its own child process from the same deterministic start.
+
+This replaces ``benchmarks/newton_model.py``, which made check 1 with the solver's own margin
+(2026-12-02): with ``active_margin`` 1e-2 the svd model was ~90x stiffer than L_A along the
+Newton step (the near-active constraints' Gauss-Newton terms, which L_A does not have), so
+exact Newton steps were too short and the inner loop stagnated; the margin is kept because
+without it the steps run into constraints that switch on (measured again with the exact
+curvature, hanging res 25 mapping, frames 61-100: margin 0 ran into the 100-round cap every
+substep; 1e-3 converged but its cloth moved more, mean KE 2.6e-5 J against 8.5e-6 J at 1e-2).
 Writes ``curvature.md`` (and .json) to ``--out``.
 """
 import argparse

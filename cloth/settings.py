@@ -76,9 +76,10 @@ COMMON_DEFAULTS = {
         # Newton steps of the AL: "cholesky" (sparse direct, CHOLMOD) or "pcg" (block-Jacobi
         # PCG in one kernel, the earlier solver).
         "linear_solver": "pcg",
-        # The constraints' curvature in the Newton matrix: "exact" (through C = F^T F, made
-        # positive semi-definite) or "model" (the curvature of ||F e|| with e frozen, the
-        # earlier solver; it misses the mapping family's rotating frame).
+        # The constraints' curvature in the Newton matrix: "exact" (mapping: through
+        # C = F^T F, made positive semi-definite; svd and warp-weft keep the model, which is
+        # already theirs) or "model" (the curvature of ||F e|| with e frozen for every family,
+        # the earlier solver; it misses the mapping family's rotating frame).
         "curvature": "exact",
         "iters": AL_ROUNDS,       # outer-round budget per projection (why 100: strain/solver.py)
         "tol": 1e-4,              # largest violation accepted, in strain
@@ -155,7 +156,8 @@ SCHEMA = {
         "linear_solver": Key("", "the AL's Newton steps: block-Jacobi PCG or sparse Cholesky",
                              choices=("pcg", "cholesky")),
         "curvature": Key("", "the constraints' curvature in the AL's Newton matrix: exact "
-                         "(through C = F^T F) or the earlier model (||F e|| with e frozen)",
+                         "(mapping: through C = F^T F) or the earlier model (||F e|| with e "
+                         "frozen)",
                          choices=("exact", "model")),
         "iters": Key("", "outer-iteration budget per projection", lo=1),
         "tol": Key("strain", "largest constraint violation accepted", lo=0, lo_open=True),

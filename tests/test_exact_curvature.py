@@ -76,10 +76,10 @@ def test_projection_with_the_exact_curvature_meets_the_limits(mode):
         assert np.all(np.isfinite(sim.model.positions()))
 
 
-@pytest.mark.parametrize("method", ["svd", "warp-weft", "mapping"])
-def test_kernel_curvature_is_the_host_split(method):
+def test_kernel_curvature_is_the_host_split():
     """The kernels' exact curvature (c_curvature.py, strain.curvature = "exact") fills the
     same Newton matrix as the host's split (exact_curvature.py) on a falling sheet."""
+    method = "mapping"
     from cloth.strain import direct
     from cloth.strain.solver import METHOD_IDS, N_CONSTRAINTS
     from tests.test_coupling import _hanging
@@ -104,3 +104,27 @@ def test_kernel_curvature_is_the_host_split(method):
         matrices.append(ws.H.to_numpy()[:metric.nnz].copy())
     curvature_part = np.abs(matrices[1] - metric.val.to_numpy()[:metric.nnz]).max()
     assert np.abs(matrices[0] - matrices[1]).max() < 1e-6 * curvature_part
+
+
+@pytest.mark.parametrize("method", ["svd", "warp-weft"])
+def test_exact_curvature_keeps_the_model_where_it_is_exact(method):
+    """svd and warp-weft keep their model under strain.curvature = "exact"
+    (solver.EXACT_CURVATURE_FOR): the same Newton matrix either way."""
+    from cloth.strain import direct
+    from cloth.strain.solver import METHOD_IDS, N_CONSTRAINTS
+    from tests.test_coupling import _hanging
+    sim = _hanging(method, "implicit", "cholesky", res=9)
+    for _ in range(8):
+        sim.step_frame()
+    lim = sim.strain
+    ws, mid, K = lim._ws, METHOD_IDS[method], N_CONSTRAINTS[method]
+    metric, _ = lim._direct_metric(True)
+    mu = lim.mu_scale * lim._mean_mass(metric)
+    matrices = []
+    for curvature in ("exact", "model"):
+        lim.curvature = curvature
+        lim._upload_params()
+        lim._assemble(mid, ws.x)
+        direct.fill_newton_system(lim, mid, K, mu, metric)
+        matrices.append(ws.H.to_numpy()[:metric.nnz].copy())
+    assert np.array_equal(matrices[0], matrices[1])
