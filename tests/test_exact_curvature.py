@@ -76,10 +76,10 @@ def test_projection_with_the_exact_curvature_meets_the_limits(mode):
         assert np.all(np.isfinite(sim.model.positions()))
 
 
-def test_kernel_curvature_is_the_host_split():
-    """The kernels' exact curvature (c_curvature.py, strain.curvature = "exact") fills the
-    same Newton matrix as the host's split (exact_curvature.py) on a falling sheet."""
-    method = "mapping"
+def _newton_matrices(method, host_split_for_model):
+    """The Cholesky path's Newton matrix values on a falling sheet (hanging res 9, frame 8)
+    with strain.curvature "exact" and "model"; ``host_split_for_model`` replaces the model's
+    curvature by the host's split (exact_curvature.py). Returns (exact, model, metric values)."""
     from cloth.strain import direct
     from cloth.strain.solver import METHOD_IDS, N_CONSTRAINTS
     from tests.test_coupling import _hanging
@@ -95,36 +95,27 @@ def test_kernel_curvature_is_the_host_split():
         lim.curvature = curvature
         lim._upload_params()
         lim._assemble(mid, ws.x)
-        if curvature == "model":              # the host adds the exact curvature instead
+        host = curvature == "model" and host_split_for_model
+        if host:
             ws.kappa.fill(0.0)
             ws.twist.fill(0.0)
         direct.fill_newton_system(lim, mid, K, mu, metric)
-        if curvature == "model":
+        if host:
             assert ec.add_to_newton_matrix(lim, method, K, mu, metric, "split") > 0
         matrices.append(ws.H.to_numpy()[:metric.nnz].copy())
-    curvature_part = np.abs(matrices[1] - metric.val.to_numpy()[:metric.nnz]).max()
-    assert np.abs(matrices[0] - matrices[1]).max() < 1e-6 * curvature_part
+    return matrices[0], matrices[1], metric.val.to_numpy()[:metric.nnz]
+
+
+def test_kernel_curvature_is_the_host_split():
+    """The kernels' exact curvature (c_curvature.py, strain.curvature = "exact") fills the
+    same Newton matrix as the host's split (exact_curvature.py) on a falling sheet."""
+    kernel, host, metric = _newton_matrices("mapping", host_split_for_model=True)
+    assert np.abs(kernel - host).max() < 1e-6 * np.abs(host - metric).max()
 
 
 @pytest.mark.parametrize("method", ["svd", "warp-weft"])
 def test_exact_curvature_keeps_the_model_where_it_is_exact(method):
     """svd and warp-weft keep their model under strain.curvature = "exact"
     (solver.EXACT_CURVATURE_FOR): the same Newton matrix either way."""
-    from cloth.strain import direct
-    from cloth.strain.solver import METHOD_IDS, N_CONSTRAINTS
-    from tests.test_coupling import _hanging
-    sim = _hanging(method, "implicit", "cholesky", res=9)
-    for _ in range(8):
-        sim.step_frame()
-    lim = sim.strain
-    ws, mid, K = lim._ws, METHOD_IDS[method], N_CONSTRAINTS[method]
-    metric, _ = lim._direct_metric(True)
-    mu = lim.mu_scale * lim._mean_mass(metric)
-    matrices = []
-    for curvature in ("exact", "model"):
-        lim.curvature = curvature
-        lim._upload_params()
-        lim._assemble(mid, ws.x)
-        direct.fill_newton_system(lim, mid, K, mu, metric)
-        matrices.append(ws.H.to_numpy()[:metric.nnz].copy())
-    assert np.array_equal(matrices[0], matrices[1])
+    exact, model, _ = _newton_matrices(method, host_split_for_model=False)
+    assert np.array_equal(exact, model)
