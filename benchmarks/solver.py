@@ -13,7 +13,7 @@ Variants (``strain.coupling`` / ``strain.linear_solver``):
   implicit/pcg       the projection in the implicit step's metric A = (1 + h a) M + h (b + h) K
                      (one linearised backward-Euler step with the limits as constraints);
   implicit/cholesky  the same with exact Newton steps (CHOLMOD, analysis reused per mesh).
-Both implicit variants use the constraints' exact curvature (strain.curvature = "exact").
+The implicit variants use ``--curvature`` (strain.curvature; default: the settings' default).
 
 Rest: hanging, soft cloth, +-1 % / +-5 %, one substep per frame, mean kinetic energy over frames
 120-150 (the issue's measure): resolution 9 for each method, 25 for mapping. Speed: hanging at
@@ -31,12 +31,12 @@ import time
 import numpy as np
 
 VARIANTS = (("projection", "pcg"), ("implicit", "pcg"), ("implicit", "cholesky"))
-# The solver before #13 (the split projection) also had only the curvature model in its
-# Newton matrix; the implicit variants use the exact one (strain.curvature, c_curvature.py).
+# The solver before #13 (the split projection) had only the curvature model in its Newton
+# matrix (strain.curvature, c_curvature.py).
 OLD_CURVATURE = "model"
 
 
-def child(res, method, coupling, linear_solver, frames, ke_from, overrides=None):
+def child(res, method, coupling, linear_solver, curvature, frames, ke_from, overrides=None):
     """One configuration: ``overrides`` sets StrainLimiter attributes after the build (e.g.
     {"active_margin": 0.005}, a probe of a setting the scene files do not expose)."""
     from cloth import backend
@@ -49,8 +49,7 @@ def child(res, method, coupling, linear_solver, frames, ke_from, overrides=None)
     cfg = resolve(mod.DEFAULTS, [{"cloth": {"resolution": res},
                                   "strain": {"method": method, "coupling": coupling,
                                              "linear_solver": linear_solver,
-                                             "curvature": OLD_CURVATURE
-                                             if coupling == "projection" else "exact"}}])
+                                             "curvature": curvature}}])
     sim = Simulator(mod.build(cfg), cfg)
     for key, value in (overrides or {}).items():
         if not hasattr(sim.strain, key):
@@ -107,12 +106,14 @@ def table(rows, keys, heads):
     return "\n".join(lines)
 
 
-def plan(quick):
-    """(kind, (resolution, method, coupling, linear_solver, frames, ke_from)) per child."""
-    old, new, chol = VARIANTS
+def plan(quick, curvature):
+    """(kind, (resolution, method, coupling, linear_solver, curvature, frames, ke_from)) per
+    child; the old solver with OLD_CURVATURE, the implicit variants with ``curvature``."""
+    old, new, chol = (v + (OLD_CURVATURE if v[0] == "projection" else curvature,)
+                      for v in VARIANTS)
     if quick:
         return [("rest", (9, "mapping") + v + (40, 30)) for v in (old, new)] + \
-            [("speed", (25, "mapping") + v + (10, 10)) for v in VARIANTS]
+            [("speed", (25, "mapping") + v + (10, 10)) for v in (old, new, chol)]
     jobs = [("rest", (9, m) + v + (150, 120)) for m in ("mapping", "svd", "warp-weft")
             for v in (old, new)]
     jobs += [("rest", (25, "mapping") + v + (150, 120)) for v in (old, new, chol)]
@@ -166,18 +167,23 @@ def main():
                          "--probe 25 mapping --frames 150 --ke-from 120")
     ap.add_argument("--coupling", default="implicit")
     ap.add_argument("--linear-solver", default="pcg")
+    ap.add_argument("--curvature", default=None, choices=("exact", "model"),
+                    help="strain.curvature of the implicit variants and --probe (default: the "
+                         "settings' default)")
     ap.add_argument("--frames", type=int, default=40)
     ap.add_argument("--ke-from", type=int, default=120)
     ap.add_argument("--set", action="append", default=[], metavar="ATTR=JSON",
                     help="StrainLimiter attribute for --probe, e.g. --set active_margin=0.005")
     args = ap.parse_args()
+    curvature = args.curvature or _default_curvature()
     if args.probe:
         overrides = {}
         for item in args.set:
             key, _, value = item.partition("=")
             overrides[key] = json.loads(value)
         print(json.dumps(child(int(args.probe[0]), args.probe[1], args.coupling,
-                               args.linear_solver, args.frames, args.ke_from, overrides)))
+                               args.linear_solver, curvature, args.frames, args.ke_from,
+                               overrides)))
         return
     if args.child:
         print(json.dumps(child(*json.loads(args.child))))
@@ -192,7 +198,7 @@ def main():
         for i, r in enumerate(data["rest"]):
             if (r.get("coupling"), r.get("linear_solver")) == (coupling, linear_solver):
                 data["rest"][i] = run_child(r["res"], r["method"], coupling, linear_solver,
-                                            r["frames"], 120)
+                                            r.get("curvature", OLD_CURVATURE), r["frames"], 120)
                 print(json.dumps(data["rest"][i]), file=sys.stderr, flush=True)
         write_docs(data["rest"], data["speed"], args.out,
                    f"`python -m benchmarks.solver` (rest rows of {args.rerun_rest} re-run with "
@@ -200,7 +206,7 @@ def main():
         return
     t0 = time.time()
     rest, speed = [], []
-    jobs = plan(args.quick)
+    jobs = plan(args.quick, curvature)
     for i, (kind, a) in enumerate(jobs):
         print(f"[{i + 1}/{len(jobs)}] {kind} {a} ({time.time() - t0:.0f} s)", file=sys.stderr,
               flush=True)
@@ -219,22 +225,28 @@ def write_docs(rest, speed, out, how):
           "jobs (timings are indicative; compare within a table).", "",
           "## Rest: hanging, mean kinetic energy over frames 120-150 (J); strain-limiting "
           "ms per frame: median over frames 2-150", "",
-          table(rest, ["faces", "method", "coupling", "linear_solver", "ke_mean", "ms_median",
-                       "rounds_median", "newton_median", "converged", "commit"],
-                ["faces", "method", "coupling", "Newton solve", "KE (J)", "SL ms/frame",
-                 "AL rounds", "Newton steps", "converged", "commit"]), "",
+          table(rest, ["faces", "method", "coupling", "linear_solver", "curvature", "ke_mean",
+                       "ms_median", "rounds_median", "newton_median", "converged", "commit"],
+                ["faces", "method", "coupling", "Newton solve", "curvature", "KE (J)",
+                 "SL ms/frame", "AL rounds", "Newton steps", "converged", "commit"]), "",
           "## Speed: hanging from its start (the sheet falls and settles), median over frames "
           "2-F", "",
-          table(speed, ["faces", "method", "frames", "coupling", "linear_solver", "ms_median",
-                        "ms_p90", "rounds_median", "rounds_max", "newton_median", "converged",
-                        "viol_max", "commit"],
-                ["faces", "method", "F", "coupling", "Newton solve", "SL ms median", "p90",
-                 "rounds", "max", "Newton", "converged", "max viol", "commit"]), ""]
+          table(speed, ["faces", "method", "frames", "coupling", "linear_solver", "curvature",
+                        "ms_median", "ms_p90", "rounds_median", "rounds_max", "newton_median",
+                        "converged", "viol_max", "commit"],
+                ["faces", "method", "F", "coupling", "Newton solve", "curvature",
+                 "SL ms median", "p90", "rounds", "max", "Newton", "converged", "max viol",
+                 "commit"]), ""]
     plot(rest, speed, os.path.join(out, "solver.png"))
     md.append("![rest and speed](solver.png)")
     with open(os.path.join(out, "solver.md"), "w") as fh:
         fh.write("\n".join(md) + "\n")
     print("\n".join(md))
+
+
+def _default_curvature():
+    from cloth.settings import COMMON_DEFAULTS
+    return COMMON_DEFAULTS["strain"]["curvature"]
 
 
 def _commit():
