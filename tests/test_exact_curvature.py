@@ -62,13 +62,13 @@ def test_split_projection_is_positive_semidefinite_and_an_upper_bound(rng):
     assert np.linalg.eigvalsh(raw).min() < -1e-6 * scale      # there was something to drop
 
 
-@pytest.mark.parametrize("mode", ["full", "split"])
-def test_projection_with_the_exact_curvature_meets_the_limits(mode):
-    """The Cholesky path with the exact curvature converges and holds the bands while the
-    sheet falls and swings (hanging res 9, mapping)."""
+def test_projection_with_the_host_curvature_meets_the_limits():
+    """The Cholesky path with the host's exact curvature (the split; the 9x9 "full" one
+    behaves alike, docs/speed/curvature.md) converges and holds the bands while the sheet
+    falls and swings (hanging res 9, mapping)."""
     from tests.test_coupling import _hanging
     sim = _hanging("mapping", "implicit", "cholesky", res=9)
-    sim.strain.exact_curvature = mode
+    sim.strain.exact_curvature = "split"
     for _ in range(6):
         sim.step_frame()
         assert sim.strain.last_converged
@@ -84,12 +84,15 @@ def _newton_matrices(method, host_split_for_model):
     from cloth.strain.solver import METHOD_IDS, N_CONSTRAINTS
     from tests.test_coupling import _hanging
     sim = _hanging(method, "implicit", "cholesky", res=9)
-    for _ in range(8):
+    for _ in range(5):
         sim.step_frame()
     lim = sim.strain
     ws, mid, K = lim._ws, METHOD_IDS[method], N_CONSTRAINTS[method]
     metric, _ = lim._direct_metric(True)
     mu = lim.mu_scale * lim._mean_mass(metric)
+    lim._assemble(mid, ws.x)
+    active = ws.lam.to_numpy()[:sim.model.n_faces, :K] + mu * ws.g.to_numpy()[:sim.model.n_faces, :K]
+    assert (active > 0).sum() > 10          # curvature to compare: constraints are active
     matrices = []
     for curvature in ("exact", "model"):
         lim.curvature = curvature
