@@ -19,6 +19,7 @@ matrix buys, before anyone writes the analytic Hessian into the kernels.
 import numpy as np
 
 from . import constraints
+from .c_curvature import C_STEP_F64
 
 # Central-difference step of the gradients (m): the positions are O(1 m) and the gradients'
 # round-off ~1e-16, so 1e-6 m leaves ~1e-10 relative error from round-off and ~1e-12 from the
@@ -45,7 +46,7 @@ def face_hessians(method, X, Dm_inv, grain, area, weights, bands, delta, iso, st
 
 
 def psd(H):
-    """Each symmetric (9, 9) block with its negative eigenvalues set to zero."""
+    """Each symmetric block of H (n, k, k) with its negative eigenvalues set to zero."""
     w, Q = np.linalg.eigh(H)
     return np.einsum("nij,nj,nkj->nik", Q, np.maximum(w, 0.0), Q)
 
@@ -93,9 +94,8 @@ def add_to_newton_matrix(lim, method, K, mu, metric, mode="split"):
 # a 2x2 coefficient matrix [[2 G_p, G_q], [G_q, 2 G_r]] in material space (times I3) and a 3x3
 # one, each of which can be made positive semi-definite on its own in closed form. This is the
 # form a kernel can afford (no 9x9 eigen-solve); ``split_face_hessians`` computes it.
-# The step of the differences in (p, q, r): C is O(1), the mapping closure's curvature is
-# ~1/iso^2 = 1e4, so 1e-5 leaves ~1e-5 relative error in the second derivatives.
-C_STEP = 1e-5
+# The step of the differences in (p, q, r): the kernels' (c_curvature.py).
+C_STEP = C_STEP_F64
 
 
 def mapping_strain_of_c(p, q, r, e, sigma, iso):
@@ -116,9 +116,11 @@ def mapping_strain_of_c(p, q, r, e, sigma, iso):
     return c * (eta - 1.0)
 
 
-def strains_of_c(method, C, grain, bands, iso):
+def strains_of_c(method, C, grain, bands, iso, C_pairs=None):
     """The K constraint values g / sqrt(a) of each face in the solver's order (mapping pairs
-    by alignment with the warp), from C = (p, q, r) of shape (..., 3) and the grain (..., 2, 2)."""
+    by alignment with the warp), from C = (p, q, r) of shape (..., 3) and the grain (..., 2, 2).
+    ``C_pairs``: the C whose pairing the mapping family keeps (default C itself), so that
+    differences around a C do not cross the relabelling."""
     p, q, r = C[..., 0], C[..., 1], C[..., 2]
     warp, weft, shear = bands
     out = []
@@ -139,8 +141,9 @@ def strains_of_c(method, C, grain, bands, iso):
     else:
         e_warp, e_weft = grain[..., :, 0], grain[..., :, 1]
         # Pair A is the principal direction closer to the warp: v1 unless |e_warp.v2| is larger.
-        t_warp = 0.5 * (p - r) * (e_warp[..., 0] ** 2 - e_warp[..., 1] ** 2) \
-            + q * 2.0 * e_warp[..., 0] * e_warp[..., 1]
+        Cp = C if C_pairs is None else C_pairs
+        t_warp = 0.5 * (Cp[..., 0] - Cp[..., 2]) * (e_warp[..., 0] ** 2 - e_warp[..., 1] ** 2) \
+            + Cp[..., 1] * 2.0 * e_warp[..., 0] * e_warp[..., 1]
         sigma_a = np.where(t_warp < 0.0, -1.0, 1.0)
         for e, lo_hi in ((e_warp, warp), (e_weft, weft)):
             for sigma in (sigma_a, -sigma_a):
@@ -158,11 +161,7 @@ def c_derivatives(method, C, grain, bands, iso, step=C_STEP):
     eye = np.eye(3) * step
 
     def at(delta):
-        Cd = C + delta
-        # Keep the mapping pairs as they are at C: differences must not cross the relabelling.
-        if method == "mapping":
-            return _mapping_frozen(Cd, C, grain, bands, iso)
-        return strains_of_c(method, Cd, grain, bands, iso)
+        return strains_of_c(method, C + delta, grain, bands, iso, C_pairs=C)
 
     g0 = at(np.zeros(3))
     for i in range(3):
@@ -174,22 +173,6 @@ def c_derivatives(method, C, grain, bands, iso, step=C_STEP):
             mp, mm = at(-eye[i] + eye[j]), at(-eye[i] - eye[j])
             hess[:, :, i, j] = hess[:, :, j, i] = (pp - pm - mp + mm) / (4 * step ** 2)
     return grad, hess
-
-
-def _mapping_frozen(C, C_ref, grain, bands, iso):
-    p, q, r = C[..., 0], C[..., 1], C[..., 2]
-    pr, qr, rr = C_ref[..., 0], C_ref[..., 1], C_ref[..., 2]
-    warp, weft, _ = bands
-    e_warp, e_weft = grain[..., :, 0], grain[..., :, 1]
-    t_warp = 0.5 * (pr - rr) * (e_warp[..., 0] ** 2 - e_warp[..., 1] ** 2) \
-        + qr * 2.0 * e_warp[..., 0] * e_warp[..., 1]
-    sigma_a = np.where(t_warp < 0.0, -1.0, 1.0)
-    out = []
-    for e, lo_hi in ((e_warp, warp), (e_weft, weft)):
-        for sigma in (sigma_a, -sigma_a):
-            s = mapping_strain_of_c(p, q, r, e, sigma, iso)
-            out.extend([s - lo_hi[1], lo_hi[0] - s])
-    return np.stack(out, axis=-1)
 
 
 def c_and_jacobian(X, Dm_inv):
@@ -209,11 +192,6 @@ def c_and_jacobian(X, Dm_inv):
     return C, Mr, J
 
 
-def _clamp(sym):
-    w, Q = np.linalg.eigh(sym)
-    return np.einsum("nij,nj,nkj->nik", Q, np.maximum(w, 0.0), Q)
-
-
 def split_face_hessians(method, X, Dm_inv, grain, area, weights, bands, iso, project=True):
     """sum_c weights[n, c] d2 g_c / dx2 per face (n, 9, 9) through C (see above), with
     g = sqrt(a) G(C); ``project`` makes the 2x2 and the 3x3 part each positive
@@ -226,7 +204,7 @@ def split_face_hessians(method, X, Dm_inv, grain, area, weights, bands, iso, pro
     T = np.stack([np.stack([2 * Gk[:, 0], Gk[:, 1]], -1),
                   np.stack([Gk[:, 1], 2 * Gk[:, 2]], -1)], 1)  # (n, 2, 2)
     if project:
-        T, HC = _clamp(T), _clamp(HC)
+        T, HC = psd(T), psd(HC)
     S = np.einsum("nia,nab,njb->nij", Mr, T, Mr)              # (n, 3, 3) over the vertices
     return _kron_i3(S) + np.einsum("nki,nkl,nlj->nij", J, HC, J)
 
