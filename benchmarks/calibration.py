@@ -191,9 +191,9 @@ def _set(field, n, arr):
 
 
 class Rig:
-    """One ClothModel and one SparseImplicitEuler refilled for every experiment (Taichi
-    compiles a data-oriented object's kernels once per object, which would otherwise cost
-    seconds per case). ``capacity``: vertices of the largest mesh to come."""
+    """One ClothModel and one SparseImplicitEuler refilled for every experiment (one
+    allocation and one sparse pattern set-up for a whole sweep). ``capacity``: vertices of
+    the largest mesh to come."""
 
     def __init__(self, capacity=2500):
         from cloth.dynamics import DynamicsSettings

@@ -43,6 +43,7 @@ RUNS = MATRICES + ("kernel",)
 
 
 def _residual_and_matrix(lim, x, mid, K, mu, metric, chol, mode):
+    from cloth import ndarrays
     from cloth.strain import direct, exact_curvature
     ws, m = lim._ws, lim.model
     nv = m.n_verts
@@ -51,8 +52,8 @@ def _residual_and_matrix(lim, x, mid, K, mu, metric, chol, mode):
     ws.x.from_numpy(full)
     lim._assemble(mid, ws.x)
     if mode != "model":
-        ws.kappa.fill(0.0)
-        ws.twist.fill(0.0)
+        ndarrays.zero(ws.kappa)
+        ndarrays.zero(ws.twist)
     direct.fill_newton_system(lim, mid, K, mu, metric)
     if mode != "model":
         exact_curvature.add_to_newton_matrix(lim, lim.method, K, mu, metric, mode)

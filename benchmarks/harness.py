@@ -1,16 +1,13 @@
-"""What the benchmarks share: the machine and commit lines every report starts with, and the
-building of scenes' Simulators (``configure``; ``SimulatorPool`` restarts a compiled one where
-it can, so a sweep compiles each mesh's kernels once).
+"""What the benchmarks share: the machine and commit lines every report starts with, and a
+scene's configuration and set-up (``configure``). A new Simulator per run is cheap: every
+kernel compiles once per process (issue #15), so no benchmark keeps Simulators around.
 
 Benchmarks run as modules from the repository root (``python -m benchmarks.NAME``), so they
 import ``cloth``, ``scenes`` and this module without editing ``sys.path``.
 """
-import hashlib
 import os
 import platform
 import subprocess
-
-import numpy as np
 
 
 def machine():
@@ -41,48 +38,6 @@ def commit():
         return (out + (" (cloth/ or scenes/ modified)" if dirty else "")) or "unknown"
     except OSError:
         return "unknown"
-
-
-# ---- one Simulator per mesh, restarted between runs ---------------------------------------
-class SimulatorPool:
-    """Compiled Simulators keyed by scene, mesh and still obstacles; ``get`` restarts a
-    matching one or builds a new one. Set-ups with moving obstacles, stitches,
-    self-collision or remeshing always get a new Simulator (``Simulator.can_restart``)."""
-
-    def __init__(self):
-        self.sims = {}
-        self.built = 0
-
-    @staticmethod
-    def obstacle_key(obstacles):
-        """Type and parameters of still obstacles (the collider keeps no per-vertex state, so
-        equal still obstacles can stay); None when one moves along a scripted path."""
-        key = []
-        for o in obstacles:
-            if o.path is not None:
-                return None
-            key.append((type(o).__name__, repr(sorted(
-                (k, np.asarray(v).tolist() if isinstance(v, np.ndarray) else v)
-                for k, v in vars(o).items() if isinstance(v, (int, float, str, np.ndarray))))))
-        return tuple(key)
-
-    def reusable(self, setup, cfg):
-        return (self.obstacle_key(setup.obstacles) is not None and setup.stitches is None
-                and not setup.self_collision and not cfg.get("remesh", {}).get("enabled", False))
-
-    def get(self, scene, setup, cfg):
-        from cloth.simulator import Simulator
-        key = (scene, hashlib.sha1(setup.mesh.faces.tobytes()).hexdigest(), len(setup.mesh.uv),
-               self.obstacle_key(setup.obstacles), cfg.get("collision", {}).get("thickness"))
-        if self.reusable(setup, cfg) and key in self.sims:
-            sim = self.sims[key]
-            setup.obstacles = sim.setup.obstacles     # equal ones, already compiled
-            return sim.restart(setup, cfg)
-        sim = Simulator(setup, cfg)
-        self.built += 1
-        if self.reusable(setup, cfg):
-            self.sims[key] = sim
-        return sim
 
 
 def configure(scene, overrides):

@@ -83,10 +83,9 @@ def timed_frames(sim, stage_names, frames, extra=None):
 
 
 def child(res, methods, frames):
-    """Measure one size; returns a dict (printed as JSON by the child process). One Simulator
-    serves every stage (compiling a second one would cost as much as the measurements at the
-    small sizes): it is restarted from the scene's start for each strain method and for the
-    collision run (``Simulator.restart``)."""
+    """Measure one size; returns a dict (printed as JSON by the child process). Each strain
+    method and the collision run get their own Simulator from the scene's start (the kernels
+    compile once per process, so only the first frame of each kind is slow)."""
     from cloth import backend
     backend.init("cpu", "f64")
     import scenes
@@ -116,7 +115,7 @@ def child(res, methods, frames):
     out["info"]["cg_iterations"] = r["cg_iterations"]
     for m in methods:
         cfg, setup = config(m)
-        sim.restart(setup, cfg)
+        sim = Simulator(setup, cfg)
         sim.step_frame()                                  # frame 1, untimed (compiles if cold)
         r = timed_frames(sim, ["strain_limit"], frames,
                          {"rounds": lambda s: s.strain.last_iterations,
@@ -125,17 +124,14 @@ def child(res, methods, frames):
         out["info"][f"rounds:{m}"] = r["rounds"]
         out["info"][f"converged:{m}"] = r["converged"]
     # Collision: a still sphere just touching the sheet's middle from behind, the ground, and
-    # self-collision, added to the same Simulator (its private _make_collider builds the
-    # Collider the way a scene with obstacles gets it).
+    # self-collision.
     cfg, setup = config()
     cfg["collision"] = {"thickness": 0.005}
     top = cfg["cloth"]["top"]
-    sim.restart(setup, cfg)
     setup.obstacles = [Sphere(center=(0.0, top - 0.5, -0.124), radius=0.12, mu=0.3),
                        Plane(point=(0.0, 0.0, 0.0), normal=(0.0, 1.0, 0.0), mu=0.3)]
-    setup.self_collision = True                           # sim.setup is this object
-    sim._make_collider()
-    sim.stage("collision").enabled = True
+    setup.self_collision = True
+    sim = Simulator(setup, cfg)
     sim.step_frame()                                      # compiles the collider
     r = timed_frames(sim, [], frames, {"collision": lambda s: s.collider.last_ms_obstacles,
                                        "self_collision": lambda s: s.collider.last_ms_self})

@@ -34,9 +34,7 @@ with their verdicts to show where that stops.
 Timing: ms per frame is the wall time of ``Simulator.step_frame`` (every stage, plus the
 per-frame bookkeeping), median over all timed frames of ``repeats`` runs, with the 10th and
 90th percentiles as the spread; one untimed warm-up frame per configuration keeps kernel
-compilation out. One Simulator per resolution is compiled once and restarted for every run
-(``Simulator.restart``): a new one costs seconds of kernel compilation, a run of these scenes well under a
-second.
+compilation out (the kernels compile once per process; every run builds its own Simulator).
 
 Writes speed_vs_error.md, speed_vs_error.json, pareto_band.png, pareto_solution.png.
 
@@ -56,7 +54,7 @@ import time
 
 import numpy as np
 
-from benchmarks.harness import SimulatorPool, commit, configure, machine
+from benchmarks.harness import commit, configure, machine
 from cloth.strain.constraints import METHODS
 
 FULL = dict(methods=list(METHODS), solvers=["al", "jacobi"],
@@ -100,18 +98,19 @@ def snapshot(sim):
     return (m.positions(), m.uv.copy(), m.faces.copy())
 
 
-def run(pool, scene, overrides, frames, snap_frames=(), warmup=False, nudge=False):
+def run(scene, overrides, frames, snap_frames=(), warmup=False, nudge=False):
     """One run. Returns dict: ``ms`` (wall ms of each frame), ``rows`` (metrics rows),
     ``snaps`` {frame: (x, uv, faces)} at ``snap_frames``, ``unconverged`` (substeps whose
     strain solve stopped on its budget; the last substep of each frame is sampled).
     ``nudge``: start from the scene's start moved by 1 nm (``nudge_start``)."""
+    from cloth.simulator import Simulator
     _, cfg, setup = configure(scene, overrides)
     if warmup:                                   # compile this configuration's kernels
-        pool.get(scene, setup, cfg).step_frame()
+        Simulator(setup, cfg).step_frame()
         _, cfg, setup = configure(scene, overrides)
     if nudge:
         setup = nudge_start(setup)
-    sim = pool.get(scene, setup, cfg)
+    sim = Simulator(setup, cfg)
     out = {"ms": [], "rows": [], "snaps": {}, "unconverged": 0,
            "energy": [sim.metrics_row()["total_energy"]]}
     m = sim.model
@@ -133,10 +132,9 @@ def run(pool, scene, overrides, frames, snap_frames=(), warmup=False, nudge=Fals
 
 
 # ---- the sweep ---------------------------------------------------------------------------------
-def sweep(grid, scene="hanging", log=print, pool=None):
+def sweep(grid, scene="hanging", log=print):
     """Runs the grid; returns (results: list of dicts, checks: list of dicts)."""
     from cloth import metrics
-    pool = pool or SimulatorPool()
     cf = sorted(grid["compare_frames"])
     results, checks = [], []
     for res, method in itertools.product(grid["resolutions"], grid["methods"]):
@@ -144,9 +142,9 @@ def sweep(grid, scene="hanging", log=print, pool=None):
         t0 = time.perf_counter()
         rs, ri, rt = grid["ref_substeps"], grid["ref_iters"], grid["ref_tol"]
         ref_ov = overrides_for(method, "al", ri, rs, res, rt)
-        ref = run(pool, scene, ref_ov, cf[-1], cf)
-        chk = run(pool, scene, overrides_for(method, "al", 2 * ri, 2 * rs, res, rt), cf[-1], cf)
-        nudged = run(pool, scene, ref_ov, cf[-1], cf, nudge=True) \
+        ref = run(scene, ref_ov, cf[-1], cf)
+        chk = run(scene, overrides_for(method, "al", 2 * ri, 2 * rs, res, rt), cf[-1], cf)
+        nudged = run(scene, ref_ov, cf[-1], cf, nudge=True) \
             if grid.get("chaos_check") else None
         points = metrics.material_sample_points(ref["snaps"][cf[0]][1], SAMPLES)
         check = {"method": method, "resolution": res, "seconds": time.perf_counter() - t0,
@@ -164,7 +162,7 @@ def sweep(grid, scene="hanging", log=print, pool=None):
         for solver, sub in itertools.product(grid["solvers"], grid["substeps"]):
             for iters in grid["iters"][solver]:
                 ov = overrides_for(method, solver, iters, sub, res)
-                reps = [run(pool, scene, ov, grid["frames"], cf, warmup=(k == 0))
+                reps = [run(scene, ov, grid["frames"], cf, warmup=(k == 0))
                         for k in range(grid["repeats"])]
                 ms = np.concatenate([r["ms"] for r in reps])
                 last = reps[0]

@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from cloth.strain.constraints import METHODS
-from benchmarks.harness import SimulatorPool, commit, configure, machine
+from benchmarks.harness import commit, configure, machine
 from benchmarks.speed_vs_error import nudge_start, snapshot
 
 GRAVITY_DROP = 2.0      # m: the pins' height above the ground in every scene used here
@@ -214,11 +214,10 @@ def _total_mass(setup):
     return float(setup.material.density * material_areas(setup.mesh.uv, setup.mesh.faces).sum())
 
 
-def run_case(case, pool=None):
+def run_case(case):
     """Run one case in-process; returns a dict of numbers and the verdict. ``final`` (x, uv,
     faces) is kept out of the JSON (key starting with '_')."""
-    from cloth.simulator import SimulationDiverged
-    pool = pool or SimulatorPool()
+    from cloth.simulator import SimulationDiverged, Simulator
     _, cfg, setup = configure(case.scene, case.overrides)
     cfg.update(case.post)
     if case.prepare is not None:
@@ -229,7 +228,7 @@ def run_case(case, pool=None):
               "note": case.note, "ke_max": ke_max}
     t0 = time.perf_counter()
     try:
-        sim = pool.get(case.scene, setup, cfg)
+        sim = Simulator(setup, cfg)
         # The simulator projects the starting shape onto the limits (h = 0) before frame 1.
         result["violation_start"] = sim.metrics_row()["own_violation_max"]
         ke_peak = viol_peak = pen_peak = 0.0
@@ -302,12 +301,11 @@ def judge(case, r):
     return True, "ok"
 
 
-def run_cases(selected, pool=None, log=print):
-    """Run the cases of this process's precision, in order, sharing compiled Simulators."""
-    pool = pool or SimulatorPool()
+def run_cases(selected, log=print):
+    """Run the cases of this process's precision, in order."""
     results = []
     for c in selected:
-        r = run_case(c, pool)
+        r = run_case(c)
         log(f"{'pass' if r['passed'] else 'FAIL'}  {c.name}  ({r['seconds']:.1f} s)  {r['why']}")
         results.append(r)
     return results

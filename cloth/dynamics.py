@@ -27,15 +27,34 @@ curvature under compression, the indefinite shear curvature, the bending angle's
 the one Newton step robust instead of exact; ``force_jacobian_product(exact=True)`` gives the
 exact membrane Jacobian for testing.
 
-Why one module of ~490 lines: forces, their Jacobian product, its diagonal and its assembled
-blocks must stay the same K; they share the element kinematics and ``_face_block``.
+Why one module of ~620 lines: forces, their Jacobian product, its diagonal and its assembled
+blocks must stay the same K; they share the element kinematics and ``face_block``.
+
+Every kernel is a module-level ``@ti.kernel`` taking all its arrays (the model's and the
+solver's work arrays, Taichi ndarrays) as arguments, and the ``@ti.func``s take the arrays they
+read as ``ti.template()`` parameters: a kernel that captured fields (or a data_oriented
+``self``) was compiled again for every new model and solver, 2.5-10 s per Simulator (issue
+#15); these compile once per process (cloth/strain/buffers.py has the measurements). Kernels
+that read the mesh take the model's arrays in the order of ``MESH_ARRAYS`` followed by x, v and
+the element work arrays in the order of ``ImplicitEuler._elements`` (``*solver._mesh()``,
+``*solver._elements()``). The price, measured against the field version (2-core CPU, f64):
+~0.27 ms more argument handling per step and CG iterations ~1.35x slower (ndarray addressing;
+0.28 -> 0.38 ms per iteration at 4.8k triangles).
 """
 from dataclasses import dataclass
 
 import numpy as np
 import taichi as ti
 
+from . import ndarrays
 from .model import ClothModel
+from .ndarrays import A, T
+
+
+# The model's arrays the kernels read, in the order the kernels take them (then x and v).
+MESH_ARRAYS = ("vert_mass", "vert_pinned", "vert_pin_target", "face_verts", "face_Dm_inv",
+               "face_rest_area", "face_grain", "edge_verts", "edge_faces", "edge_opp",
+               "edge_rest_angle", "edge_bend_weight")
 
 
 @dataclass
@@ -54,7 +73,6 @@ class DynamicsSettings:
             raise ValueError(f"dynamics.cg_max_iters must be >= 1 (got {self.cg_max_iters})")
 
 
-@ti.data_oriented
 class ImplicitEuler:
     """One backward-Euler Newton step per call of ``step(h)``.
 
@@ -68,31 +86,32 @@ class ImplicitEuler:
             np.asarray(stitches, np.int32).reshape(-1, 2)
         self.last_cg_iters = 0
         self.last_cg_residual = 0.0
-        # Every field is allocated once, here: kernels keep the fields they were compiled
-        # with, so a field made later would leave them reading a stale (or freed) one. The
-        # model never grows in place (the simulator builds a new model and new solvers).
+        # Every work array is allocated once, here, sized from the model's capacities (the
+        # model never grows in place: the simulator builds a new model and new solvers). They
+        # are kernel arguments, so a new solver compiles nothing.
         V, F, E = model.v_cap, model.f_cap, model.e_cap
-        vec = lambda n: ti.Vector.field(3, float, n)  # noqa: E731
+        vec3 = ti.types.vector(3, float)
+        vec = lambda n: ti.ndarray(vec3, n)  # noqa: E731
         self.force, self.dv, self.rhs, self.res = vec(V), vec(V), vec(V), vec(V)
         self.z, self.p, self.Ap = vec(V), vec(V), vec(V)
-        self.precond = ti.Matrix.field(3, 3, float, V)
+        self.precond = ti.ndarray(ti.types.matrix(3, 3, float), V)
         self.face_fu, self.face_fv, self.face_E = vec(F), vec(F), vec(F)
         self.face_wa, self.face_wb = vec(F), vec(F)   # warp / weft weights of the 3 verts
-        self.edge_grad = ti.Matrix.field(4, 3, float, E)
-        self.edge_theta = ti.field(float, E)
-        self.scalars = ti.field(float, 4)
+        self.edge_grad = ti.ndarray(ti.types.matrix(4, 3, float), E)
+        self.edge_theta = ti.ndarray(float, E)
+        self.scalars = ti.ndarray(float, 4)
         self.stitch_cap = max(len(self.stitches_np), 1)
-        self.stitch = ti.Vector.field(2, ti.i32, self.stitch_cap)
+        self.stitch = ti.ndarray(ti.types.vector(2, ti.i32), self.stitch_cap)
         self.on_mesh_changed()
 
     # -- allocation ---------------------------------------------------------------------------
     def on_mesh_changed(self):
-        """Call after the model's fields were refilled (remeshing): forget the warm start and
+        """Call after the model's arrays were refilled (remeshing): forget the warm start and
         upload the (remapped) stitch pairs."""
         if len(self.stitches_np) > self.stitch_cap:
             raise ValueError(f"{len(self.stitches_np)} stitches exceed the {self.stitch_cap} "
                              "this solver was built for: build a new ImplicitEuler")
-        self.dv.fill(0.0)
+        ndarrays.zero(self.dv)
         self.stitch.from_numpy(np.resize(self.stitches_np, (self.stitch_cap, 2)).astype(np.int32)
                                if len(self.stitches_np) else np.zeros((1, 2), np.int32))
         self.n_stitches = len(self.stitches_np)
@@ -101,31 +120,46 @@ class ImplicitEuler:
         self.stitches_np = np.asarray(pairs, np.int32).reshape(-1, 2)
         self.on_mesh_changed()
 
+    # -- kernel arguments ---------------------------------------------------------------------
+    def _mesh(self):
+        """The model's arrays (``MESH_ARRAYS``), then x and v."""
+        m = self.model
+        return tuple(getattr(m, name) for name in MESH_ARRAYS) + (m.state.x, m.state.v)
+
+    def _elements(self):
+        """The per-element work arrays and the stitch pairs."""
+        return (self.face_fu, self.face_fv, self.face_E, self.face_wa, self.face_wb,
+                self.edge_grad, self.edge_theta, self.stitch)
+
     # -- public API ---------------------------------------------------------------------------
     def step(self, h):
         """Advance model.state by one backward-Euler step of ``h`` seconds."""
         m, mat, s = self.model, self.model.material, self.settings
-        iters = self._step(h, ti.Vector(list(s.gravity)), mat.k_warp, mat.k_weft, mat.k_shear,
+        rel, iters = _step(h, ti.Vector(list(s.gravity)), mat.k_warp, mat.k_weft, mat.k_shear,
                            mat.k_bend, mat.damp_mass, mat.damp_stiff, s.stitch_stiffness,
-                           m.n_verts, m.n_faces, m.n_edges, self.n_stitches,
-                           s.cg_tol, s.cg_max_iters)
+                           m.n_verts, m.n_faces, m.n_edges, self.n_stitches, s.cg_tol,
+                           s.cg_max_iters, *self._mesh(), *self._elements(), self.force,
+                           self.dv, self.rhs, self.res, self.z, self.p, self.Ap, self.precond,
+                           self.scalars)
         self.last_cg_iters = int(iters)
-        self.last_cg_residual = float(self.scalars[0])
+        self.last_cg_residual = float(rel)
         return self.last_cg_iters
 
     def energy(self):
         """Elastic energy (membrane + bending + stitches) of the current positions, J."""
         mat = self.model.material
-        return float(self._energy(mat.k_warp, mat.k_weft, mat.k_shear, mat.k_bend,
-                                  self.settings.stitch_stiffness, self.model.n_faces,
-                                  self.model.n_edges, self.n_stitches))
+        return float(_energy(mat.k_warp, mat.k_weft, mat.k_shear, mat.k_bend,
+                             self.settings.stitch_stiffness, self.model.n_faces,
+                             self.model.n_edges, self.n_stitches, *self._mesh(),
+                             *self._elements()))
 
     def forces(self):
         """Elastic forces (no gravity, no damping) at the current positions, (V, 3) numpy."""
         mat = self.model.material
-        self._elastic_forces(mat.k_warp, mat.k_weft, mat.k_shear, mat.k_bend,
-                             self.settings.stitch_stiffness, self.model.n_verts,
-                             self.model.n_faces, self.model.n_edges, self.n_stitches)
+        _elastic_forces(mat.k_warp, mat.k_weft, mat.k_shear, mat.k_bend,
+                        self.settings.stitch_stiffness, self.model.n_verts, self.model.n_faces,
+                        self.model.n_edges, self.n_stitches, *self._mesh(), *self._elements(),
+                        self.force)
         return self.force.to_numpy()[: self.model.n_verts].astype(np.float64)
 
     def force_jacobian_product(self, p, exact=True):
@@ -136,357 +170,449 @@ class ImplicitEuler:
         full = np.zeros((m.v_cap, 3))
         full[: m.n_verts] = p
         self.p.from_numpy(full.astype(self.p.to_numpy().dtype))
-        self._jacobian_product(mat.k_warp, mat.k_weft, mat.k_shear, mat.k_bend,
-                               self.settings.stitch_stiffness, m.n_verts, m.n_faces, m.n_edges,
-                               self.n_stitches, 1 if exact else 0)
+        _jacobian_product(mat.k_warp, mat.k_weft, mat.k_shear, mat.k_bend,
+                          self.settings.stitch_stiffness, m.n_verts, m.n_faces, m.n_edges,
+                          self.n_stitches, 1 if exact else 0, *self._mesh(), *self._elements(),
+                          self.p, self.Ap)
         return -self.Ap.to_numpy()[: m.n_verts].astype(np.float64)
 
     def system_matrix(self, h, B):
         """Fill the BlockMatrix ``B`` (cloth/system_matrix.py, built over this model's mesh and
         stitches) with the matrix of the last ``step(h)``: A = (1 + h alpha) M + h (beta + h)
-        K_psd, linearised where that step started (the element data its ``_linearise`` left).
+        K_psd, linearised where that step started (the element data its ``linearise`` left).
         Pinned rows are not filtered (the strain solver keeps pins fixed itself)."""
         mat, s, m = self.model.material, self.settings, self.model
-        self._fill_blocks(h, mat.damp_mass, mat.damp_stiff, mat.k_warp, mat.k_weft, mat.k_shear,
-                          mat.k_bend, s.stitch_stiffness, m.n_verts, m.n_faces, m.n_edges,
-                          self.n_stitches, B.nnz, B.val, B.diag, B.face_slot, B.edge_slot,
-                          B.stitch_slot)
+        _fill_blocks(h, mat.damp_mass, mat.damp_stiff, mat.k_warp, mat.k_weft, mat.k_shear,
+                     mat.k_bend, s.stitch_stiffness, m.n_verts, m.n_faces, m.n_edges,
+                     self.n_stitches, B.nnz, B.val, B.diag, B.face_slot, B.edge_slot,
+                     B.stitch_slot, *self._mesh(), *self._elements())
 
-    @ti.kernel
-    def _fill_blocks(self, h: float, alpha: float, beta: float, kw: float, kf: float,
-                     ks: float, kb: float, kst: float, nv: ti.i32, nf: ti.i32, ne: ti.i32,
-                     nst: ti.i32, nnz: ti.i32, val: ti.types.ndarray(), diag: ti.types.ndarray(),
-                     face_slot: ti.types.ndarray(), edge_slot: ti.types.ndarray(),
-                     stitch_slot: ti.types.ndarray()):
-        # The blocks of _add_K_product (exact = 0) written out: serial, as elements share
-        # blocks.
-        ti.loop_config(serialize=True)
-        for _ in range(1):
-            scale = h * (beta + h)
-            I = ti.Matrix.identity(float, 3)
-            for k in range(nnz):
-                val[k] = ti.Matrix.zero(float, 3, 3)
-            for i in range(nv):
-                val[diag[i]] += (1.0 + h * alpha) * self.model.vert_mass[i] * I
-            for f in range(nf):
-                A = self.model.face_rest_area[f]
-                for n in ti.static(range(3)):
-                    for q in ti.static(range(3)):
-                        val[face_slot[f, 3 * n + q]] += scale * A * \
-                            self._face_block(f, n, q, kw, kf, ks)
-            for e in range(ne):
-                if self.model.edge_faces[e][1] >= 0:
-                    k = scale * kb * self.model.edge_bend_weight[e]
-                    G = self.edge_grad[e]
-                    for n in ti.static(range(4)):
-                        gn = ti.Vector([G[n, 0], G[n, 1], G[n, 2]])
-                        for q in ti.static(range(4)):
-                            gq = ti.Vector([G[q, 0], G[q, 1], G[q, 2]])
-                            val[edge_slot[e, 4 * n + q]] += k * gn.outer_product(gq)
-            for s in range(nst):
-                k = scale * kst
-                val[stitch_slot[s, 0]] += k * I
-                val[stitch_slot[s, 1]] -= k * I
-                val[stitch_slot[s, 2]] -= k * I
-                val[stitch_slot[s, 3]] += k * I
 
-    @ti.func
-    def _face_block(self, f, n, q, kw, kf, ks):
-        """Block (n, q) of face f's membrane stiffness K = -d2E / dx_n dx_q per unit rest area,
-        made positive semi-definite: the curvature terms kept where the warp or weft is in
-        tension, the shear's dropped (``_add_K_product`` with exact = 0 applies the same K).
-        The one definition of the block: the CG preconditioner, the assembled matrix and the
-        sparse direct solver all take it from here."""
-        fu, fv, E = self.face_fu[f], self.face_fv[f], self.face_E[f]
-        wa, wb = self.face_wa[f], self.face_wb[f]
-        gn = wa[n] * fv + wb[n] * fu
-        gq = wa[q] * fv + wb[q] * fu
-        aa, bb = wa[n] * wa[q], wb[n] * wb[q]
-        return kw * aa * fu.outer_product(fu) + kf * bb * fv.outer_product(fv) \
-            + ks * gn.outer_product(gq) \
-            + (kw * ti.max(E[0], 0.0) * aa + kf * ti.max(E[1], 0.0) * bb) * ti.Matrix.identity(float, 3)
+@ti.kernel
+def _fill_blocks(h: float, alpha: float, beta: float, kw: float, kf: float, ks: float,
+                 kb: float, kst: float, nv: ti.i32, nf: ti.i32, ne: ti.i32, nst: ti.i32,
+                 nnz: ti.i32, val: A, diag: A, face_slot: A, edge_slot: A, stitch_slot: A,
+                 vert_mass: A, vert_pinned: A, vert_pin_target: A, face_verts: A,
+                 face_Dm_inv: A, face_rest_area: A, face_grain: A, edge_verts: A,
+                 edge_faces: A, edge_opp: A, edge_rest_angle: A, edge_bend_weight: A, x: A,
+                 v: A, face_fu: A, face_fv: A, face_E: A, face_wa: A, face_wb: A,
+                 edge_grad: A, edge_theta: A, stitch: A):
+    # The blocks of add_K_product (exact = 0) written out: serial, as elements share blocks.
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        scale = h * (beta + h)
+        I = ti.Matrix.identity(float, 3)
+        for k in range(nnz):
+            val[k] = ti.Matrix.zero(float, 3, 3)
+        for i in range(nv):
+            val[diag[i]] += (1.0 + h * alpha) * vert_mass[i] * I
+        for f in range(nf):
+            A = face_rest_area[f]
+            for n in ti.static(range(3)):
+                for q in ti.static(range(3)):
+                    val[face_slot[f, 3 * n + q]] += scale * A * \
+                        face_block(f, n, q, kw, kf, ks, face_fu, face_fv, face_E, face_wa,
+                                   face_wb)
+        for e in range(ne):
+            if edge_faces[e][1] >= 0:
+                k = scale * kb * edge_bend_weight[e]
+                G = edge_grad[e]
+                for n in ti.static(range(4)):
+                    gn = ti.Vector([G[n, 0], G[n, 1], G[n, 2]])
+                    for q in ti.static(range(4)):
+                        gq = ti.Vector([G[q, 0], G[q, 1], G[q, 2]])
+                        val[edge_slot[e, 4 * n + q]] += k * gn.outer_product(gq)
+        for s in range(nst):
+            k = scale * kst
+            val[stitch_slot[s, 0]] += k * I
+            val[stitch_slot[s, 1]] -= k * I
+            val[stitch_slot[s, 2]] -= k * I
+            val[stitch_slot[s, 3]] += k * I
 
-    # -- element kinematics -------------------------------------------------------------------
-    @ti.func
-    def _face_weights(self, f):
-        """Warp and weft weights a_n, b_n of the face's vertices: F e_warp = sum a_n x_n."""
-        D = self.model.face_Dm_inv[f] @ self.model.face_grain[f]   # rows: M_j, M_k in grain
-        wa = ti.Vector([-D[0, 0] - D[1, 0], D[0, 0], D[1, 0]])
-        wb = ti.Vector([-D[0, 1] - D[1, 1], D[0, 1], D[1, 1]])
-        return wa, wb
 
-    @ti.func
-    def _update_face(self, f):
-        tri = self.model.face_verts[f]
-        wa, wb = self._face_weights(f)
-        fu = ti.Vector([0.0, 0.0, 0.0], dt=float)
-        fv = ti.Vector([0.0, 0.0, 0.0], dt=float)
+@ti.func
+def face_block(f, n, q, kw, kf, ks, face_fu: T, face_fv: T, face_E: T, face_wa: T,
+               face_wb: T):
+    """Block (n, q) of face f's membrane stiffness K = -d2E / dx_n dx_q per unit rest area,
+    made positive semi-definite: the curvature terms kept where the warp or weft is in
+    tension, the shear's dropped (``add_K_product`` with exact = 0 applies the same K).
+    The one definition of the block: the CG preconditioner, the assembled matrix and the
+    sparse direct solver all take it from here."""
+    fu, fv, E = face_fu[f], face_fv[f], face_E[f]
+    wa, wb = face_wa[f], face_wb[f]
+    gn = wa[n] * fv + wb[n] * fu
+    gq = wa[q] * fv + wb[q] * fu
+    aa, bb = wa[n] * wa[q], wb[n] * wb[q]
+    return kw * aa * fu.outer_product(fu) + kf * bb * fv.outer_product(fv) \
+        + ks * gn.outer_product(gq) \
+        + (kw * ti.max(E[0], 0.0) * aa + kf * ti.max(E[1], 0.0) * bb) * ti.Matrix.identity(float, 3)
+
+
+# -- element kinematics -----------------------------------------------------------------------
+@ti.func
+def face_weights(f, face_Dm_inv: T, face_grain: T):
+    """Warp and weft weights a_n, b_n of the face's vertices: F e_warp = sum a_n x_n."""
+    D = face_Dm_inv[f] @ face_grain[f]   # rows: M_j, M_k in grain
+    wa = ti.Vector([-D[0, 0] - D[1, 0], D[0, 0], D[1, 0]])
+    wb = ti.Vector([-D[0, 1] - D[1, 1], D[0, 1], D[1, 1]])
+    return wa, wb
+
+
+@ti.func
+def update_face(f, x: T, face_verts: T, face_Dm_inv: T, face_grain: T, face_fu: T,
+                face_fv: T, face_E: T, face_wa: T, face_wb: T):
+    tri = face_verts[f]
+    wa, wb = face_weights(f, face_Dm_inv, face_grain)
+    fu = ti.Vector([0.0, 0.0, 0.0], dt=float)
+    fv = ti.Vector([0.0, 0.0, 0.0], dt=float)
+    for n in ti.static(range(3)):
+        fu += wa[n] * x[tri[n]]
+        fv += wb[n] * x[tri[n]]
+    face_fu[f], face_fv[f] = fu, fv
+    face_wa[f], face_wb[f] = wa, wb
+    face_E[f] = ti.Vector([0.5 * (fu.dot(fu) - 1.0), 0.5 * (fv.dot(fv) - 1.0), 0.5 * fu.dot(fv)])
+
+
+@ti.func
+def update_edge(e, x: T, edge_verts: T, edge_faces: T, edge_opp: T, edge_grad: T,
+                edge_theta: T):
+    """Dihedral angle and its gradient (Bridson et al. 2003) for edge x0-x1 with opposite
+    vertices x2 (face 0, order x0 x1 x2) and x3 (face 1, order x1 x0 x3)."""
+    theta = 0.0
+    G = ti.Matrix.zero(float, 4, 3)
+    if edge_faces[e][1] >= 0:
+        ev, eo = edge_verts[e], edge_opp[e]
+        x0, x1 = x[ev[0]], x[ev[1]]
+        x2, x3 = x[eo[0]], x[eo[1]]
+        ed = x1 - x0
+        n1 = ed.cross(x2 - x0)
+        n2 = (x3 - x0).cross(ed)
+        el = ed.norm()
+        n1s, n2s = n1.dot(n1), n2.dot(n2)
+        if el > 1e-12 and n1s > 1e-24 and n2s > 1e-24:
+            eh = ed / el
+            theta = ti.atan2(n1.cross(n2).dot(eh), n1.dot(n2))
+            u1, u2 = n1 / n1s, n2 / n2s
+            g2 = -el * u1
+            g3 = -el * u2
+            g0 = -((x2 - x1).dot(eh) * u1 + (x3 - x1).dot(eh) * u2)
+            g1 = (x2 - x0).dot(eh) * u1 + (x3 - x0).dot(eh) * u2
+            for c in ti.static(range(3)):
+                G[0, c], G[1, c], G[2, c], G[3, c] = g0[c], g1[c], g2[c], g3[c]
+    edge_theta[e] = theta
+    edge_grad[e] = G
+
+
+@ti.func
+def edge_vertex(e, n, edge_verts: T, edge_opp: T):
+    """Vertex n (0..3) of edge e's bending stencil: x0, x1, x2, x3."""
+    ev, eo = edge_verts[e], edge_opp[e]
+    vid = eo[1]
+    if n == 0:
+        vid = ev[0]
+    elif n == 1:
+        vid = ev[1]
+    elif n == 2:
+        vid = eo[0]
+    return vid
+
+
+@ti.func
+def update_kinematics(nf: ti.i32, ne: ti.i32, x: T, face_verts: T, face_Dm_inv: T,
+                      face_grain: T, edge_verts: T, edge_faces: T, edge_opp: T, face_fu: T,
+                      face_fv: T, face_E: T, face_wa: T, face_wb: T, edge_grad: T,
+                      edge_theta: T):
+    for f in range(nf):
+        update_face(f, x, face_verts, face_Dm_inv, face_grain, face_fu, face_fv, face_E,
+                    face_wa, face_wb)
+    for e in range(ne):
+        update_edge(e, x, edge_verts, edge_faces, edge_opp, edge_grad, edge_theta)
+
+
+# -- forces -----------------------------------------------------------------------------------
+@ti.func
+def add_elastic_forces(force: T, kw, kf, ks, kb, kst, nf: ti.i32, ne: ti.i32, nst: ti.i32,
+                       x: T, face_verts: T, face_rest_area: T, edge_verts: T, edge_faces: T,
+                       edge_opp: T, edge_rest_angle: T, edge_bend_weight: T, face_fu: T,
+                       face_fv: T, face_E: T, face_wa: T, face_wb: T, edge_grad: T,
+                       edge_theta: T, stitch: T):
+    for f in range(nf):
+        tri = face_verts[f]
+        A = face_rest_area[f]
+        fu, fv, E = face_fu[f], face_fv[f], face_E[f]
+        wa, wb = face_wa[f], face_wb[f]
         for n in ti.static(range(3)):
-            fu += wa[n] * self.model.state.x[tri[n]]
-            fv += wb[n] * self.model.state.x[tri[n]]
-        self.face_fu[f], self.face_fv[f] = fu, fv
-        self.face_wa[f], self.face_wb[f] = wa, wb
-        self.face_E[f] = ti.Vector([0.5 * (fu.dot(fu) - 1.0), 0.5 * (fv.dot(fv) - 1.0),
-                                    0.5 * fu.dot(fv)])
+            grad = A * (kw * E[0] * wa[n] * fu + kf * E[1] * wb[n] * fv
+                        + 2.0 * ks * E[2] * (wa[n] * fv + wb[n] * fu))
+            force[tri[n]] -= grad
+    for e in range(ne):
+        if edge_faces[e][1] >= 0:
+            coef = kb * edge_bend_weight[e] * (edge_theta[e] - edge_rest_angle[e])
+            G = edge_grad[e]
+            for n in ti.static(range(4)):
+                vid = edge_vertex(e, n, edge_verts, edge_opp)
+                force[vid] -= coef * ti.Vector([G[n, 0], G[n, 1], G[n, 2]])
+    for s in range(nst):
+        a, b = stitch[s][0], stitch[s][1]
+        d = x[a] - x[b]
+        force[a] -= kst * d
+        force[b] += kst * d
 
-    @ti.func
-    def _update_edge(self, e):
-        """Dihedral angle and its gradient (Bridson et al. 2003) for edge x0-x1 with opposite
-        vertices x2 (face 0, order x0 x1 x2) and x3 (face 1, order x1 x0 x3)."""
-        theta = 0.0
-        G = ti.Matrix.zero(float, 4, 3)
-        if self.model.edge_faces[e][1] >= 0:
-            ev, eo = self.model.edge_verts[e], self.model.edge_opp[e]
-            x0, x1 = self.model.state.x[ev[0]], self.model.state.x[ev[1]]
-            x2, x3 = self.model.state.x[eo[0]], self.model.state.x[eo[1]]
-            ed = x1 - x0
-            n1 = ed.cross(x2 - x0)
-            n2 = (x3 - x0).cross(ed)
-            el = ed.norm()
-            n1s, n2s = n1.dot(n1), n2.dot(n2)
-            if el > 1e-12 and n1s > 1e-24 and n2s > 1e-24:
-                eh = ed / el
-                theta = ti.atan2(n1.cross(n2).dot(eh), n1.dot(n2))
-                u1, u2 = n1 / n1s, n2 / n2s
-                g2 = -el * u1
-                g3 = -el * u2
-                g0 = -((x2 - x1).dot(eh) * u1 + (x3 - x1).dot(eh) * u2)
-                g1 = (x2 - x0).dot(eh) * u1 + (x3 - x0).dot(eh) * u2
-                for c in ti.static(range(3)):
-                    G[0, c], G[1, c], G[2, c], G[3, c] = g0[c], g1[c], g2[c], g3[c]
-        self.edge_theta[e] = theta
-        self.edge_grad[e] = G
 
-    @ti.func
-    def _edge_vertex(self, e, n):
-        """Vertex n (0..3) of edge e's bending stencil: x0, x1, x2, x3."""
-        ev, eo = self.model.edge_verts[e], self.model.edge_opp[e]
-        vid = eo[1]
-        if n == 0:
-            vid = ev[0]
-        elif n == 1:
-            vid = ev[1]
-        elif n == 2:
-            vid = eo[0]
-        return vid
+@ti.func
+def add_K_product(src: T, dst: T, scale, kw, kf, ks, kb, kst, nf: ti.i32, ne: ti.i32,
+                  nst: ti.i32, exact: ti.i32, face_verts: T, face_rest_area: T, edge_verts: T,
+                  edge_faces: T, edge_opp: T, edge_bend_weight: T, face_fu: T, face_fv: T,
+                  face_E: T, face_wa: T, face_wb: T, edge_grad: T, stitch: T):
+    """dst += scale * K src, with K = -df/dx (PSD-projected unless ``exact``)."""
+    for f in range(nf):
+        tri = face_verts[f]
+        A = face_rest_area[f]
+        fu, fv, E = face_fu[f], face_fv[f], face_E[f]
+        wa, wb = face_wa[f], face_wb[f]
+        dfu = wa[0] * src[tri[0]] + wa[1] * src[tri[1]] + wa[2] * src[tri[2]]
+        dfv = wb[0] * src[tri[0]] + wb[1] * src[tri[1]] + wb[2] * src[tri[2]]
+        dE0, dE1 = fu.dot(dfu), fv.dot(dfv)
+        dE2 = 0.5 * (fu.dot(dfv) + fv.dot(dfu))
+        # Curvature terms: kept where they are non-negative (stretch in tension) unless exact.
+        E0, E1, E2 = E[0], E[1], E[2]
+        if exact == 0:
+            E0, E1, E2 = ti.max(E0, 0.0), ti.max(E1, 0.0), 0.0
+        for n in ti.static(range(3)):
+            out = kw * (dE0 * wa[n] * fu + E0 * wa[n] * dfu) \
+                + kf * (dE1 * wb[n] * fv + E1 * wb[n] * dfv) \
+                + 2.0 * ks * (dE2 * (wa[n] * fv + wb[n] * fu) + E2 * (wa[n] * dfv + wb[n] * dfu))
+            dst[tri[n]] += scale * A * out
+    for e in range(ne):
+        if edge_faces[e][1] >= 0:
+            k = kb * edge_bend_weight[e]
+            G = edge_grad[e]
+            dtheta = 0.0
+            for n in ti.static(range(4)):
+                dtheta += ti.Vector([G[n, 0], G[n, 1], G[n, 2]]).dot(
+                    src[edge_vertex(e, n, edge_verts, edge_opp)])
+            for n in ti.static(range(4)):
+                dst[edge_vertex(e, n, edge_verts, edge_opp)] += scale * k * dtheta * \
+                    ti.Vector([G[n, 0], G[n, 1], G[n, 2]])
+    for s in range(nst):
+        a, b = stitch[s][0], stitch[s][1]
+        d = src[a] - src[b]
+        dst[a] += scale * kst * d
+        dst[b] -= scale * kst * d
 
-    @ti.func
-    def _update_kinematics(self, nf: ti.i32, ne: ti.i32):
-        for f in range(nf):
-            self._update_face(f)
-        for e in range(ne):
-            self._update_edge(e)
 
-    # -- forces -------------------------------------------------------------------------------
-    @ti.func
-    def _add_elastic_forces(self, kw, kf, ks, kb, kst, nf: ti.i32, ne: ti.i32, nst: ti.i32):
-        for f in range(nf):
-            tri = self.model.face_verts[f]
-            A = self.model.face_rest_area[f]
-            fu, fv, E = self.face_fu[f], self.face_fv[f], self.face_E[f]
-            wa, wb = self.face_wa[f], self.face_wb[f]
-            for n in ti.static(range(3)):
-                grad = A * (kw * E[0] * wa[n] * fu + kf * E[1] * wb[n] * fv
-                            + 2.0 * ks * E[2] * (wa[n] * fv + wb[n] * fu))
-                self.force[tri[n]] -= grad
-        for e in range(ne):
-            if self.model.edge_faces[e][1] >= 0:
-                coef = kb * self.model.edge_bend_weight[e] * \
-                    (self.edge_theta[e] - self.model.edge_rest_angle[e])
-                G = self.edge_grad[e]
-                for n in ti.static(range(4)):
-                    vid = self._edge_vertex(e, n)
-                    self.force[vid] -= coef * ti.Vector([G[n, 0], G[n, 1], G[n, 2]])
-        for s in range(nst):
-            a, b = self.stitch[s][0], self.stitch[s][1]
-            d = self.model.state.x[a] - self.model.state.x[b]
-            self.force[a] -= kst * d
-            self.force[b] += kst * d
+@ti.func
+def add_K_diagonal(precond: T, scale, kw, kf, ks, kb, kst, nf: ti.i32, ne: ti.i32,
+                   nst: ti.i32, face_verts: T, face_rest_area: T, edge_verts: T,
+                   edge_faces: T, edge_opp: T, edge_bend_weight: T, face_fu: T, face_fv: T,
+                   face_E: T, face_wa: T, face_wb: T, edge_grad: T, stitch: T):
+    """precond += scale * (3x3 diagonal blocks of the PSD K)."""
+    for f in range(nf):
+        tri = face_verts[f]
+        A = face_rest_area[f]
+        for n in ti.static(range(3)):
+            precond[tri[n]] += scale * A * face_block(f, n, n, kw, kf, ks, face_fu, face_fv,
+                                                      face_E, face_wa, face_wb)
+    for e in range(ne):
+        if edge_faces[e][1] >= 0:
+            k = kb * edge_bend_weight[e]
+            G = edge_grad[e]
+            for n in ti.static(range(4)):
+                g = ti.Vector([G[n, 0], G[n, 1], G[n, 2]])
+                precond[edge_vertex(e, n, edge_verts, edge_opp)] += scale * k * g.outer_product(g)
+    for s in range(nst):
+        I = ti.Matrix.identity(float, 3)
+        precond[stitch[s][0]] += scale * kst * I
+        precond[stitch[s][1]] += scale * kst * I
 
-    @ti.func
-    def _add_K_product(self, src: ti.template(), dst: ti.template(), scale, kw, kf, ks, kb, kst,
-                       nf: ti.i32, ne: ti.i32, nst: ti.i32, exact: ti.i32):
-        """dst += scale * K src, with K = -df/dx (PSD-projected unless ``exact``)."""
-        for f in range(nf):
-            tri = self.model.face_verts[f]
-            A = self.model.face_rest_area[f]
-            fu, fv, E = self.face_fu[f], self.face_fv[f], self.face_E[f]
-            wa, wb = self.face_wa[f], self.face_wb[f]
-            dfu = wa[0] * src[tri[0]] + wa[1] * src[tri[1]] + wa[2] * src[tri[2]]
-            dfv = wb[0] * src[tri[0]] + wb[1] * src[tri[1]] + wb[2] * src[tri[2]]
-            dE0, dE1 = fu.dot(dfu), fv.dot(dfv)
-            dE2 = 0.5 * (fu.dot(dfv) + fv.dot(dfu))
-            # Curvature terms: kept where they are non-negative (stretch in tension) unless exact.
-            E0, E1, E2 = E[0], E[1], E[2]
-            if exact == 0:
-                E0, E1, E2 = ti.max(E0, 0.0), ti.max(E1, 0.0), 0.0
-            for n in ti.static(range(3)):
-                out = kw * (dE0 * wa[n] * fu + E0 * wa[n] * dfu) \
-                    + kf * (dE1 * wb[n] * fv + E1 * wb[n] * dfv) \
-                    + 2.0 * ks * (dE2 * (wa[n] * fv + wb[n] * fu) + E2 * (wa[n] * dfv + wb[n] * dfu))
-                dst[tri[n]] += scale * A * out
-        for e in range(ne):
-            if self.model.edge_faces[e][1] >= 0:
-                k = kb * self.model.edge_bend_weight[e]
-                G = self.edge_grad[e]
-                dtheta = 0.0
-                for n in ti.static(range(4)):
-                    dtheta += ti.Vector([G[n, 0], G[n, 1], G[n, 2]]).dot(src[self._edge_vertex(e, n)])
-                for n in ti.static(range(4)):
-                    dst[self._edge_vertex(e, n)] += scale * k * dtheta * \
-                        ti.Vector([G[n, 0], G[n, 1], G[n, 2]])
-        for s in range(nst):
-            a, b = self.stitch[s][0], self.stitch[s][1]
-            d = src[a] - src[b]
-            dst[a] += scale * kst * d
-            dst[b] -= scale * kst * d
 
-    @ti.func
-    def _add_K_diagonal(self, scale, kw, kf, ks, kb, kst, nf: ti.i32, ne: ti.i32, nst: ti.i32):
-        """precond += scale * (3x3 diagonal blocks of the PSD K)."""
-        for f in range(nf):
-            tri = self.model.face_verts[f]
-            A = self.model.face_rest_area[f]
-            for n in ti.static(range(3)):
-                self.precond[tri[n]] += scale * A * self._face_block(f, n, n, kw, kf, ks)
-        for e in range(ne):
-            if self.model.edge_faces[e][1] >= 0:
-                k = kb * self.model.edge_bend_weight[e]
-                G = self.edge_grad[e]
-                for n in ti.static(range(4)):
-                    g = ti.Vector([G[n, 0], G[n, 1], G[n, 2]])
-                    self.precond[self._edge_vertex(e, n)] += scale * k * g.outer_product(g)
-        for s in range(nst):
-            I = ti.Matrix.identity(float, 3)
-            self.precond[self.stitch[s][0]] += scale * kst * I
-            self.precond[self.stitch[s][1]] += scale * kst * I
+# -- kernels ----------------------------------------------------------------------------------
+@ti.kernel
+def _elastic_forces(kw: float, kf: float, ks: float, kb: float, kst: float, nv: ti.i32,
+                    nf: ti.i32, ne: ti.i32, nst: ti.i32, vert_mass: A, vert_pinned: A,
+                    vert_pin_target: A, face_verts: A, face_Dm_inv: A, face_rest_area: A,
+                    face_grain: A, edge_verts: A, edge_faces: A, edge_opp: A,
+                    edge_rest_angle: A, edge_bend_weight: A, x: A, v: A, face_fu: A,
+                    face_fv: A, face_E: A, face_wa: A, face_wb: A, edge_grad: A,
+                    edge_theta: A, stitch: A, force: A):
+    for i in range(nv):
+        force[i] = ti.Vector([0.0, 0.0, 0.0])
+    update_kinematics(nf, ne, x, face_verts, face_Dm_inv, face_grain, edge_verts, edge_faces,
+                      edge_opp, face_fu, face_fv, face_E, face_wa, face_wb, edge_grad,
+                      edge_theta)
+    add_elastic_forces(force, kw, kf, ks, kb, kst, nf, ne, nst, x, face_verts, face_rest_area,
+                       edge_verts, edge_faces, edge_opp, edge_rest_angle, edge_bend_weight,
+                       face_fu, face_fv, face_E, face_wa, face_wb, edge_grad, edge_theta,
+                       stitch)
 
-    # -- kernels ------------------------------------------------------------------------------
-    @ti.kernel
-    def _elastic_forces(self, kw: float, kf: float, ks: float, kb: float, kst: float,
-                        nv: ti.i32, nf: ti.i32, ne: ti.i32, nst: ti.i32):
+
+@ti.kernel
+def _jacobian_product(kw: float, kf: float, ks: float, kb: float, kst: float, nv: ti.i32,
+                      nf: ti.i32, ne: ti.i32, nst: ti.i32, exact: ti.i32, vert_mass: A,
+                      vert_pinned: A, vert_pin_target: A, face_verts: A, face_Dm_inv: A,
+                      face_rest_area: A, face_grain: A, edge_verts: A, edge_faces: A,
+                      edge_opp: A, edge_rest_angle: A, edge_bend_weight: A, x: A, v: A,
+                      face_fu: A, face_fv: A, face_E: A, face_wa: A, face_wb: A,
+                      edge_grad: A, edge_theta: A, stitch: A, p: A, Ap: A):
+    for i in range(nv):
+        Ap[i] = ti.Vector([0.0, 0.0, 0.0])
+    update_kinematics(nf, ne, x, face_verts, face_Dm_inv, face_grain, edge_verts, edge_faces,
+                      edge_opp, face_fu, face_fv, face_E, face_wa, face_wb, edge_grad,
+                      edge_theta)
+    add_K_product(p, Ap, 1.0, kw, kf, ks, kb, kst, nf, ne, nst, exact, face_verts,
+                  face_rest_area, edge_verts, edge_faces, edge_opp, edge_bend_weight, face_fu,
+                  face_fv, face_E, face_wa, face_wb, edge_grad, stitch)
+
+
+@ti.kernel
+def _energy(kw: float, kf: float, ks: float, kb: float, kst: float, nf: ti.i32, ne: ti.i32,
+            nst: ti.i32, vert_mass: A, vert_pinned: A, vert_pin_target: A, face_verts: A,
+            face_Dm_inv: A, face_rest_area: A, face_grain: A, edge_verts: A, edge_faces: A,
+            edge_opp: A, edge_rest_angle: A, edge_bend_weight: A, x: A, v: A, face_fu: A,
+            face_fv: A, face_E: A, face_wa: A, face_wb: A, edge_grad: A, edge_theta: A,
+            stitch: A) -> float:
+    update_kinematics(nf, ne, x, face_verts, face_Dm_inv, face_grain, edge_verts, edge_faces,
+                      edge_opp, face_fu, face_fv, face_E, face_wa, face_wb, edge_grad,
+                      edge_theta)
+    total = 0.0
+    for f in range(nf):
+        E = face_E[f]
+        total += face_rest_area[f] * (0.5 * kw * E[0] ** 2 + 0.5 * kf * E[1] ** 2
+                                      + 2.0 * ks * E[2] ** 2)
+    for e in range(ne):
+        if edge_faces[e][1] >= 0:
+            d = edge_theta[e] - edge_rest_angle[e]
+            total += 0.5 * kb * edge_bend_weight[e] * d * d
+    for s in range(nst):
+        d = x[stitch[s][0]] - x[stitch[s][1]]
+        total += 0.5 * kst * d.dot(d)
+    return total
+
+
+@ti.func
+def apply_A(src: T, dst: T, h, alpha, beta, kw, kf, ks, kb, kst, nv: ti.i32, nf: ti.i32,
+            ne: ti.i32, nst: ti.i32, vert_mass: T, vert_pinned: T, face_verts: T,
+            face_rest_area: T, edge_verts: T, edge_faces: T, edge_opp: T,
+            edge_bend_weight: T, face_fu: T, face_fv: T, face_E: T, face_wa: T, face_wb: T,
+            edge_grad: T, stitch: T):
+    """dst = A src with A = (1 + h alpha) M + h (beta + h) K, pinned rows filtered."""
+    for i in range(nv):
+        dst[i] = (1.0 + h * alpha) * vert_mass[i] * src[i]
+    add_K_product(src, dst, h * (beta + h), kw, kf, ks, kb, kst, nf, ne, nst, 0, face_verts,
+                  face_rest_area, edge_verts, edge_faces, edge_opp, edge_bend_weight, face_fu,
+                  face_fv, face_E, face_wa, face_wb, edge_grad, stitch)
+    for i in range(nv):
+        if vert_pinned[i] != 0:
+            dst[i] = ti.Vector([0.0, 0.0, 0.0])
+
+
+@ti.func
+def linearise(h, g, kw, kf, ks, kb, alpha, beta, kst, nv: ti.i32, nf: ti.i32, ne: ti.i32,
+              nst: ti.i32, force: T, precond: T, rhs: T, vert_mass: T, face_verts: T,
+              face_Dm_inv: T, face_rest_area: T, face_grain: T, edge_verts: T, edge_faces: T,
+              edge_opp: T, edge_rest_angle: T, edge_bend_weight: T, x: T, v: T, face_fu: T,
+              face_fv: T, face_E: T, face_wa: T, face_wb: T, edge_grad: T, edge_theta: T,
+              stitch: T):
+    """Forces and element quantities at the start of the step, the diagonal blocks of A
+    (in ``precond``) and the right-hand side h (f - alpha M v) - h (beta + h) K v."""
+    for i in range(nv):
+        force[i] = vert_mass[i] * g
+        precond[i] = (1.0 + h * alpha) * vert_mass[i] * ti.Matrix.identity(float, 3)
+    update_kinematics(nf, ne, x, face_verts, face_Dm_inv, face_grain, edge_verts, edge_faces,
+                      edge_opp, face_fu, face_fv, face_E, face_wa, face_wb, edge_grad,
+                      edge_theta)
+    add_elastic_forces(force, kw, kf, ks, kb, kst, nf, ne, nst, x, face_verts, face_rest_area,
+                       edge_verts, edge_faces, edge_opp, edge_rest_angle, edge_bend_weight,
+                       face_fu, face_fv, face_E, face_wa, face_wb, edge_grad, edge_theta,
+                       stitch)
+    add_K_diagonal(precond, h * (beta + h), kw, kf, ks, kb, kst, nf, ne, nst, face_verts,
+                   face_rest_area, edge_verts, edge_faces, edge_opp, edge_bend_weight, face_fu,
+                   face_fv, face_E, face_wa, face_wb, edge_grad, stitch)
+    for i in range(nv):
+        rhs[i] = h * (force[i] - alpha * vert_mass[i] * v[i])
+    add_K_product(v, rhs, -h * (beta + h), kw, kf, ks, kb, kst, nf, ne, nst, 0, face_verts,
+                  face_rest_area, edge_verts, edge_faces, edge_opp, edge_bend_weight, face_fu,
+                  face_fv, face_E, face_wa, face_wb, edge_grad, stitch)
+
+
+@ti.kernel
+def _step(h: float, g: ti.types.vector(3, float), kw: float, kf: float, ks: float, kb: float,
+          alpha: float, beta: float, kst: float, nv: ti.i32, nf: ti.i32, ne: ti.i32,
+          nst: ti.i32, tol: float, max_iters: ti.i32, vert_mass: A, vert_pinned: A,
+          vert_pin_target: A, face_verts: A, face_Dm_inv: A, face_rest_area: A,
+          face_grain: A, edge_verts: A, edge_faces: A, edge_opp: A, edge_rest_angle: A,
+          edge_bend_weight: A, x: A, v: A, face_fu: A, face_fv: A, face_E: A, face_wa: A,
+          face_wb: A, edge_grad: A, edge_theta: A, stitch: A, force: A, dv: A, rhs: A,
+          res: A, z: A, p: A, Ap: A, precond: A, scalars: A) -> ti.types.vector(2, float):
+    """(relative residual, CG iterations), also left in scalars[0] and scalars[1]."""
+    # The whole step runs in one serial kernel: on a 2-core CPU, launching a kernel per CG
+    # phase costs more than the work below ~50k triangles (METHOD.md section 4 hints).
+    # Returning both numbers costs less than reading them back (~0.05 vs ~0.17 ms).
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        linearise(h, g, kw, kf, ks, kb, alpha, beta, kst, nv, nf, ne, nst, force, precond, rhs,
+                  vert_mass, face_verts, face_Dm_inv, face_rest_area, face_grain, edge_verts,
+                  edge_faces, edge_opp, edge_rest_angle, edge_bend_weight, x, v, face_fu,
+                  face_fv, face_E, face_wa, face_wb, edge_grad, edge_theta, stitch)
+        # Pinned vertices: the dv that lands them on their target at the end of the step.
+        # Free vertices start CG from the last step's dv (warm start: near rest, successive
+        # velocity changes are alike); on_mesh_changed zeroes it after a remesh.
         for i in range(nv):
-            self.force[i] = ti.Vector([0.0, 0.0, 0.0])
-        self._update_kinematics(nf, ne)
-        self._add_elastic_forces(kw, kf, ks, kb, kst, nf, ne, nst)
-
-    @ti.kernel
-    def _jacobian_product(self, kw: float, kf: float, ks: float, kb: float, kst: float,
-                          nv: ti.i32, nf: ti.i32, ne: ti.i32, nst: ti.i32, exact: ti.i32):
+            if vert_pinned[i] != 0:
+                dv[i] = (vert_pin_target[i] - x[i]) / h - v[i]
+            precond[i] = precond[i].inverse()
+        # r = b - A dv over the free vertices (pinned dv enters through the coupling).
+        apply_A(dv, Ap, h, alpha, beta, kw, kf, ks, kb, kst, nv, nf, ne, nst, vert_mass,
+                vert_pinned, face_verts, face_rest_area, edge_verts, edge_faces, edge_opp,
+                edge_bend_weight, face_fu, face_fv, face_E, face_wa, face_wb, edge_grad,
+                stitch)
         for i in range(nv):
-            self.Ap[i] = ti.Vector([0.0, 0.0, 0.0])
-        self._update_kinematics(nf, ne)
-        self._add_K_product(self.p, self.Ap, 1.0, kw, kf, ks, kb, kst, nf, ne, nst, exact)
-
-    @ti.kernel
-    def _energy(self, kw: float, kf: float, ks: float, kb: float, kst: float,
-                nf: ti.i32, ne: ti.i32, nst: ti.i32) -> float:
-        self._update_kinematics(nf, ne)
-        total = 0.0
-        for f in range(nf):
-            E = self.face_E[f]
-            total += self.model.face_rest_area[f] * (0.5 * kw * E[0] ** 2 + 0.5 * kf * E[1] ** 2
-                                                     + 2.0 * ks * E[2] ** 2)
-        for e in range(ne):
-            if self.model.edge_faces[e][1] >= 0:
-                d = self.edge_theta[e] - self.model.edge_rest_angle[e]
-                total += 0.5 * kb * self.model.edge_bend_weight[e] * d * d
-        for s in range(nst):
-            d = self.model.state.x[self.stitch[s][0]] - self.model.state.x[self.stitch[s][1]]
-            total += 0.5 * kst * d.dot(d)
-        return total
-
-    @ti.func
-    def _apply_A(self, src: ti.template(), dst: ti.template(), h, alpha, beta, kw, kf, ks, kb,
-                 kst, nv: ti.i32, nf: ti.i32, ne: ti.i32, nst: ti.i32):
-        """dst = A src with A = (1 + h alpha) M + h (beta + h) K, pinned rows filtered."""
+            res[i] = rhs[i] - Ap[i]
+            if vert_pinned[i] != 0:
+                res[i] = ti.Vector([0.0, 0.0, 0.0])
+        # (Free rows of A dv include the coupling to the prescribed pinned dv.)
+        rz = 0.0
+        bnorm = 0.0
         for i in range(nv):
-            dst[i] = (1.0 + h * alpha) * self.model.vert_mass[i] * src[i]
-        self._add_K_product(src, dst, h * (beta + h), kw, kf, ks, kb, kst, nf, ne, nst, 0)
-        for i in range(nv):
-            if self.model.vert_pinned[i] != 0:
-                dst[i] = ti.Vector([0.0, 0.0, 0.0])
-
-    @ti.func
-    def _linearise(self, h, g, kw, kf, ks, kb, alpha, beta, kst, nv: ti.i32, nf: ti.i32,
-                   ne: ti.i32, nst: ti.i32):
-        """Forces and element quantities at the start of the step, the diagonal blocks of A
-        (in ``precond``) and the right-hand side h (f - alpha M v) - h (beta + h) K v."""
-        m, v = ti.static(self.model.vert_mass, self.model.state.v)
-        for i in range(nv):
-            self.force[i] = m[i] * g
-            self.precond[i] = (1.0 + h * alpha) * m[i] * ti.Matrix.identity(float, 3)
-        self._update_kinematics(nf, ne)
-        self._add_elastic_forces(kw, kf, ks, kb, kst, nf, ne, nst)
-        self._add_K_diagonal(h * (beta + h), kw, kf, ks, kb, kst, nf, ne, nst)
-        for i in range(nv):
-            self.rhs[i] = h * (self.force[i] - alpha * m[i] * v[i])
-        self._add_K_product(v, self.rhs, -h * (beta + h), kw, kf, ks, kb, kst, nf, ne, nst, 0)
-
-    @ti.kernel
-    def _step(self, h: float, g: ti.types.vector(3, float), kw: float, kf: float, ks: float,
-              kb: float, alpha: float, beta: float, kst: float, nv: ti.i32, nf: ti.i32,
-              ne: ti.i32, nst: ti.i32, tol: float, max_iters: ti.i32) -> ti.i32:
-        # The whole step runs in one serial kernel: on a 2-core CPU, launching a kernel per CG
-        # phase costs more than the work below ~50k triangles (METHOD.md section 4 hints).
-        ti.loop_config(serialize=True)
-        for _ in range(1):
-            x, v = ti.static(self.model.state.x, self.model.state.v)
-            self._linearise(h, g, kw, kf, ks, kb, alpha, beta, kst, nv, nf, ne, nst)
-            # Pinned vertices: the dv that lands them on their target at the end of the step.
-            # Free vertices start CG from the last step's dv (warm start: near rest, successive
-            # velocity changes are alike); on_mesh_changed zeroes it after a remesh.
+            z[i] = precond[i] @ res[i]
+            p[i] = z[i]
+            rz += res[i].dot(z[i])
+            if vert_pinned[i] == 0:    # CG's scale: the free rows only
+                bnorm += rhs[i].dot(precond[i] @ rhs[i])
+        # Preconditioned CG on the free vertices.
+        iters = 0
+        rel = ti.sqrt(ti.abs(rz) / ti.max(bnorm, 1e-300))
+        while iters < max_iters and rel > tol:
+            apply_A(p, Ap, h, alpha, beta, kw, kf, ks, kb, kst, nv, nf, ne, nst, vert_mass,
+                    vert_pinned, face_verts, face_rest_area, edge_verts, edge_faces, edge_opp,
+                    edge_bend_weight, face_fu, face_fv, face_E, face_wa, face_wb, edge_grad,
+                    stitch)
+            pAp = 0.0
             for i in range(nv):
-                if self.model.vert_pinned[i] != 0:
-                    self.dv[i] = (self.model.vert_pin_target[i] - x[i]) / h - v[i]
-                self.precond[i] = self.precond[i].inverse()
-            # r = b - A dv over the free vertices (pinned dv enters through the coupling).
-            self._apply_A(self.dv, self.Ap, h, alpha, beta, kw, kf, ks, kb, kst, nv, nf, ne, nst)
+                pAp += p[i].dot(Ap[i])
+            if pAp <= 0.0:
+                break
+            step = rz / pAp
+            rz_new = 0.0
             for i in range(nv):
-                self.res[i] = self.rhs[i] - self.Ap[i]
-                if self.model.vert_pinned[i] != 0:
-                    self.res[i] = ti.Vector([0.0, 0.0, 0.0])
-            # (Free rows of A dv include the coupling to the prescribed pinned dv.)
-            rz = 0.0
-            bnorm = 0.0
+                dv[i] += step * p[i]
+                res[i] -= step * Ap[i]
+                z[i] = precond[i] @ res[i]
+                rz_new += res[i].dot(z[i])
+            beta_cg = rz_new / rz
             for i in range(nv):
-                self.z[i] = self.precond[i] @ self.res[i]
-                self.p[i] = self.z[i]
-                rz += self.res[i].dot(self.z[i])
-                if self.model.vert_pinned[i] == 0:    # CG's scale: the free rows only
-                    bnorm += self.rhs[i].dot(self.precond[i] @ self.rhs[i])
-            # Preconditioned CG on the free vertices.
-            iters = 0
+                p[i] = z[i] + beta_cg * p[i]
+                if vert_pinned[i] != 0:
+                    p[i] = ti.Vector([0.0, 0.0, 0.0])
+            rz = rz_new
             rel = ti.sqrt(ti.abs(rz) / ti.max(bnorm, 1e-300))
-            while iters < max_iters and rel > tol:
-                self._apply_A(self.p, self.Ap, h, alpha, beta, kw, kf, ks, kb, kst, nv, nf, ne,
-                              nst)
-                pAp = 0.0
-                for i in range(nv):
-                    pAp += self.p[i].dot(self.Ap[i])
-                if pAp <= 0.0:
-                    break
-                step = rz / pAp
-                rz_new = 0.0
-                for i in range(nv):
-                    self.dv[i] += step * self.p[i]
-                    self.res[i] -= step * self.Ap[i]
-                    self.z[i] = self.precond[i] @ self.res[i]
-                    rz_new += self.res[i].dot(self.z[i])
-                beta_cg = rz_new / rz
-                for i in range(nv):
-                    self.p[i] = self.z[i] + beta_cg * self.p[i]
-                    if self.model.vert_pinned[i] != 0:
-                        self.p[i] = ti.Vector([0.0, 0.0, 0.0])
-                rz = rz_new
-                rel = ti.sqrt(ti.abs(rz) / ti.max(bnorm, 1e-300))
-                iters += 1
-            self.scalars[0] = rel
-            # Update: v += dv, x += h v; pins exactly on target.
-            for i in range(nv):
-                v[i] += self.dv[i]
-                x[i] += h * v[i]
-                if self.model.vert_pinned[i] != 0:
-                    x[i] = self.model.vert_pin_target[i]
-            self.scalars[1] = iters
-        return ti.cast(self.scalars[1], ti.i32)
+            iters += 1
+        scalars[0] = rel
+        # Update: v += dv, x += h v; pins exactly on target.
+        for i in range(nv):
+            v[i] += dv[i]
+            x[i] += h * v[i]
+            if vert_pinned[i] != 0:
+                x[i] = vert_pin_target[i]
+        scalars[1] = iters
+    return ti.Vector([scalars[0], scalars[1]])

@@ -8,8 +8,8 @@ System (identical to dynamics.py, same PSD-projected K, same right-hand side):
     A = (1 + h alpha) M + h (beta + h) K_psd,    A dv = h (f - alpha M v) - h (beta + h) K_psd v
 
 Pinned vertices are eliminated: their dv is prescribed (lands them on their target), the
-coupling ``A_fp dv_p`` moves to the right-hand side (computed matrix-free with the parent's
-``_apply_A``), and only the free-free block ``A_ff`` is assembled (3 rows per free vertex, in
+coupling ``A_fp dv_p`` moves to the right-hand side (computed matrix-free with dynamics.py's
+``apply_A``), and only the free-free block ``A_ff`` is assembled (3 rows per free vertex, in
 the order of a compact free-vertex index). The direct solvers read only the lower triangle, so
 only that is assembled for them (about half the triplets).
 
@@ -17,19 +17,21 @@ Per step: ``_prepare`` (forces, kinematics, rhs, residual, free index; one seria
 ``_assemble`` (per-element 3x3 blocks into a ``ti.types.sparse_matrix_builder``) + ``build``,
 ``factorize`` (``analyze_pattern`` only when the mesh or the pin set changed), ``solve``, and
 ``_finish`` (scatter dv, update v and x). ``last_timings`` holds the ms of each phase.
+The kernels are module-level and take every array as an argument, like dynamics.py's: they
+compile once per process, not once per solver.
 """
 import time
 
 import numpy as np
 import taichi as ti
 
-from .dynamics import DynamicsSettings, ImplicitEuler
+from .dynamics import (A, T, DynamicsSettings, ImplicitEuler, apply_A, edge_vertex, face_block,
+                       linearise)
 from .model import ClothModel
 
 LINEAR_SOLVERS = ("llt", "ldlt", "sparse-cg", "matrix-free")
 
 
-@ti.data_oriented
 class SparseImplicitEuler(ImplicitEuler):
     """``ImplicitEuler`` whose linear solve is a sparse direct (or sparse CG) solve.
 
@@ -58,7 +60,7 @@ class SparseImplicitEuler(ImplicitEuler):
         super().on_mesh_changed()
         m = self.model
         if getattr(self, "_free_for", None) != m.v_cap:
-            self.free_index = ti.field(ti.i32, m.v_cap)
+            self.free_index = ti.ndarray(ti.i32, m.v_cap)
             self._free_for = m.v_cap
         self._pattern_key = None       # the sparsity pattern must be analysed again
 
@@ -73,27 +75,29 @@ class SparseImplicitEuler(ImplicitEuler):
         T = {}
         t0 = time.perf_counter()
         # Warm start only helps the iterative solver; a direct solve starts from dv_free = 0.
-        n_free = int(self._prepare(h, ti.Vector(list(s.gravity)), *k, alpha, beta, kst,
-                                   m.n_verts, m.n_faces, m.n_edges, self.n_stitches,
-                                   0 if direct else 1))
+        n_free = int(_prepare(h, ti.Vector(list(s.gravity)), *k, alpha, beta, kst, m.n_verts,
+                              m.n_faces, m.n_edges, self.n_stitches, 0 if direct else 1,
+                              *self._mesh(), *self._elements(), self.force, self.dv, self.rhs,
+                              self.res, self.Ap, self.precond, self.scalars, self.free_index))
         t1 = time.perf_counter()
         T["prepare"] = 1e3 * (t1 - t0)
         n = 3 * n_free
         if n == 0:
-            self._finish(np.zeros(1), h, m.n_verts, 0)
+            _finish(np.zeros(1), h, m.n_verts, 0, *self._finish_arrays())
             self.last_cg_iters, self.last_cg_residual = 0, 0.0
             self.last_timings = T
             return 0
         lower = 1 if direct else 0
         scaled = 0 if direct else 1
         self._ensure_builder(n, m)
-        self._assemble(self._builder, h, *k, alpha, beta, kst, m.n_verts, m.n_faces, m.n_edges,
-                       self.n_stitches, lower, scaled)
+        _assemble(self._builder, h, *k, alpha, beta, kst, m.n_verts, m.n_faces, m.n_edges,
+                  self.n_stitches, lower, scaled, *self._mesh(), *self._elements(),
+                  self.precond, self.free_index)
         A = self._builder.build()
         t2 = time.perf_counter()
         T["assembly"] = 1e3 * (t2 - t1)
         b = np.zeros(n, dtype=np.float64 if self._dtype == ti.f64 else np.float32)
-        self._gather(b, m.n_verts, scaled)
+        _gather(b, m.n_verts, scaled, self.res, self.precond, self.free_index)
         iters = 0
         if direct:
             key = (m.n_verts, m.n_faces, m.n_edges, n_free, self.n_stitches, self.linear_solver)
@@ -129,7 +133,8 @@ class SparseImplicitEuler(ImplicitEuler):
             self.last_cg_residual = float(np.linalg.norm(r) / max(np.linalg.norm(b), 1e-300))
         else:
             self.last_cg_residual = 0.0
-        self._finish(np.ascontiguousarray(x, dtype=b.dtype), h, m.n_verts, scaled)
+        _finish(np.ascontiguousarray(x, dtype=b.dtype), h, m.n_verts, scaled,
+                *self._finish_arrays())
         T["finish"] = 1e3 * (time.perf_counter() - t5)
         self.last_timings = T
         self.last_cg_iters = iters
@@ -162,6 +167,11 @@ class SparseImplicitEuler(ImplicitEuler):
         return L @ x + L.transpose() @ x - d * x
 
     # -- helpers ------------------------------------------------------------------------------
+    def _finish_arrays(self):
+        m = self.model
+        return (m.vert_pinned, m.vert_pin_target, m.state.x, m.state.v, self.dv, self.precond,
+                self.free_index)
+
     def _ensure_builder(self, n, m):
         # Triplets (full blocks; the lower triangle needs about half): 9 per free vertex
         # (mass), 81 per face, 144 per interior edge, 36 per stitch.
@@ -172,110 +182,133 @@ class SparseImplicitEuler(ImplicitEuler):
                                                           dtype=self._dtype)
             self._builder_key = key
 
-    # -- kernels ------------------------------------------------------------------------------
-    @ti.kernel
-    def _prepare(self, h: float, g: ti.types.vector(3, float), kw: float, kf: float, ks: float,
-                 kb: float, alpha: float, beta: float, kst: float, nv: ti.i32, nf: ti.i32,
-                 ne: ti.i32, nst: ti.i32, warm: ti.i32) -> ti.i32:
-        """Forces, rhs, prescribed pinned dv, residual r = b - A dv0 in ``res`` (free rows),
-        the compact free-vertex index and the diagonal blocks of A in ``precond``."""
-        ti.loop_config(serialize=True)
-        for _ in range(1):
-            x, v = ti.static(self.model.state.x, self.model.state.v)
-            self._linearise(h, g, kw, kf, ks, kb, alpha, beta, kst, nv, nf, ne, nst)
-            n_free = 0
-            for i in range(nv):
-                if self.model.vert_pinned[i] != 0:
-                    self.dv[i] = (self.model.vert_pin_target[i] - x[i]) / h - v[i]
-                    self.free_index[i] = -1
-                else:
-                    if warm == 0:
-                        self.dv[i] = ti.Vector([0.0, 0.0, 0.0])
-                    self.free_index[i] = n_free
-                    n_free += 1
-            self._apply_A(self.dv, self.Ap, h, alpha, beta, kw, kf, ks, kb, kst, nv, nf, ne, nst)
-            for i in range(nv):
-                self.res[i] = self.rhs[i] - self.Ap[i]
-                if self.model.vert_pinned[i] != 0:
-                    self.res[i] = ti.Vector([0.0, 0.0, 0.0])
-            self.scalars[2] = n_free
-        return ti.cast(self.scalars[2], ti.i32)
 
-    @ti.func
-    def _scale_of(self, i, c, scaled: ti.i32):
-        s = 1.0
-        if scaled != 0:
-            s = 1.0 / ti.sqrt(self.precond[i][c, c])
-        return s
-
-    @ti.func
-    def _add_block(self, B: ti.template(), va, vb, blk, lower: ti.i32, scaled: ti.i32):
-        """B[rows of va, cols of vb] += blk for free va, vb (lower triangle only if asked).
-        Runtime loops, not static ones: an unrolled assembly kernel takes minutes to compile."""
-        ra, rb = self.free_index[va], self.free_index[vb]
-        if ra >= 0 and rb >= 0:
-            for a, c in ti.ndrange(3, 3):
-                r, col = 3 * ra + a, 3 * rb + c
-                if lower == 0 or r >= col:
-                    B[r, col] += blk[a, c] * self._scale_of(va, a, scaled) * \
-                        self._scale_of(vb, c, scaled)
-
-    @ti.kernel
-    def _assemble(self, B: ti.types.sparse_matrix_builder(), h: float, kw: float, kf: float,
-                  ks: float, kb: float, alpha: float, beta: float, kst: float, nv: ti.i32,
-                  nf: ti.i32, ne: ti.i32, nst: ti.i32, lower: ti.i32, scaled: ti.i32):
-        """The free-free block of A = (1 + h alpha) M + h (beta + h) K_psd, element by element:
-        the blocks whose action is ``_add_K_product(..., exact=0)`` and whose diagonal is
-        ``_add_K_diagonal``. Uses the kinematics left by ``_prepare``."""
-        ti.loop_config(serialize=True)
-        for _ in range(1):
-            sc = h * (beta + h)
-            I = ti.Matrix.identity(float, 3)
-            for i in range(nv):
-                self._add_block(B, i, i, (1.0 + h * alpha) * self.model.vert_mass[i] * I,
-                                lower, scaled)
-            for f in range(nf):
-                tri = self.model.face_verts[f]
-                A = self.model.face_rest_area[f]
-                for n in ti.static(range(3)):
-                    for q in ti.static(range(3)):
-                        self._add_block(B, tri[n], tri[q],
-                                        sc * A * self._face_block(f, n, q, kw, kf, ks), lower,
-                                        scaled)
-            for e in range(ne):
-                if self.model.edge_faces[e][1] >= 0:
-                    kk = sc * kb * self.model.edge_bend_weight[e]
-                    G = self.edge_grad[e]
-                    for n, q in ti.ndrange(4, 4):
-                        gn = ti.Vector([G[n, 0], G[n, 1], G[n, 2]])
-                        gq = ti.Vector([G[q, 0], G[q, 1], G[q, 2]])
-                        self._add_block(B, self._edge_vertex(e, n), self._edge_vertex(e, q),
-                                        kk * gn.outer_product(gq), lower, scaled)
-            for s in range(nst):
-                a, b = self.stitch[s][0], self.stitch[s][1]
-                self._add_block(B, a, a, sc * kst * I, lower, scaled)
-                self._add_block(B, b, b, sc * kst * I, lower, scaled)
-                self._add_block(B, a, b, -sc * kst * I, lower, scaled)
-                self._add_block(B, b, a, -sc * kst * I, lower, scaled)
-
-    @ti.kernel
-    def _gather(self, b: ti.types.ndarray(), nv: ti.i32, scaled: ti.i32):
+# -- kernels ----------------------------------------------------------------------------------
+@ti.kernel
+def _prepare(h: float, g: ti.types.vector(3, float), kw: float, kf: float, ks: float,
+             kb: float, alpha: float, beta: float, kst: float, nv: ti.i32, nf: ti.i32,
+             ne: ti.i32, nst: ti.i32, warm: ti.i32, vert_mass: A, vert_pinned: A,
+             vert_pin_target: A, face_verts: A, face_Dm_inv: A, face_rest_area: A,
+             face_grain: A, edge_verts: A, edge_faces: A, edge_opp: A, edge_rest_angle: A,
+             edge_bend_weight: A, x: A, v: A, face_fu: A, face_fv: A, face_E: A, face_wa: A,
+             face_wb: A, edge_grad: A, edge_theta: A, stitch: A, force: A, dv: A, rhs: A,
+             res: A, Ap: A, precond: A, scalars: A, free_index: A) -> ti.i32:
+    """Forces, rhs, prescribed pinned dv, residual r = b - A dv0 in ``res`` (free rows),
+    the compact free-vertex index and the diagonal blocks of A in ``precond``."""
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        linearise(h, g, kw, kf, ks, kb, alpha, beta, kst, nv, nf, ne, nst, force, precond, rhs,
+                  vert_mass, face_verts, face_Dm_inv, face_rest_area, face_grain, edge_verts,
+                  edge_faces, edge_opp, edge_rest_angle, edge_bend_weight, x, v, face_fu,
+                  face_fv, face_E, face_wa, face_wb, edge_grad, edge_theta, stitch)
+        n_free = 0
         for i in range(nv):
-            r = self.free_index[i]
-            if r >= 0:
-                for c in ti.static(range(3)):
-                    b[3 * r + c] = self.res[i][c] * self._scale_of(i, c, scaled)
-
-    @ti.kernel
-    def _finish(self, sol: ti.types.ndarray(), h: float, nv: ti.i32, scaled: ti.i32):
-        """dv_free += solution (unscaled), then v += dv, x += h v, pins exactly on target."""
+            if vert_pinned[i] != 0:
+                dv[i] = (vert_pin_target[i] - x[i]) / h - v[i]
+                free_index[i] = -1
+            else:
+                if warm == 0:
+                    dv[i] = ti.Vector([0.0, 0.0, 0.0])
+                free_index[i] = n_free
+                n_free += 1
+        apply_A(dv, Ap, h, alpha, beta, kw, kf, ks, kb, kst, nv, nf, ne, nst, vert_mass,
+                vert_pinned, face_verts, face_rest_area, edge_verts, edge_faces, edge_opp,
+                edge_bend_weight, face_fu, face_fv, face_E, face_wa, face_wb, edge_grad,
+                stitch)
         for i in range(nv):
-            r = self.free_index[i]
-            if r >= 0:
-                for c in ti.static(range(3)):
-                    self.dv[i][c] += sol[3 * r + c] * self._scale_of(i, c, scaled)
-            x, v = ti.static(self.model.state.x, self.model.state.v)
-            v[i] += self.dv[i]
-            x[i] += h * v[i]
-            if self.model.vert_pinned[i] != 0:
-                x[i] = self.model.vert_pin_target[i]
+            res[i] = rhs[i] - Ap[i]
+            if vert_pinned[i] != 0:
+                res[i] = ti.Vector([0.0, 0.0, 0.0])
+        scalars[2] = n_free
+    return ti.cast(scalars[2], ti.i32)
+
+
+@ti.func
+def scale_of(i, c, scaled: ti.i32, precond: T):
+    s = 1.0
+    if scaled != 0:
+        s = 1.0 / ti.sqrt(precond[i][c, c])
+    return s
+
+
+@ti.func
+def add_block(B: T, va, vb, blk, lower: ti.i32, scaled: ti.i32, precond: T, free_index: T):
+    """B[rows of va, cols of vb] += blk for free va, vb (lower triangle only if asked).
+    Runtime loops, not static ones: an unrolled assembly kernel takes minutes to compile."""
+    ra, rb = free_index[va], free_index[vb]
+    if ra >= 0 and rb >= 0:
+        for a, c in ti.ndrange(3, 3):
+            r, col = 3 * ra + a, 3 * rb + c
+            if lower == 0 or r >= col:
+                B[r, col] += blk[a, c] * scale_of(va, a, scaled, precond) * \
+                    scale_of(vb, c, scaled, precond)
+
+
+@ti.kernel
+def _assemble(B: ti.types.sparse_matrix_builder(), h: float, kw: float, kf: float, ks: float,
+              kb: float, alpha: float, beta: float, kst: float, nv: ti.i32, nf: ti.i32,
+              ne: ti.i32, nst: ti.i32, lower: ti.i32, scaled: ti.i32, vert_mass: A,
+              vert_pinned: A, vert_pin_target: A, face_verts: A, face_Dm_inv: A,
+              face_rest_area: A, face_grain: A, edge_verts: A, edge_faces: A, edge_opp: A,
+              edge_rest_angle: A, edge_bend_weight: A, x: A, v: A, face_fu: A, face_fv: A,
+              face_E: A, face_wa: A, face_wb: A, edge_grad: A, edge_theta: A, stitch: A,
+              precond: A, free_index: A):
+    """The free-free block of A = (1 + h alpha) M + h (beta + h) K_psd, element by element:
+    the blocks whose action is ``add_K_product(..., exact=0)`` and whose diagonal is
+    ``add_K_diagonal``. Uses the kinematics left by ``_prepare``."""
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        sc = h * (beta + h)
+        I = ti.Matrix.identity(float, 3)
+        for i in range(nv):
+            add_block(B, i, i, (1.0 + h * alpha) * vert_mass[i] * I, lower, scaled, precond,
+                      free_index)
+        for f in range(nf):
+            tri = face_verts[f]
+            A = face_rest_area[f]
+            for n in ti.static(range(3)):
+                for q in ti.static(range(3)):
+                    add_block(B, tri[n], tri[q],
+                              sc * A * face_block(f, n, q, kw, kf, ks, face_fu, face_fv, face_E,
+                                                  face_wa, face_wb),
+                              lower, scaled, precond, free_index)
+        for e in range(ne):
+            if edge_faces[e][1] >= 0:
+                kk = sc * kb * edge_bend_weight[e]
+                G = edge_grad[e]
+                for n, q in ti.ndrange(4, 4):
+                    gn = ti.Vector([G[n, 0], G[n, 1], G[n, 2]])
+                    gq = ti.Vector([G[q, 0], G[q, 1], G[q, 2]])
+                    add_block(B, edge_vertex(e, n, edge_verts, edge_opp),
+                              edge_vertex(e, q, edge_verts, edge_opp), kk * gn.outer_product(gq),
+                              lower, scaled, precond, free_index)
+        for s in range(nst):
+            a, b = stitch[s][0], stitch[s][1]
+            add_block(B, a, a, sc * kst * I, lower, scaled, precond, free_index)
+            add_block(B, b, b, sc * kst * I, lower, scaled, precond, free_index)
+            add_block(B, a, b, -sc * kst * I, lower, scaled, precond, free_index)
+            add_block(B, b, a, -sc * kst * I, lower, scaled, precond, free_index)
+
+
+@ti.kernel
+def _gather(b: A, nv: ti.i32, scaled: ti.i32, res: A, precond: A, free_index: A):
+    for i in range(nv):
+        r = free_index[i]
+        if r >= 0:
+            for c in ti.static(range(3)):
+                b[3 * r + c] = res[i][c] * scale_of(i, c, scaled, precond)
+
+
+@ti.kernel
+def _finish(sol: A, h: float, nv: ti.i32, scaled: ti.i32, vert_pinned: A, vert_pin_target: A,
+            x: A, v: A, dv: A, precond: A, free_index: A):
+    """dv_free += solution (unscaled), then v += dv, x += h v, pins exactly on target."""
+    for i in range(nv):
+        r = free_index[i]
+        if r >= 0:
+            for c in ti.static(range(3)):
+                dv[i][c] += sol[3 * r + c] * scale_of(i, c, scaled, precond)
+        v[i] += dv[i]
+        x[i] += h * v[i]
+        if vert_pinned[i] != 0:
+            x[i] = vert_pin_target[i]

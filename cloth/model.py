@@ -1,8 +1,11 @@
 """The cloth model (what changes only when the mesh changes) and its state (x, v).
 
-Every array lives in a Taichi field allocated with spare capacity; ``n_verts``, ``n_faces`` and
-``n_edges`` say how much of each is active, so a remesh refills the fields instead of
-reallocating them every frame (``ClothModel.load`` grows them only when capacity runs out).
+Every array lives in a Taichi ndarray allocated with spare capacity; ``n_verts``, ``n_faces``
+and ``n_edges`` say how much of each is active, so a remesh refills the arrays instead of
+reallocating them every frame (when capacity runs out the Simulator builds a bigger model).
+The arrays are ndarrays, never fields, because every kernel takes them as arguments: a kernel
+then compiles once per process, not once per model (a field captured by a kernel is baked
+into it, so every new model recompiled every kernel: 4-10 s per Simulator, issue #15).
 
 Units are SI throughout: metres, kilograms, seconds, newtons.
 
@@ -26,7 +29,7 @@ class ModelError(ValueError):
 
 
 class CapacityExceeded(RuntimeError):
-    """A mesh does not fit in a model's fields (remeshing grew it past the spare capacity)."""
+    """A mesh does not fit in a model's arrays (remeshing grew it past the spare capacity)."""
 
     def __init__(self, nv, nf, ne, caps):
         super().__init__(f"mesh of {nv} vertices, {nf} faces, {ne} edges exceeds the capacity "
@@ -89,7 +92,7 @@ class Material:
 @dataclass
 class MeshArrays:
     """A cloth mesh as numpy arrays, the exchange format between builders, remeshing and
-    the Taichi fields. ``grain`` is (F, 2, 2): columns warp and weft in material space."""
+    the Taichi arrays. ``grain`` is (F, 2, 2): columns warp and weft in material space."""
     uv: np.ndarray                 # (V, 2) material coordinates, m
     x: np.ndarray                  # (V, 3) world positions, m
     faces: np.ndarray              # (F, 3) int, counter-clockwise in material space
@@ -182,11 +185,10 @@ def dihedral_angles(x, edge_verts, edge_opp):
     return theta
 
 
-@ti.data_oriented
 class ClothModel:
-    """Rest shape, topology and material of one cloth, in Taichi fields.
+    """Rest shape, topology and material of one cloth, in Taichi ndarrays.
 
-    Fields (capacity rows; the first ``n_*`` are active):
+    Arrays (capacity rows; the first ``n_*`` are active):
       vert_uv (V, vec2, m)            material coordinates
       vert_mass (V, kg)               lumped mass, density * area / 3 from each face
       vert_pinned (V, i32)            1 where the vertex follows ``vert_pin_target``
@@ -214,19 +216,20 @@ class ClothModel:
         cf = self.capacity_factor
         self.v_cap, self.f_cap, self.e_cap = (max(int(n * cf) + 8, 16) for n in (nv, nf, ne))
         V, F, E = self.v_cap, self.f_cap, self.e_cap
-        self.vert_uv = ti.Vector.field(2, float, V)
-        self.vert_mass = ti.field(float, V)
-        self.vert_pinned = ti.field(ti.i32, V)
-        self.vert_pin_target = ti.Vector.field(3, float, V)
-        self.face_verts = ti.Vector.field(3, ti.i32, F)
-        self.face_Dm_inv = ti.Matrix.field(2, 2, float, F)
-        self.face_rest_area = ti.field(float, F)
-        self.face_grain = ti.Matrix.field(2, 2, float, F)
-        self.edge_verts = ti.Vector.field(2, ti.i32, E)
-        self.edge_faces = ti.Vector.field(2, ti.i32, E)
-        self.edge_opp = ti.Vector.field(2, ti.i32, E)
-        self.edge_rest_angle = ti.field(float, E)
-        self.edge_bend_weight = ti.field(float, E)
+        vec, mat2 = ti.types.vector, ti.types.matrix(2, 2, float)
+        self.vert_uv = ti.ndarray(vec(2, float), V)
+        self.vert_mass = ti.ndarray(float, V)
+        self.vert_pinned = ti.ndarray(ti.i32, V)
+        self.vert_pin_target = ti.ndarray(vec(3, float), V)
+        self.face_verts = ti.ndarray(vec(3, ti.i32), F)
+        self.face_Dm_inv = ti.ndarray(mat2, F)
+        self.face_rest_area = ti.ndarray(float, F)
+        self.face_grain = ti.ndarray(mat2, F)
+        self.edge_verts = ti.ndarray(vec(2, ti.i32), E)
+        self.edge_faces = ti.ndarray(vec(2, ti.i32), E)
+        self.edge_opp = ti.ndarray(vec(2, ti.i32), E)
+        self.edge_rest_angle = ti.ndarray(float, E)
+        self.edge_bend_weight = ti.ndarray(float, E)
         self.state = ClothState(V)
 
     def fits(self, nv, nf, ne):
@@ -234,7 +237,7 @@ class ClothModel:
 
     # -- filling from numpy -------------------------------------------------------------------
     def load(self, mesh: MeshArrays, rest_x=None):
-        """(Re)fill every field from ``mesh`` within the allocated capacity; raises
+        """(Re)fill every array from ``mesh`` within the allocated capacity; raises
         CapacityExceeded when it does not fit (build a new ClothModel then)."""
         uv, faces = mesh.uv, mesh.faces
         if uv.ndim != 2 or uv.shape[1] != 2 or mesh.x.shape != (len(uv), 3):
@@ -259,8 +262,9 @@ class ClothModel:
         nv, nf, ne = len(uv), len(faces), len(ev)
         if not self.fits(nv, nf, ne):
             if self.v_cap > 0:
-                # Kernels compiled against these fields would keep pointing at them, so a model
-                # never reallocates itself: the owner builds a new model (Simulator does).
+                # The solvers size their work arrays from the model's capacities, so a model
+                # never reallocates itself: the owner builds a new model and solvers
+                # (Simulator._rebuild_for; nothing recompiles).
                 raise CapacityExceeded(nv, nf, ne, (self.v_cap, self.f_cap, self.e_cap))
             self._allocate(nv, nf, ne)
         self.n_verts, self.n_faces, self.n_edges = nv, nf, ne
@@ -361,17 +365,9 @@ class ClothModel:
                           pin_target=self.vert_pin_target.to_numpy()[: self.n_verts],
                           grain=self.grain)
 
-    @ti.kernel
-    def all_finite(self, n: ti.i32) -> ti.i32:
+    def all_finite(self, n):
         """1 if the first ``n`` positions and velocities are finite (and below 1e30)."""
-        ok = 1
-        for i in range(n):
-            x, v = self.state.x[i], self.state.v[i]
-            for c in ti.static(range(3)):
-                # NaN fails every comparison; inf fails the bound.
-                if not (ti.abs(x[c]) < 1e30 and ti.abs(v[c]) < 1e30):
-                    ok = 0
-        return ok
+        return _all_finite(n, self.state.x, self.state.v)
 
     def typical_edge(self):
         """The typical edge length (m): the square root of the mean rest area. The scale that
@@ -379,7 +375,7 @@ class ClothModel:
         return float(np.sqrt(np.mean(self.rest_area[:self.n_faces])))
 
     def set_vertex_pin(self, v, pinned, target=None):
-        """Pin vertex ``v`` to ``target`` (m) or free it. The field the kernels read and the
+        """Pin vertex ``v`` to ``target`` (m) or free it. The array the kernels read and the
         ``pinned`` array the host reads change together."""
         self.vert_pinned[v] = int(bool(pinned))
         self._np_cache["pinned"][v] = bool(pinned)
@@ -392,12 +388,23 @@ class ClothModel:
         self.vert_pin_target.from_numpy(full)
 
 
-@ti.data_oriented
 class ClothState:
     """What changes every substep: positions ``x`` (V, vec3, m) and velocities ``v``
     (V, vec3, m/s); ``n`` rows are active."""
 
     def __init__(self, capacity):
-        self.x = ti.Vector.field(3, float, capacity)
-        self.v = ti.Vector.field(3, float, capacity)
+        self.x = ti.ndarray(ti.types.vector(3, float), capacity)
+        self.v = ti.ndarray(ti.types.vector(3, float), capacity)
         self.n = 0
+
+
+@ti.kernel
+def _all_finite(n: ti.i32, x: ti.types.ndarray(), v: ti.types.ndarray()) -> ti.i32:
+    ok = 1
+    for i in range(n):
+        xi, vi = x[i], v[i]
+        for c in ti.static(range(3)):
+            # NaN fails every comparison; inf fails the bound.
+            if not (ti.abs(xi[c]) < 1e30 and ti.abs(vi[c]) < 1e30):
+                ok = 0
+    return ok

@@ -73,7 +73,6 @@ class Stage:
     ms: float = 0.0            # time spent in the current frame
 
 
-@ti.data_oriented
 class Simulator:
     def __init__(self, setup: SceneSetup, settings):
         """``settings``: a ``Settings``, or the resolved nested dict of a scene (checked here;
@@ -121,48 +120,6 @@ class Simulator:
         """The time step (s): 1 / (fps x substeps)."""
         return 1.0 / (float(self.settings.sim.fps) * self.substeps)
 
-    def can_restart(self, setup: SceneSetup, cfg):
-        """Whether ``restart`` may reuse this Simulator for ``setup``: the same mesh topology,
-        no stitches, self-collision, moving obstacles or remeshing (their solvers hold state
-        that ``restart`` does not reset; obstacles must be equal, which the caller knows)."""
-        m = self.model
-        return (len(setup.mesh.uv) == m.n_verts and len(setup.mesh.faces) == m.n_faces
-                and np.array_equal(setup.mesh.faces, m.faces) and setup.stitches is None
-                and self.setup.stitches is None and not setup.self_collision
-                and all(o.path is None for o in setup.obstacles)
-                and not Settings.of(cfg).remesh.enabled and self.remesher is None)
-
-    def restart(self, setup: SceneSetup, cfg):
-        """Start again from ``setup``'s initial state with the settings of ``cfg`` without
-        compiling anything: state, pins, material, time step, dynamics and strain-limiting
-        settings, clock. Everything a run carries over (the CG warm start, the AL multipliers)
-        is reset, so a restarted run repeats a run on a fresh Simulator bit for bit
-        (tests/test_benchmarks.py). The obstacles stay those this Simulator was built with.
-        Raises ValueError where ``can_restart`` is False."""
-        if not self.can_restart(setup, cfg):
-            raise ValueError("restart needs the same mesh and no stitches, self-collision, "
-                             "moving obstacles or remeshing: build a new Simulator")
-        settings = Settings.of(cfg)
-        self.settings, self.setup = settings, setup
-        self.model.material = setup.material          # load() recomputes the masses from it
-        ds = self.dynamics.settings                   # the object the dynamics reads each step
-        ds.gravity = tuple(settings.sim.gravity)
-        ds.cg_tol, ds.cg_max_iters = float(settings.sim.cg_tol), int(settings.sim.cg_iters)
-        st = settings.strain
-        if st.method != "none":
-            self.set_method(st.method)                # builds the limiter if there was none
-            lim = self.strain
-            lim.solver, lim.tol, lim.max_iters = st.solver, float(st.tol), int(st.iters)
-            lim.mapping_iso = float(st.isotropy)
-            lim.set_coupling(st.coupling)
-            lim.linear_solver = st.linear_solver
-            lim.curvature = st.curvature
-            lim.set_bands(warp=st.warp, weft=st.weft, bias=st.bias if st.bias else "auto")
-        elif self.strain is not None:
-            self.set_method("none")
-        self.reset()
-        return self
-
     def reset(self):
         """Back to the scene's initial state at time 0 with the current settings (method,
         bands, material, substeps kept). Nothing compiles; everything a run carries over (the
@@ -184,7 +141,7 @@ class Simulator:
         return np.zeros((0, 2), np.int32) if st is None else np.asarray(st, np.int32).reshape(-1, 2)
 
     def _mesh_changed(self):
-        """The model's fields were refilled (reset, remesh): every solver forgets what it kept
+        """The model's arrays were refilled (reset, remesh): every solver forgets what it kept
         per vertex or face and re-reads the mesh. The one place that tells them all."""
         self.dynamics.on_mesh_changed()
         if self.strain is not None:
@@ -195,9 +152,9 @@ class Simulator:
 
     @staticmethod
     def _capacity_factor(mesh, remesh_settings, cap_faces=200_000):
-        """Spare room in the fields. With remeshing, room for the finest mesh the sizing
-        allows (2.5 x the count of equilateral triangles of edge size_min that tile it), so a
-        refining cloth rarely outgrows its fields (growing means recompiling the kernels)."""
+        """Spare room in the model's arrays. With remeshing, room for the finest mesh the
+        sizing allows (2.5 x the count of equilateral triangles of edge size_min that tile
+        it), so a refining cloth rarely outgrows its arrays (growing rebuilds the solvers)."""
         if not remesh_settings.enabled:
             return 1.2
         area = metrics.material_areas(mesh.uv, mesh.faces).sum()
@@ -333,10 +290,10 @@ class Simulator:
         return np.min([o.sdf(points, self.time)[0] for o in self.setup.obstacles], axis=0)
 
     def _rebuild_for(self, mesh):
-        """The remeshed cloth outgrew the fields: build a model with twice the room and new
-        solver objects around it (their kernels compile anew against the new fields)."""
+        """The remeshed cloth outgrew the arrays: build a model with twice the room and new
+        solver objects around it (nothing compiles: every kernel takes arrays as arguments)."""
         self.grow_count += 1
-        print(f"loom: remeshing grew the cloth to {len(mesh.faces)} faces; reallocating fields "
+        print(f"loom: remeshing grew the cloth to {len(mesh.faces)} faces; reallocating arrays "
               f"with room for {2 * len(mesh.faces)} (grown {self.grow_count}x)", file=sys.stderr)
         self.model = ClothModel(mesh, self.setup.material, capacity_factor=2.0)
         self.dynamics = self._make_dynamics(self.dynamics.stitches_np)

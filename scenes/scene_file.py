@@ -414,7 +414,7 @@ class SceneFile:
         elif kind == "capsule":
             d = s["b"] - s["a"]
             length = float(np.linalg.norm(d))
-            rot = col._rotation_between([0, 0, 1], d) if length > 0 else np.eye(3)
+            rot = col.rotation_between([0, 0, 1], d) if length > 0 else np.eye(3)
             o = col.Capsule(center=tuple(0.5 * (s["a"] + s["b"])), length=length,
                             radius=s["radius"], rotation=rot, mu=mu)
         elif kind == "box":

@@ -30,43 +30,18 @@ def run(state, frames):
         state.tick()
 
 
-@pytest.fixture(scope="module")
-def shared():
-    """One app state for the module: every simulator compiles its kernels once, and
-    ``AppState.reset`` reloads the mesh without compiling again."""
+def fresh_state():
+    """The app on the free sheet at frame 0. No strain limiting (the scene's default is
+    mapping): the reference images and the method-switch tests start from the free sheet."""
     from ui.state import AppState
-    # No strain limiting (the scene's default is mapping): the reference images and the
-    # method-switch tests start from the free sheet.
     return AppState.from_scene("hanging", [FREE_SHEET])
 
 
-def restore(shared):
-    """Back to frame 0 with the scene's settings."""
-    from ui.state import MATERIAL_KEYS
-    base = shared.base_cfg
-    shared.switch_method(base["strain"]["method"])
-    shared.set_band("warp", *base["strain"]["warp"])
-    shared.set_band("weft", *base["strain"]["weft"])
-    shared.set_auto_bias(True)
-    shared.set_substeps(base["sim"]["substeps"])
-    shared.set_iterations(base["strain"]["iters"])
-    for key in MATERIAL_KEYS:
-        shared.set_material(key, base["material"][key])
-    shared.reset()
-    shared.resume()
-    # Checked, so a test that changes something restore() does not undo fails here instead
-    # of silently changing the tests after it.
-    from cloth.settings import Settings
-    want, have = Settings(base).to_dict(), shared.sim.settings.to_dict()
-    for section in ("sim", "material", "strain", "remesh"):
-        assert have[section] == want[section], f"restore() left {section} changed"
-    assert shared.sim.frame == 0 and shared.sim.held_vertex is None
-    return shared
-
-
 @pytest.fixture
-def st(shared):
-    return restore(shared)
+def st():
+    """A new app state per test (a new Simulator compiles nothing: issue #15), so no test
+    sees what another changed."""
+    return fresh_state()
 
 
 # -- the state machine ------------------------------------------------------------------------
@@ -263,11 +238,10 @@ def reference_images(state):
 
 
 @pytest.fixture(scope="module")
-def rendered(shared):
+def rendered():
     from ui.render import RenderUnavailable
-    restore(shared)
     try:
-        return reference_images(shared)
+        return reference_images(fresh_state())
     except RenderUnavailable as err:
         pytest.skip(f"rendering tests need a Vulkan device (lavapipe will do): {err}")
 
@@ -385,9 +359,7 @@ def test_comparison_view_is_reached_from_the_panel_and_left_again():
     assert st.sim.frame == 0
 
 
-def test_scene_switch_rebuilds_with_that_scenes_defaults(shared):
-    """Last: it replaces the shared simulator with the scene's default one."""
-    st = shared
+def test_scene_switch_rebuilds_with_that_scenes_defaults(st):
     faces = st.sim.model.n_faces
     assert not st.switch_scene("no-such-scene")
     assert "unknown scene" in st.message and st.sim.model.n_faces == faces
@@ -400,10 +372,8 @@ def regenerate():
     import imageio.v2 as imageio
     from cloth import backend
     backend.init("cpu", "f64")
-    from ui.state import AppState
     os.makedirs(REFERENCE_DIR, exist_ok=True)
-    images, _, _ = reference_images(
-        AppState.from_scene("hanging", [FREE_SHEET]))
+    images, _, _ = reference_images(fresh_state())
     for mode, img in images.items():
         path = os.path.join(REFERENCE_DIR, f"hanging_{mode}.png")
         imageio.imwrite(path, img)

@@ -1,7 +1,7 @@
 """The speed-against-error sweep and the stability suite, small enough for CI.
 
-Everything runs in this process on shared, compiled Simulators (``SimulatorPool``): a new
-Simulator costs seconds of kernel compilation, a run of these small scenes a fraction of one.
+Everything runs in this process (each run builds its Simulator: the kernels compile once per
+process).
 The sweep uses a reduced grid of ``benchmarks.speed_vs_error``; the stability cases are exactly
 the ``--fast`` cases of ``benchmarks.stability``.
 """
@@ -13,8 +13,7 @@ import numpy as np
 import pytest
 
 from benchmarks import stability
-from benchmarks.harness import SimulatorPool
-from benchmarks.speed_vs_error import RESOLUTION, overrides_for, run, sweep, write_outputs
+from benchmarks.speed_vs_error import RESOLUTION, sweep, write_outputs
 
 # Whole module: simulation sweeps (make test-quick leaves them out).
 pytestmark = pytest.mark.slow
@@ -30,33 +29,9 @@ CF = GRID["compare_frames"][0]
 
 
 @pytest.fixture(scope="module")
-def pool():
-    return SimulatorPool()
-
-
-def test_restarted_simulator_repeats_a_fresh_run(pool):
-    """A run on a restarted Simulator, after a run with other settings, is bit for bit the
-    run of a new Simulator: the sweep's numbers do not depend on what ran before."""
-    a = overrides_for("mapping", "al", 8, 1, 7)
-    b = overrides_for("warp-weft", "jacobi", 50, 2, 7)
-    b["material"] = {"density": 0.3, "k_bend": 1e-4}
-    b["strain"].update(warp=[-0.02, 0.03], bias=[-0.1, 0.1])
-    own = SimulatorPool()
-    first = run(own, "hanging", a, 5, snap_frames=(5,))
-    other = run(own, "hanging", b, 5, snap_frames=(5,))
-    again = run(own, "hanging", a, 5, snap_frames=(5,))
-    assert own.built == 1                                   # one Simulator served all three
-    assert not np.array_equal(other["snaps"][5][0], first["snaps"][5][0])
-    assert np.array_equal(again["snaps"][5][0], first["snaps"][5][0])
-    assert [r["own_violation_max"] for r in again["rows"]] == \
-        [r["own_violation_max"] for r in first["rows"]]
-    pool.sims.update(own.sims)                              # hand it on, compiled
-
-
-@pytest.fixture(scope="module")
-def swept(pool, tmp_path_factory):
+def swept(tmp_path_factory):
     out = str(tmp_path_factory.mktemp("speed"))
-    results, checks = sweep(GRID, "hanging", log=lambda *a: None, pool=pool)
+    results, checks = sweep(GRID, "hanging", log=lambda *a: None)
     write_outputs(results, checks, out, GRID, "hanging", "tests/test_benchmarks.py", 0.0)
     return out, results, checks
 
@@ -160,9 +135,9 @@ KNOWN = {}      # case name -> reason, for a known failure (strict xfail)
 
 
 @pytest.fixture(scope="module")
-def stability_results(pool, tmp_path_factory):
+def stability_results(tmp_path_factory):
     out = str(tmp_path_factory.mktemp("stability"))
-    results = stability.run_cases(FAST, pool, log=lambda *a: None)
+    results = stability.run_cases(FAST, log=lambda *a: None)
     stability.write_report(results, out, "tests/test_benchmarks.py", 0.0)
     return out, {r["case"]: r for r in results}
 

@@ -17,8 +17,8 @@ G = np.array([0.0, 0.0, -9.81])
 
 
 @ti.kernel
-def _explicit_step(x: ti.template(), v: ti.template(), pinned: ti.template(), n: ti.i32,
-                   h: float, g: ti.types.vector(3, float)):
+def _explicit_step(x: ti.types.ndarray(), v: ti.types.ndarray(), pinned: ti.types.ndarray(),
+                   n: ti.i32, h: float, g: ti.types.vector(3, float)):
     for i in range(n):
         if pinned[i] == 0:
             v[i] += h * g

@@ -3,7 +3,6 @@ targets, a divergence is reported with frame and stage and keeps what was writte
 import os
 
 import numpy as np
-import pytest
 
 import scenes
 from cloth.simulator import Simulator
@@ -76,19 +75,3 @@ def test_divergence_is_reported_with_frame_and_stage_and_output_is_kept(tmp_path
     assert len(rows) == 1 + 3       # frames 0, 1, 2
     assert sorted(os.listdir(tmp_path / "meshes"))[-1] == "frame_0002.obj"
     assert np.all(np.isfinite(sim.last_good.x))
-
-
-def test_restart_refuses_what_it_cannot_reset():
-    """Simulator.restart reuses compiled kernels only for the same mesh and no stateful extras
-    (remeshing, stitches, self-collision): anything else must be a new Simulator."""
-    import scenes
-    from scenes.common import resolve
-    sim, cfg = make_sim(cloth={"resolution": 5}, strain=FREE)
-    module = scenes.get("hanging")
-    same = resolve(module.DEFAULTS, [{"cloth": {"resolution": 5}, "strain": FREE}])
-    assert sim.can_restart(module.build(same), same)
-    for change in ({"cloth": {"resolution": 6}}, {"cloth": {"resolution": 5},
-                                                  "remesh": {"enabled": True}}):
-        other = resolve(module.DEFAULTS, [change, {"strain": FREE}])
-        with pytest.raises(ValueError, match="new Simulator"):
-            sim.restart(module.build(other), other)

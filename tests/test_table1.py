@@ -1,10 +1,6 @@
 """Paper Table 1 at low resolution (issue #3): the hanging cloth near rest for the three
 methods x the two band settings, asserting the findings recorded in docs/table1.
 
-One simulator runs all six settings (``Simulator.restart``: a fresh simulator would cost
-~2.5 s of kernel loading per setting; a restarted run repeats a fresh one bit for bit,
-tests/test_benchmarks.py).
-
 The cloth does not come fully to rest with strain limiting (kinetic energy stays ~1e-4 J: a
 jitter of a few vertices), so the strain maxima of single frames jitter too (mapping's warp
 max between 1.0 and 1.24 % from frame to frame in V1H5). Each run is therefore summarised
@@ -64,11 +60,11 @@ def _run(sim):
 
 @pytest.fixture(scope="module")
 def table():
-    sim, rows = None, {}
+    rows = {}
     for bands in BANDS:
         for method in METHODS:
             setup, cfg = _setting(bands, method)
-            sim = Simulator(setup, cfg) if sim is None else sim.restart(setup, cfg)
+            sim = Simulator(setup, cfg)
             rows[bands, method] = _run(sim)
     return rows
 

@@ -149,8 +149,8 @@ class AppState:
 
     def reset(self):
         """Restart the scene with the current settings (method, bands, sliders kept). The
-        simulators reload the scene's initial mesh into their fields, so no kernel compiles
-        again; if that fails they are rebuilt."""
+        simulators reload the scene's initial mesh into their arrays; if that fails they are
+        rebuilt."""
         self.end_drag()
         self.message, self.failed = "", False
         try:

@@ -1,18 +1,19 @@
 """A rigid union of spheres and capsules as one obstacle (the mannequin).
 
-One obstacle with the primitives in fields costs one kernel however many primitives there are;
-a separate obstacle per primitive would compile and launch one kernel each. The union's signed
-distance is the minimum over the primitives: exact outside (the distance to the nearest
+One obstacle with the primitives in an array (an ndarray argument of the collision kernels, see
+``shape.py``) costs one launch per pass however many primitives there are, where a separate
+obstacle per primitive would launch once each. The union's signed distance is the minimum over
+the primitives (``geom.sdf_capsule_union``): exact outside (the distance to the nearest
 primitive is the distance to the union) and a lower bound of the depth inside, which is what
-push-out needs.
+push-out needs. Its gradient is by central differences; its contact planes are those of its two
+nearest primitives (``geom.nearest_two_capsules``).
 """
 import numpy as np
-import taichi as ti
 
+from . import shape
 from .obstacles import CollisionError, Obstacle
 
 
-@ti.data_oriented
 class CapsuleUnion(Obstacle):
     """Primitives as segments ``a``-``b`` inflated by ``radius`` (a sphere has a == b).
 
@@ -20,6 +21,7 @@ class CapsuleUnion(Obstacle):
     ``{"kind": "capsule", "a", "b", "radius"}`` (the format of ``assets/mannequin.json``)."""
 
     kind = "capsule-union"
+    kind_id = shape.UNION
 
     def __init__(self, prims, mu=0.3, position=(0.0, 0.0, 0.0), rotation=None, path=None):
         if not prims:
@@ -38,12 +40,6 @@ class CapsuleUnion(Obstacle):
         self.seg_a, self.seg_b = np.array(a, np.float64), np.array(b, np.float64)
         self.radii = np.array(r, np.float64)
         self.n = len(r)
-        self.fa = ti.Vector.field(3, float, self.n)
-        self.fb = ti.Vector.field(3, float, self.n)
-        self.fr = ti.field(float, self.n)
-        self.fa.from_numpy(self.seg_a)
-        self.fb.from_numpy(self.seg_b)
-        self.fr.from_numpy(self.radii)
         super().__init__(mu=mu, position=position, rotation=rotation, path=path)
 
     def size(self):
@@ -71,38 +67,6 @@ class CapsuleUnion(Obstacle):
         m = trimesh.util.concatenate(parts)
         return np.asarray(m.vertices), np.asarray(m.faces)
 
-    @ti.func
-    def _offset(self, k, p):
-        """p minus the nearest point of primitive k's segment."""
-        a, b = self.fa[k], self.fb[k]
-        ab = b - a
-        t = 0.0
-        L2 = ab.dot(ab)
-        if L2 > 1e-20:
-            t = ti.math.clamp((p - a).dot(ab) / L2, 0.0, 1.0)
-        return p - (a + t * ab)
-
-    @ti.func
-    def sdf_local(self, p):
-        best = 1e30
-        for k in range(self.n):
-            best = ti.min(best, self._offset(k, p).norm() - self.fr[k])
-        return best
-
-    @ti.func
-    def nearest_two(self, p):
-        """The two nearest primitives' distances and outward normals (exact, per capsule)."""
-        d1, d2 = 1e30, 1e30
-        n1 = ti.Vector([0.0, 0.0, 1.0])
-        n2 = ti.Vector([0.0, 0.0, 1.0])
-        for k in range(self.n):
-            off = self._offset(k, p)
-            dist = off.norm()
-            d = dist - self.fr[k]
-            nk = off / dist if dist > 1e-12 else ti.Vector([0.0, 0.0, 1.0])
-            if d < d1:
-                d2, n2 = d1, n1
-                d1, n1 = d, nk
-            elif d < d2:
-                d2, n2 = d, nk
-        return d1, n1, d2, n2
+    def host_prims(self):
+        """Rows (a, b, radius), the layout of ``shape.py``'s ``prims``."""
+        return np.c_[self.seg_a, self.seg_b, self.radii]

@@ -30,18 +30,25 @@ section 7 applied to a rigid body):
     sticking vertex does not creep by ``h^2 g sin(theta)`` every substep.
 Pinned vertices are never touched.
 
-Units: SI. Fields use ``float`` (Taichi's default float).
+The kernels are module-level functions of ndarray arguments: the model's arrays, the
+collider's small result arrays and the obstacle's shape (kind, parameters, primitives, grid; see
+``shape.py``). None captures a field or is specialised to an obstacle, so each compiles once
+per process however many Colliders, obstacles and models a process builds (issue #15).
+
+Units: SI. Arrays use ``float`` (Taichi's default float).
 """
 import time
 
 import taichi as ti
 
 # The contact half-spaces' layout is the strain projection's (its work arrays hold them).
+from ..ndarrays import A
 from ..strain.buffers import CONTACT_SLOTS, NO_CONTACT
+from . import shape
 from .obstacles import THICKNESS, CollisionError, Obstacle, mat3, vec3
 
 
-@ti.data_oriented
+
 class Collider:
     """Resolves cloth-obstacle contact (and self-contact when asked) once per substep.
 
@@ -74,9 +81,10 @@ class Collider:
         self.last_contacts = 0
         self.last_self_pairs = 0
         self._last_t = 0.0
-        self._counter = ti.field(ti.i32, ())
-        self._maxval = ti.field(float, ())
-        self._moved = ti.field(float, ())      # largest push of the last obstacle pass (m)
+        self._counter = ti.ndarray(ti.i32, 1)     # contacts of the last obstacle pass
+        self._maxval = ti.ndarray(float, 1)       # max_penetration's reduction
+        self._moved = ti.ndarray(float, 1)        # largest push of the last obstacle pass (m)
+        self._mu_tmp = None
         self.self_solver = None
         if self.self_collision:
             from .self_collision import SelfCollision
@@ -115,15 +123,15 @@ class Collider:
             # impulses treat them as heavy, so a layer landing on a layer that rests on the
             # ground is stopped by the upper layer's impulse instead of pushing the lower one
             # into the ground (which the final obstacle pass would undo, closing the gap).
-            g = self.self_solver.prepare_contacts()
-            self._obstacle_pass(h, t, g, True)
+            flags = self.self_solver.prepare_contacts()
+            self._mark_pass(h, t, flags)
             self.self_solver.resolve(h)
             self.last_self_pairs = self.self_solver.last_pairs
         ti.sync()
         t_mid = time.perf_counter()
-        self._counter[None] = 0
-        self._obstacle_pass(h, t, self._counter, False)
-        self.last_contacts = int(self._counter[None]) if self.obstacles else 0
+        self._counter[0] = 0
+        self._obstacle_pass(h, t)
+        self.last_contacts = int(self._counter[0]) if self.obstacles else 0
         t_end = time.perf_counter()
         self._last_t = t + h
         self.last_ms_self = 1e3 * (t_mid - t_start)
@@ -138,12 +146,12 @@ class Collider:
         continuous test from there finds false crossings (measured on tshirt: vertices thrown
         to the far side of an arm, 27 cm). Returns how far it moved the vertex it moved most
         (m)."""
-        self._moved[None] = 0.0
+        self._moved[0] = 0.0
         if self.obstacles:
-            self._obstacle_pass(h, t, self._counter, False, ccd=False)
-        return float(self._moved[None])
+            self._obstacle_pass(h, t, ccd=False)
+        return float(self._moved[0])
 
-    def _obstacle_pass(self, h, t, out, mark, ccd=True):
+    def _obstacle_pass(self, h, t, ccd=True):
         st = self.model.state
         n = self.model.n_verts
         for o in self.obstacles:
@@ -151,115 +159,20 @@ class Collider:
             c1, R1 = o.pose(t + h)
             vlin, omega = o.velocity(t, h)
             step = min(o.ccd_step(self.thickness), 1e30) if ccd else -1.0
-            self._resolve_obstacle(o, st.x, st.v, self.model.vert_pinned, out, mark, n, h,
-                                   self.thickness, o.mu, ti.Matrix(R0), ti.Vector(c0),
-                                   ti.Matrix(R1), ti.Vector(c1), ti.Vector(vlin),
-                                   ti.Vector(omega), step)
+            _resolve_obstacle(*o.shape_args(), st.x, st.v, self.model.vert_pinned, n, h,
+                              self.thickness, o.mu, ti.Matrix(R0), ti.Vector(c0),
+                              ti.Matrix(R1), ti.Vector(c1), ti.Vector(vlin), ti.Vector(omega),
+                              step, self.ccd_samples, self._counter, self._moved)
 
-    @ti.kernel
-    def _resolve_obstacle(self, o: ti.template(), x: ti.template(), v: ti.template(),
-                          pinned: ti.template(), out: ti.template(), mark: ti.template(),
-                          n: ti.i32, h: float, th: float, mu: float,
-                          R0: mat3, c0: vec3, R1: mat3, c1: vec3, vlin: vec3, omega: vec3,
-                          step: float):
-        # out: the contact counter (mark False) or, for the read-only pass before
-        # self-collision (mark True), a per-vertex flag set where the vertex started the
-        # substep on the obstacle (nothing else is written then).
-        for i in range(n):
-            if pinned[i] == 0:
-                x1 = x[i]
-                vi = v[i]
-                x0 = x1 - h * vi
-                p0 = R0.transpose() @ (x0 - c0)
-                p1 = R1.transpose() @ (x1 - c1)
-                phi0 = o.sdf_local(p0) - th
-                phi1 = o.sdf_local(p1) - th
-                pn = p1
-                contact = False
-                s_hit = 0.0        # fraction of the substep before the contact began
-                nloc = ti.Vector([0.0, 0.0, 1.0])
-                entry = False
-                if phi0 >= 0.0 and step > 0.0:      # step <= 0: no continuous test
-                    # Continuous test: walk the relative motion in the obstacle's frame and find
-                    # the first time the thickened surface is crossed.
-                    seg = p1 - p0
-                    L = seg.norm()
-                    K = ti.min(ti.max(ti.cast(ti.ceil(L / step), ti.i32), 1), self.ccd_samples)
-                    s_lo = 0.0
-                    s_hi = -1.0
-                    for k in range(1, K + 1):
-                        if s_hi < 0.0:
-                            s = k / K
-                            ph = phi1
-                            if k < K:
-                                ph = o.sdf_local(p0 + s * seg) - th
-                            if ph < 0.0:
-                                s_hi = s
-                            else:
-                                s_lo = s
-                    if s_hi >= 0.0:
-                        for _ in range(20):
-                            sm = 0.5 * (s_lo + s_hi)
-                            if o.sdf_local(p0 + sm * seg) - th < 0.0:
-                                s_hi = sm
-                            else:
-                                s_lo = sm
-                        s_hit = s_lo
-                        pe = p0 + s_lo * seg               # on the outer side of the crossing
-                        ne = o.grad_local(pe)
-                        # Back to the entry side: onto the tangent plane of the first crossing.
-                        depth = (pe - p1).dot(ne)
-                        if depth > 0.0:
-                            pn = p1 + depth * ne
-                        contact = True
-                        entry = True
-                        nloc = ne
-                # Push out along the gradient (a few Newton steps on phi = thickness).
-                pushed = False
-                for _ in range(4):
-                    ph = o.sdf_local(pn) - th
-                    if ph < 0.0:
-                        pn = pn - ph * o.grad_local(pn)
-                        contact = True
-                        pushed = True
-                if contact and ti.static(not mark):
-                    # The contact normal: where the surface was first met for a caught crossing
-                    # (the vertex now sits on that tangent plane), else where it was pushed to.
-                    if pushed or not entry:
-                        nloc = o.grad_local(pn)
-                    nrm = R1 @ nloc
-                    xn = R1 @ pn + c1
-                    vo = vlin + omega.cross(xn - c1)
-                    vrel = vi - vo
-                    vn = vrel.dot(nrm)
-                    if vn < 0.0:
-                        vt = vrel - vn * nrm
-                        vt_len = vt.norm()
-                        dvn = -vn
-                        vt_new = ti.Vector([0.0, 0.0, 0.0])
-                        if vt_len > mu * dvn:
-                            vt_new = vt * (1.0 - mu * dvn / vt_len)
-                        v[i] = vo + vt_new
-                        # Keep x consistent with v (x = x_start + h v) along the tangent over
-                        # the part of the substep in contact, so a sticking vertex stays put.
-                        xn += (1.0 - s_hit) * h * (vt_new - vt)
-                        # On a curved surface that tangential step can dip below the shell.
-                        pt = R1.transpose() @ (xn - c1)
-                        for _ in range(2):
-                            ph = o.sdf_local(pt) - th
-                            if ph < 0.0:
-                                pt = pt - ph * o.grad_local(pt)
-                        xn = R1 @ pt + c1
-                    ti.atomic_max(self._moved[None], (xn - x1).norm())
-                    x[i] = xn
-                    if ti.static(not mark):
-                        ti.atomic_add(out[None], 1)
-                if ti.static(mark):
-                    # Resting on the obstacle at the start of the substep. (Not "inside at the
-                    # end": a layer falling onto a resting layer is predicted inside the ground
-                    # too, and must not count as supported.)
-                    if phi0 < 0.1 * th:
-                        out[i] = 1
+    def _mark_pass(self, h, t, flags):
+        """The read-only pass before self-collision: set ``flags[i]`` where vertex i started
+        the substep on an obstacle (nothing else is written)."""
+        st = self.model.state
+        for o in self.obstacles:
+            c0, R0 = o.pose(t)
+            _mark_resting(*o.shape_args(), st.x, st.v, self.model.vert_pinned,
+                          self.model.n_verts, h, self.thickness, ti.Matrix(R0), ti.Vector(c0),
+                          flags)
 
     # -- contacts as constraints of the strain projection -----------------------------------
     def contact_planes(self, t, out, reach=None, mu_out=None):
@@ -268,7 +181,7 @@ class Collider:
         obstacle within ``reach`` (m, at least ``thickness``) of the thickened surface, the
         tangent plane of that surface as (n, d) with n.x >= d on the free side; elsewhere
         (0, 0, 0, NO_CONTACT), which no position violates. ``out`` has two slots per vertex: the
-        two nearest planes over the obstacles and their parts (``Obstacle.nearest_two``), so
+        two nearest planes over the obstacles and their parts (``shape.nearest_two``), so
         a vertex in a concave corner of a body (arm against torso) keeps out of both parts
         instead of being pushed from one into the other by the fix-up passes.
 
@@ -282,48 +195,16 @@ class Collider:
         n = self.model.n_verts
         if mu_out is None:
             mu_out = self._mu_scratch(n)
-        self._clear_planes(n, out, mu_out)
+        _clear_planes(n, out, mu_out)
         for o in self.obstacles:
             c, R = o.pose(t)
-            self._planes(o, self.model.state.x, self.model.vert_pinned, n, self.thickness,
-                         reach, float(o.mu), ti.Matrix(R), ti.Vector(c), out, mu_out)
+            _planes(*o.shape_args(), self.model.state.x, self.model.vert_pinned, n,
+                    self.thickness, reach, float(o.mu), ti.Matrix(R), ti.Vector(c), out, mu_out)
 
     def _mu_scratch(self, n):
-        if getattr(self, "_mu_tmp", None) is None or self._mu_tmp.shape[0] < n:
+        if self._mu_tmp is None or self._mu_tmp.shape[0] < n:
             self._mu_tmp = ti.ndarray(float, max(n, 1))
         return self._mu_tmp
-
-    @ti.kernel
-    def _clear_planes(self, n: ti.i32, out: ti.types.ndarray(), mu_out: ti.types.ndarray()):
-        for i in range(n):
-            mu_out[i] = 0.0
-            for j in ti.static(range(CONTACT_SLOTS)):
-                out[i, j] = ti.Vector([0.0, 0.0, 0.0, NO_CONTACT])
-
-    @ti.kernel
-    def _planes(self, o: ti.template(), x: ti.template(), pinned: ti.template(), n: ti.i32,
-                th: float, reach: float, mu: float, R: mat3, c: vec3,
-                out: ti.types.ndarray(), mu_out: ti.types.ndarray()):
-        for i in range(n):
-            if pinned[i] == 0:
-                xi = x[i]
-                p = R.transpose() @ (xi - c)
-                d1, n1, d2, n2 = o.nearest_two(p)
-                for k in ti.static(range(2)):
-                    gap = (d1 if k == 0 else d2) - th
-                    if gap < reach:
-                        nw = R @ (n1 if k == 0 else n2)
-                        plane = ti.Vector([nw[0], nw[1], nw[2], nw.dot(xi) - gap])
-                        # Keep the two nearest planes, nearest first (unset: gap 1e30).
-                        p0, p1 = out[i, 0], out[i, 1]
-                        gap0 = p0[0] * xi[0] + p0[1] * xi[1] + p0[2] * xi[2] - p0[3]
-                        gap1 = p1[0] * xi[0] + p1[1] * xi[1] + p1[2] * xi[2] - p1[3]
-                        if gap < gap0:
-                            out[i, 1] = p0
-                            out[i, 0] = plane
-                            mu_out[i] = mu          # friction of the nearest contact
-                        elif gap < gap1:
-                            out[i, 1] = plane
 
     # -- diagnostics -------------------------------------------------------------------------
     def max_penetration(self, t=None):
@@ -335,23 +216,173 @@ class Collider:
         worst = 0.0
         for o in self.obstacles:
             c, R = o.pose(t)
-            self._maxval[None] = -1e30
-            self._max_pen(o, self.model.state.x, n, self.thickness, ti.Matrix(R), ti.Vector(c))
-            worst = max(worst, float(self._maxval[None]))
+            self._maxval[0] = -1e30
+            _max_pen(*o.shape_args(), self.model.state.x, n, self.thickness, ti.Matrix(R),
+                     ti.Vector(c), self._maxval)
+            worst = max(worst, float(self._maxval[0]))
         return worst
 
     def max_depth(self, t=None):
         """Largest depth below the obstacle surface itself (-sdf), clipped at 0."""
         return max(0.0, self.max_penetration(t) - self.thickness)
 
-    @ti.kernel
-    def _max_pen(self, o: ti.template(), x: ti.template(), n: ti.i32, th: float, R: mat3,
-                 c: vec3):
-        for i in range(n):
-            p = R.transpose() @ (x[i] - c)
-            ti.atomic_max(self._maxval[None], th - o.sdf_local(p))
-
     def obstacle_meshes(self, t=None):
         """[(vertices, faces)] of every obstacle at time t, for drawing and export."""
         t = self._last_t if t is None else t
         return [o.mesh_at(t) for o in self.obstacles]
+
+
+# -- kernels -------------------------------------------------------------------------------------
+# Each takes an obstacle as (kind, prm, prims, grid) (``Obstacle.shape_args``, see shape.py) and
+# the model's arrays as ndarrays: compiled once per process.
+
+@ti.kernel
+def _resolve_obstacle(kind: ti.i32, prm: shape.params_t, prims: A, grid: A, x: A, v: A,
+                      pinned: A, n: ti.i32, h: float, th: float, mu: float, R0: mat3, c0: vec3,
+                      R1: mat3, c1: vec3, vlin: vec3, omega: vec3, step: float,
+                      ccd_samples: ti.i32, counter: A, moved: A):
+    """One obstacle's response (the module docstring); ``counter[0]`` counts the contacts,
+    ``moved[0]`` keeps the largest move of a vertex. ``step`` <= 0: no continuous test."""
+    for i in range(n):
+        if pinned[i] == 0:
+            x1 = x[i]
+            vi = v[i]
+            x0 = x1 - h * vi
+            p0 = R0.transpose() @ (x0 - c0)
+            p1 = R1.transpose() @ (x1 - c1)
+            phi0 = shape.sdf_local(kind, prm, prims, grid, p0) - th
+            phi1 = shape.sdf_local(kind, prm, prims, grid, p1) - th
+            pn = p1
+            contact = False
+            s_hit = 0.0        # fraction of the substep before the contact began
+            nloc = ti.Vector([0.0, 0.0, 1.0])
+            entry = False
+            if phi0 >= 0.0 and step > 0.0:      # step <= 0: no continuous test
+                # Continuous test: walk the relative motion in the obstacle's frame and find
+                # the first time the thickened surface is crossed.
+                seg = p1 - p0
+                L = seg.norm()
+                K = ti.min(ti.max(ti.cast(ti.ceil(L / step), ti.i32), 1), ccd_samples)
+                s_lo = 0.0
+                s_hi = -1.0
+                for k in range(1, K + 1):
+                    if s_hi < 0.0:
+                        s = k / K
+                        ph = phi1
+                        if k < K:
+                            ph = shape.sdf_local(kind, prm, prims, grid, p0 + s * seg) - th
+                        if ph < 0.0:
+                            s_hi = s
+                        else:
+                            s_lo = s
+                if s_hi >= 0.0:
+                    for _ in range(20):
+                        sm = 0.5 * (s_lo + s_hi)
+                        if shape.sdf_local(kind, prm, prims, grid, p0 + sm * seg) - th < 0.0:
+                            s_hi = sm
+                        else:
+                            s_lo = sm
+                    s_hit = s_lo
+                    pe = p0 + s_lo * seg               # on the outer side of the crossing
+                    ne = shape.grad_local(kind, prm, prims, grid, pe)
+                    # Back to the entry side: onto the tangent plane of the first crossing.
+                    depth = (pe - p1).dot(ne)
+                    if depth > 0.0:
+                        pn = p1 + depth * ne
+                    contact = True
+                    entry = True
+                    nloc = ne
+            # Push out along the gradient (a few Newton steps on phi = thickness).
+            pushed = False
+            for _ in range(4):
+                ph = shape.sdf_local(kind, prm, prims, grid, pn) - th
+                if ph < 0.0:
+                    pn = pn - ph * shape.grad_local(kind, prm, prims, grid, pn)
+                    contact = True
+                    pushed = True
+            if contact:
+                # The contact normal: where the surface was first met for a caught crossing
+                # (the vertex now sits on that tangent plane), else where it was pushed to.
+                if pushed or not entry:
+                    nloc = shape.grad_local(kind, prm, prims, grid, pn)
+                nrm = R1 @ nloc
+                xn = R1 @ pn + c1
+                vo = vlin + omega.cross(xn - c1)
+                vrel = vi - vo
+                vn = vrel.dot(nrm)
+                if vn < 0.0:
+                    vt = vrel - vn * nrm
+                    vt_len = vt.norm()
+                    dvn = -vn
+                    vt_new = ti.Vector([0.0, 0.0, 0.0])
+                    if vt_len > mu * dvn:
+                        vt_new = vt * (1.0 - mu * dvn / vt_len)
+                    v[i] = vo + vt_new
+                    # Keep x consistent with v (x = x_start + h v) along the tangent over
+                    # the part of the substep in contact, so a sticking vertex stays put.
+                    xn += (1.0 - s_hit) * h * (vt_new - vt)
+                    # On a curved surface that tangential step can dip below the shell.
+                    pt = R1.transpose() @ (xn - c1)
+                    for _ in range(2):
+                        ph = shape.sdf_local(kind, prm, prims, grid, pt) - th
+                        if ph < 0.0:
+                            pt = pt - ph * shape.grad_local(kind, prm, prims, grid, pt)
+                    xn = R1 @ pt + c1
+                ti.atomic_max(moved[0], (xn - x1).norm())
+                x[i] = xn
+                ti.atomic_add(counter[0], 1)
+
+
+@ti.kernel
+def _mark_resting(kind: ti.i32, prm: shape.params_t, prims: A, grid: A, x: A, v: A, pinned: A,
+                  n: ti.i32, h: float, th: float, R0: mat3, c0: vec3, flags: A):
+    for i in range(n):
+        if pinned[i] == 0:
+            # Resting on the obstacle at the start of the substep. (Not "inside at the end": a
+            # layer falling onto a resting layer is predicted inside the ground too, and must
+            # not count as supported.)
+            p0 = R0.transpose() @ ((x[i] - h * v[i]) - c0)
+            phi0 = shape.sdf_local(kind, prm, prims, grid, p0) - th
+            if phi0 < 0.1 * th:
+                flags[i] = 1
+
+
+@ti.kernel
+def _clear_planes(n: ti.i32, out: A, mu_out: A):
+    for i in range(n):
+        mu_out[i] = 0.0
+        for j in ti.static(range(CONTACT_SLOTS)):
+            out[i, j] = ti.Vector([0.0, 0.0, 0.0, NO_CONTACT])
+
+
+@ti.kernel
+def _planes(kind: ti.i32, prm: shape.params_t, prims: A, grid: A, x: A, pinned: A, n: ti.i32,
+            th: float, reach: float, mu: float, R: mat3, c: vec3, out: A, mu_out: A):
+    for i in range(n):
+        if pinned[i] == 0:
+            xi = x[i]
+            p = R.transpose() @ (xi - c)
+            d1, n1, d2, n2 = shape.nearest_two(kind, prm, prims, grid, p)
+            for k in ti.static(range(2)):
+                gap = (d1 if k == 0 else d2) - th
+                if gap < reach:
+                    nw = R @ (n1 if k == 0 else n2)
+                    plane = ti.Vector([nw[0], nw[1], nw[2], nw.dot(xi) - gap])
+                    # Keep the two nearest planes, nearest first (unset: gap 1e30).
+                    p0, p1 = out[i, 0], out[i, 1]
+                    gap0 = p0[0] * xi[0] + p0[1] * xi[1] + p0[2] * xi[2] - p0[3]
+                    gap1 = p1[0] * xi[0] + p1[1] * xi[1] + p1[2] * xi[2] - p1[3]
+                    if gap < gap0:
+                        out[i, 1] = p0
+                        out[i, 0] = plane
+                        mu_out[i] = mu          # friction of the nearest contact
+                    elif gap < gap1:
+                        out[i, 1] = plane
+
+
+@ti.kernel
+def _max_pen(kind: ti.i32, prm: shape.params_t, prims: A, grid: A, x: A, n: ti.i32, th: float,
+             R: mat3, c: vec3, maxval: A):
+    for i in range(n):
+        p = R.transpose() @ (x[i] - c)
+        ti.atomic_max(maxval[0], th - shape.sdf_local(kind, prm, prims, grid, p))

@@ -1,4 +1,5 @@
-"""Exact closest-point queries used by the collision code (Taichi funcs, no fields).
+"""Exact closest-point queries and the primitives' signed distances used by the collision code
+(Taichi funcs; arrays come in as arguments, no fields).
 
 Conventions: every function works in ``float`` (Taichi's default float); distances in metres.
 The closest-point routines follow the Voronoi-region case analysis of a triangle and the
@@ -132,6 +133,49 @@ def sdf_box(p, half):
     outside = ti.max(q, 0.0).norm()
     inside = ti.min(ti.max(q[0], ti.max(q[1], q[2])), 0.0)
     return outside + inside
+
+
+# A union of capsules (capsule_union.py): row k of ``prims`` is (a, b, radius), the segment a-b
+# inflated by radius (a sphere has a == b). The union's distance is the minimum over the rows.
+@ti.func
+def _capsule_offset(prims: ti.template(), k, p):
+    """p minus the nearest point of primitive k's segment."""
+    a = ti.Vector([prims[k, 0], prims[k, 1], prims[k, 2]])
+    b = ti.Vector([prims[k, 3], prims[k, 4], prims[k, 5]])
+    ab = b - a
+    t = 0.0
+    L2 = ab.dot(ab)
+    if L2 > 1e-20:
+        t = ti.math.clamp((p - a).dot(ab) / L2, 0.0, 1.0)
+    return p - (a + t * ab)
+
+
+@ti.func
+def sdf_capsule_union(prims: ti.template(), p):
+    best = 1e30
+    for k in range(prims.shape[0]):
+        best = ti.min(best, _capsule_offset(prims, k, p).norm() - prims[k, 6])
+    return best
+
+
+@ti.func
+def nearest_two_capsules(prims: ti.template(), p):
+    """The two nearest primitives' distances and outward normals (exact, per capsule):
+    (d1, n1, d2, n2), d1 <= d2; with one primitive d2 = 1e30."""
+    d1, d2 = 1e30, 1e30
+    n1 = ti.Vector([0.0, 0.0, 1.0])
+    n2 = ti.Vector([0.0, 0.0, 1.0])
+    for k in range(prims.shape[0]):
+        off = _capsule_offset(prims, k, p)
+        dist = off.norm()
+        d = dist - prims[k, 6]
+        nk = off / dist if dist > 1e-12 else ti.Vector([0.0, 0.0, 1.0])
+        if d < d1:
+            d2, n2 = d1, n1
+            d1, n1 = d, nk
+        elif d < d2:
+            d2, n2 = d, nk
+    return d1, n1, d2, n2
 
 
 @ti.func

@@ -2,12 +2,17 @@
 their own local frame; a pose ``(c, R)`` maps local to world, ``x = R p + c``. A static
 obstacle has a fixed pose; a scripted one gets its pose from ``path(t)`` (a Python callable
 of time), evaluated once per substep on the host and sent to the kernels as arguments.
+
+The shape, too, reaches the kernels as arguments (``Obstacle.shape_args``: a kind id, a small
+parameter vector and two arrays, see ``shape.py``), never as a compile-time specialisation: every
+collision kernel compiles once per process, however many obstacles of whatever kinds and sizes
+a process builds (issue #15).
 """
 import numpy as np
 import taichi as ti
 
 from .. import backend
-from .geom import (sdf_box, sdf_capsule, sdf_plane, sdf_sphere, safe_normalize)
+from . import shape
 from .sdf_grid import SDFGrid
 
 vec3 = ti.types.vector(3, float)
@@ -23,7 +28,7 @@ class CollisionError(ValueError):
     """Bad obstacle or collider settings; the message names the fix."""
 
 
-def _rotation_between(a, b):
+def rotation_between(a, b):
     """A rotation matrix taking unit vector a to unit vector b."""
     a = np.asarray(a, float) / np.linalg.norm(a)
     b = np.asarray(b, float) / np.linalg.norm(b)
@@ -66,18 +71,20 @@ def _rotvec(R):
 
 # -- obstacles ---------------------------------------------------------------------------------
 
-@ti.data_oriented
 class Obstacle:
-    """Base class: a rigid solid with a local signed distance ``sdf_local(p)`` (a ti.func).
+    """Base class: a rigid solid with a local signed distance, one of the kinds of
+    ``shape.py`` (``kind_id``) with its parameters (``shape_params``) and, for a capsule union
+    or a mesh, its primitives or grid (``host_prims``, ``host_phi``).
 
     position, rotation: the static pose (rotation a 3x3 world-from-local matrix).
     path: optional ``path(t) -> position`` or ``-> (position, rotation)``; overrides the
         static pose (rotation None keeps the static rotation).
     mu: Coulomb friction coefficient against the cloth.
-    Shape parameters are compile-time constants of the kernels: do not change them after the
-    first substep (make a new obstacle instead)."""
+    Shape parameters are read on the host at every launch, but a capsule union's primitives
+    and a mesh's grid are copied to Taichi once: make a new obstacle to change those."""
 
     kind = "obstacle"
+    kind_id = None               # shape.PLANE, shape.SPHERE, ...
 
     def __init__(self, mu=0.3, position=(0.0, 0.0, 0.0), rotation=None, path=None):
         if mu < 0:
@@ -110,28 +117,38 @@ class Obstacle:
         """(vertices, faces) of the surface in the local frame, for drawing and export."""
         raise NotImplementedError
 
-    @ti.func
-    def sdf_local(self, p):
-        return 0.0
+    def shape_params(self):
+        """The kind's parameters after the finite-difference step (layout: ``shape.py``)."""
+        return ()
 
-    @ti.func
-    def grad_local(self, p):
-        """Unit gradient of the SDF by central differences (exact SDFs have |grad| = 1 almost
-        everywhere; on a medial surface this picks a consistent average)."""
-        e = self.fd_eps
-        g = ti.Vector([
-            self.sdf_local(p + ti.Vector([e, 0.0, 0.0])) - self.sdf_local(p - ti.Vector([e, 0.0, 0.0])),
-            self.sdf_local(p + ti.Vector([0.0, e, 0.0])) - self.sdf_local(p - ti.Vector([0.0, e, 0.0])),
-            self.sdf_local(p + ti.Vector([0.0, 0.0, e])) - self.sdf_local(p - ti.Vector([0.0, 0.0, e])),
-        ])
-        return safe_normalize(g, ti.Vector([0.0, 0.0, 1.0]))
+    def host_prims(self):
+        """(n, 7) primitives (a, b, radius) of a capsule union; None for other kinds."""
+        return None
 
-    @ti.func
-    def nearest_two(self, p):
-        """The two nearest parts of the shape as (sdf1, normal1, sdf2, normal2), for contact
-        planes; a single solid has one part (sdf2 = 1e30). Unions override it: near a
-        concave corner the second part's plane keeps the cloth out of it."""
-        return self.sdf_local(p), self.grad_local(p), 1e30, ti.Vector([0.0, 0.0, 1.0])
+    def host_phi(self):
+        """The signed-distance grid of a mesh obstacle; None for other kinds."""
+        return None
+
+    # the shape as kernel arguments ----------------------------------------------------------
+    def shape_args(self):
+        """(kind, prm, prims, phi): this shape as the arguments of the collision kernels (see
+        ``shape.py``). The arrays are copied to Taichi on first use (and again after a
+        ``ti.reset``); kinds without primitives or a grid share the dummy arrays."""
+        if self.kind_id is None:
+            raise CollisionError(f"{type(self).__name__} has no shape kind: use Plane, Sphere, "
+                                 "Capsule, Box, MeshObstacle or CapsuleUnion")
+        rt = shape.current_runtime()
+        dev = self.__dict__.get("_device")
+        if dev is None or dev[0] is not rt:
+            prims, phi = shape.dummy_arrays()
+            host_prims, host_phi = self.host_prims(), self.host_phi()
+            if host_prims is not None:
+                prims = shape.upload(host_prims)
+            if host_phi is not None:
+                phi = shape.upload(host_phi)
+            dev = self._device = (rt, prims, phi)
+        return (self.kind_id, shape.make_params(self.fd_eps, self.shape_params()), dev[1],
+                dev[2])
 
     # pose --------------------------------------------------------------------------------------
     @property
@@ -170,31 +187,35 @@ class Obstacle:
     def sdf(self, points, t=0.0):
         """Signed distance at world points (N,3) at time t, via the same Taichi code the
         collider uses. Returns (phi (N,), grad (N,3))."""
-        pts = np.ascontiguousarray(np.asarray(points, np.float64).reshape(-1, 3))
-        phi = np.zeros(len(pts))
-        grad = np.zeros((len(pts), 3))
+        # In Taichi's default float (f32 kernels get f32 arrays), returned as float64.
+        fp = shape.float_dtype()
+        pts = np.ascontiguousarray(np.asarray(points, np.float64).reshape(-1, 3), dtype=fp)
+        phi = np.zeros(len(pts), fp)
+        grad = np.zeros((len(pts), 3), fp)
         c, R = self.pose(t)
-        self._eval(pts, phi, grad, ti.Matrix(R), ti.Vector(c))
-        return phi, grad
-
-    @ti.kernel
-    def _eval(self, pts: ti.types.ndarray(), phi: ti.types.ndarray(), grad: ti.types.ndarray(),
-              R: mat3, c: vec3):
-        for i in range(pts.shape[0]):
-            x = ti.Vector([pts[i, 0], pts[i, 1], pts[i, 2]])
-            p = R.transpose() @ (x - c)
-            phi[i] = self.sdf_local(p)
-            g = R @ self.grad_local(p)
-            for d in ti.static(range(3)):
-                grad[i, d] = g[d]
+        _eval(*self.shape_args(), pts, phi, grad, ti.Matrix(R), ti.Vector(c))
+        return phi.astype(np.float64, copy=False), grad.astype(np.float64, copy=False)
 
 
-@ti.data_oriented
+@ti.kernel
+def _eval(kind: ti.i32, prm: shape.params_t, prims: ti.types.ndarray(), grid: ti.types.ndarray(),
+          pts: ti.types.ndarray(), phi: ti.types.ndarray(), grad: ti.types.ndarray(), R: mat3,
+          c: vec3):
+    for i in range(pts.shape[0]):
+        x = ti.Vector([pts[i, 0], pts[i, 1], pts[i, 2]])
+        p = R.transpose() @ (x - c)
+        phi[i] = shape.sdf_local(kind, prm, prims, grid, p)
+        g = R @ shape.grad_local(kind, prm, prims, grid, p)
+        for d in ti.static(range(3)):
+            grad[i, d] = g[d]
+
+
 class Plane(Obstacle):
     """The half-space behind a plane through ``point`` with outward unit ``normal``.
     Drawn as a square of side ``draw_size`` (m)."""
 
     kind = "plane"
+    kind_id = shape.PLANE
 
     def __init__(self, point=(0.0, 0.0, 0.0), normal=(0.0, 0.0, 1.0), mu=0.3, path=None,
                  draw_size=4.0):
@@ -202,7 +223,7 @@ class Plane(Obstacle):
         if not np.linalg.norm(n) > 0:
             raise CollisionError("plane normal must be non-zero")
         self.draw_size = float(draw_size)
-        super().__init__(mu=mu, position=point, rotation=_rotation_between([0, 0, 1], n),
+        super().__init__(mu=mu, position=point, rotation=rotation_between([0, 0, 1], n),
                          path=path)
 
     def size(self):
@@ -213,18 +234,10 @@ class Plane(Obstacle):
         v = np.array([[-s, -s, 0], [s, -s, 0], [s, s, 0], [-s, s, 0]], float)
         return v, np.array([[0, 1, 2], [0, 2, 3]])
 
-    @ti.func
-    def sdf_local(self, p):
-        return sdf_plane(p)
 
-    @ti.func
-    def grad_local(self, p):
-        return ti.Vector([0.0, 0.0, 1.0])
-
-
-@ti.data_oriented
 class Sphere(Obstacle):
     kind = "sphere"
+    kind_id = shape.SPHERE
 
     def __init__(self, center=(0.0, 0.0, 0.0), radius=0.25, mu=0.3, path=None):
         if not radius > 0:
@@ -245,21 +258,16 @@ class Sphere(Obstacle):
         m = trimesh.creation.icosphere(subdivisions=3, radius=self.radius)
         return m.vertices, m.faces
 
-    @ti.func
-    def sdf_local(self, p):
-        return sdf_sphere(p, self.radius)
-
-    @ti.func
-    def grad_local(self, p):
-        return safe_normalize(p, ti.Vector([0.0, 0.0, 1.0]))
+    def shape_params(self):
+        return (self.radius,)
 
 
-@ti.data_oriented
 class Capsule(Obstacle):
     """A segment of length ``length`` along the local z axis, inflated by ``radius``;
     ``rotation`` (or the path) orients it."""
 
     kind = "capsule"
+    kind_id = shape.CAPSULE
 
     def __init__(self, center=(0.0, 0.0, 0.0), length=0.5, radius=0.1, rotation=None, mu=0.3,
                  path=None):
@@ -281,16 +289,15 @@ class Capsule(Obstacle):
         m = trimesh.creation.capsule(height=self.length, radius=self.radius, count=[24, 24])
         return m.vertices, m.faces
 
-    @ti.func
-    def sdf_local(self, p):
-        return sdf_capsule(p, 0.5 * self.length, self.radius)
+    def shape_params(self):
+        return (0.5 * self.length, self.radius)
 
 
-@ti.data_oriented
 class Box(Obstacle):
     """An oriented box with full side lengths ``extents`` (m)."""
 
     kind = "box"
+    kind_id = shape.BOX
 
     def __init__(self, center=(0.0, 0.0, 0.0), extents=(0.5, 0.5, 0.5), rotation=None, mu=0.3,
                  path=None):
@@ -312,18 +319,17 @@ class Box(Obstacle):
         m = trimesh.creation.box(extents=[2 * h for h in self.half])
         return m.vertices, m.faces
 
-    @ti.func
-    def sdf_local(self, p):
-        return sdf_box(p, ti.Vector([self.half[0], self.half[1], self.half[2]]))
+    def shape_params(self):
+        return self.half
 
 
-@ti.data_oriented
 class MeshObstacle(Obstacle):
     """A closed triangle mesh (OBJ/PLY/STL/GLB via trimesh, or given arrays) turned once into a
     signed-distance grid (see ``sdf_grid``). ``resolution`` is the number of cells along
     the longest side. ``scale`` and ``offset`` are applied to the file's vertices first."""
 
     kind = "mesh"
+    kind_id = shape.MESH
 
     def __init__(self, source, resolution=64, mu=0.3, position=(0.0, 0.0, 0.0), rotation=None,
                  path=None, scale=1.0, offset=(0.0, 0.0, 0.0)):
@@ -356,9 +362,9 @@ class MeshObstacle(Obstacle):
     def local_mesh(self):
         return self.vertices, self.faces
 
-    @ti.func
-    def sdf_local(self, p):
-        return self.grid.lookup(p)
+    def shape_params(self):
+        return self.grid.origin + (self.grid.dx,)
 
+    def host_phi(self):
+        return self.grid.phi
 
-# -- the collider ------------------------------------------------------------------------------

@@ -172,9 +172,32 @@ def _apply_sign(phi: ti.types.ndarray(), crossings: ti.types.ndarray()):
                 phi[i, j, k] = -phi[i, j, k]
 
 
-@ti.data_oriented
+@ti.func
+def lookup(phi: ti.template(), o, dx, p):
+    """The grid ``phi`` (an array argument, node (i, j, k) at ``o + (i, j, k) dx``) at local
+    point p: trilinear interpolation; outside the grid, the distance to the grid box is added to
+    the value at the nearest box point (the grid is padded so that point is outside)."""
+    nx, ny, nz = phi.shape[0], phi.shape[1], phi.shape[2]
+    top = o + dx * ti.Vector([nx - 1, ny - 1, nz - 1])
+    pc = ti.min(ti.max(p, o), top)
+    extra = (p - pc).norm()
+    g = (pc - o) / dx
+    i0 = ti.min(ti.max(ti.cast(ti.floor(g), ti.i32), 0), ti.Vector([nx - 2, ny - 2, nz - 2]))
+    f = g - ti.cast(i0, float)
+    i, j, k = i0[0], i0[1], i0[2]
+    c00 = phi[i, j, k] * (1 - f[0]) + phi[i + 1, j, k] * f[0]
+    c10 = phi[i, j + 1, k] * (1 - f[0]) + phi[i + 1, j + 1, k] * f[0]
+    c01 = phi[i, j, k + 1] * (1 - f[0]) + phi[i + 1, j, k + 1] * f[0]
+    c11 = phi[i, j + 1, k + 1] * (1 - f[0]) + phi[i + 1, j + 1, k + 1] * f[0]
+    c0 = c00 * (1 - f[1]) + c10 * f[1]
+    c1 = c01 * (1 - f[1]) + c11 * f[1]
+    return c0 * (1 - f[2]) + c1 * f[2] + extra
+
+
 class SDFGrid:
-    """Signed distances on a regular grid: ``phi[i, j, k]`` at ``origin + (i, j, k) * dx``.
+    """Signed distances on a regular grid: ``phi[i, j, k]`` (a numpy array in Taichi's default
+    float) at ``origin + (i, j, k) * dx``. The collider reads it through ``lookup`` from an
+    ndarray the obstacle uploads (``MeshObstacle``), so no kernel is specialised to a grid.
     ``build_seconds``: wall time of the construction (the first grid in a process also pays
     for compiling the build kernels, ~1 s)."""
 
@@ -208,33 +231,9 @@ class SDFGrid:
                 _sweep(tris, phi, closest, o, self.dx, d[0], d[1], d[2])
         _count_crossings(tris, crossings, o, self.dx)
         _apply_sign(phi, crossings)
-        self.phi = ti.field(float, self.shape)
-        self.phi.from_numpy(phi)
         ti.sync()
+        self.phi = phi
         self.build_seconds = time.perf_counter() - t0
 
-    # -- lookup ----------------------------------------------------------------------------
-    @ti.func
-    def lookup(self, p):
-        """Trilinear interpolation; outside the grid, the distance to the grid box is added to
-        the value at the nearest box point (the grid is padded so that point is outside)."""
-        nx, ny, nz = self.phi.shape
-        o = ti.Vector([self.origin[0], self.origin[1], self.origin[2]])
-        dx = self.dx
-        top = o + dx * ti.Vector([nx - 1, ny - 1, nz - 1])
-        pc = ti.min(ti.max(p, o), top)
-        extra = (p - pc).norm()
-        g = (pc - o) / dx
-        i0 = ti.min(ti.max(ti.cast(ti.floor(g), ti.i32), 0), ti.Vector([nx - 2, ny - 2, nz - 2]))
-        f = g - ti.cast(i0, float)
-        i, j, k = i0[0], i0[1], i0[2]
-        c00 = self.phi[i, j, k] * (1 - f[0]) + self.phi[i + 1, j, k] * f[0]
-        c10 = self.phi[i, j + 1, k] * (1 - f[0]) + self.phi[i + 1, j + 1, k] * f[0]
-        c01 = self.phi[i, j, k + 1] * (1 - f[0]) + self.phi[i + 1, j, k + 1] * f[0]
-        c11 = self.phi[i, j + 1, k + 1] * (1 - f[0]) + self.phi[i + 1, j + 1, k + 1] * f[0]
-        c0 = c00 * (1 - f[1]) + c10 * f[1]
-        c1 = c01 * (1 - f[1]) + c11 * f[1]
-        return c0 * (1 - f[2]) + c1 * f[2] + extra
-
     def phi_numpy(self):
-        return self.phi.to_numpy()
+        return self.phi.copy()

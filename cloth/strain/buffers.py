@@ -21,10 +21,9 @@ Design notes (measured on this 2-core CPU, Taichi 1.7.4, f64):
 """
 import taichi as ti
 
+from ..ndarrays import A, T  # noqa: F401 (the strain kernels import them from here)
 from .constraints import K_MAX
 
-A = ti.types.ndarray()          # any ndarray; kernels compile once per dtype / dimension
-T = ti.template()               # how a ti.func takes an array (by reference)
 
 # Indices into the ``stats`` array (read back once per solve).
 ST_ITERS, ST_VIOL, ST_CONVERGED, ST_CG, ST_NEWTON, ST_COMP, ST_START_VIOL = range(7)
@@ -46,17 +45,15 @@ CONTACT_SLOTS = 2
 class Workspace:
     """Per-limiter arrays sized from the model's capacities (f_cap faces, v_cap vertices)."""
 
-    def __init__(self, f_cap, v_cap):
-        self.f_cap, self.v_cap = f_cap, v_cap
-        F, V, K = f_cap, v_cap, K_MAX
+    def __init__(self, model):
+        self.f_cap, self.v_cap = model.f_cap, model.v_cap
+        F, V, K = model.f_cap, model.v_cap, K_MAX
         vec3, vec9 = ti.types.vector(3, float), ti.types.vector(9, float)
-        # Copies of the model (refreshed by StrainLimiter when the mesh changes).
-        self.face_verts = ti.ndarray(ti.types.vector(3, ti.i32), F)
-        self.Dm_inv = ti.ndarray(ti.types.matrix(2, 2, float), F)
-        self.grain = ti.ndarray(ti.types.matrix(2, 2, float), F)
-        self.rest_area = ti.ndarray(float, F)
-        self.mass = ti.ndarray(float, V)
-        self.pinned = ti.ndarray(ti.i32, V)
+        # The model's rest arrays themselves (not copies: a re-pinned vertex or a refilled
+        # mesh is seen without a copy to keep in step).
+        self.face_verts, self.Dm_inv = model.face_verts, model.face_Dm_inv
+        self.grain, self.rest_area = model.face_grain, model.face_rest_area
+        self.mass, self.pinned = model.vert_mass, model.vert_pinned
         # Multipliers lambda >= 0, one per constraint (warm-started across calls).
         self.lam = ti.ndarray(float, (F, K))
         # Contact half-spaces n.x >= d per vertex as (n, d) (see ``contact_g``) and their
@@ -98,19 +95,6 @@ class Workspace:
         self.s_cap = max(int(n), 1)
         self.stitch = ti.ndarray(ti.types.vector(2, ti.i32), self.s_cap)
         self.lam_s = ti.ndarray(ti.types.vector(3, float), self.s_cap)
-
-
-# ---- copies between the model's fields and the work arrays -----------------------------------
-@ti.kernel
-def field_to_array(src: ti.template(), dst: A, n: int):
-    for i in range(n):
-        dst[i] = src[i]
-
-
-@ti.kernel
-def array_to_field(src: A, dst: ti.template(), n: int):
-    for i in range(n):
-        dst[i] = src[i]
 
 
 @ti.kernel

@@ -25,6 +25,7 @@ import os
 import numpy as np
 import taichi as ti
 
+from .. import ndarrays
 from . import exact_curvature
 from .c_curvature import c_curvature_block
 from .al import (assemble_all, choose_start, contact_g, contact_normal, fill_c_curvature,
@@ -227,8 +228,8 @@ def solve(lim, mid, K, metric, chol, mu, mu_max, step_tol):
     while rounds < lim.max_iters and not converged:
         for _ in range(lim.max_newton):
             if lim.exact_curvature:
-                ws.kappa.fill(0.0)      # the model's curvature off: the exact one is added
-                ws.twist.fill(0.0)
+                ndarrays.zero(ws.kappa)      # the model's curvature off: the exact one is added
+                ndarrays.zero(ws.twist)
             fill_newton_system(lim, mid, K, mu, metric)
             if lim.exact_curvature:
                 exact_curvature.add_to_newton_matrix(lim, lim.method, K, mu, metric,

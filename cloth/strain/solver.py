@@ -22,7 +22,7 @@ import time
 import numpy as np
 import taichi as ti
 
-from .. import backend, metrics
+from .. import backend, metrics, ndarrays
 from .. import system_matrix
 from .constraints import (MAPPING_DELTA, MAPPING_ISO, METHOD_IDS, METHODS, N_CONSTRAINTS,
                           SVD_DELTA)
@@ -233,7 +233,7 @@ class StrainLimiter:
                                    f"{', '.join(METHOD_NAMES)}")
         if name != self.method:
             # Multipliers belong to the constraints of one method: start the new one cold.
-            self._ws.lam.fill(0.0)
+            ndarrays.zero(self._ws.lam)
         self.method = name
         self._upload_params()               # the Newton matrix's curvature follows the method
 
@@ -300,7 +300,7 @@ class StrainLimiter:
         ws = self._ws
         if len(self._stitches) > ws.s_cap:
             ws.set_stitch_capacity(len(self._stitches))
-        ws.lam_s.fill(0.0)
+        ndarrays.zero(ws.lam_s)
         self._system = None                    # the stitches are part of its pattern
         self._full_mass = None
         self._chol = None
@@ -314,28 +314,20 @@ class StrainLimiter:
         return (m.f_cap, m.v_cap, m.n_faces, m.n_verts, id(m._np_cache))
 
     def on_mesh_changed(self):
-        """Call after the model's fields were refilled (remesh). Faces are renumbered by a
+        """Call after the model's arrays were refilled (remesh). Faces are renumbered by a
         remesh, so per-face multipliers no longer belong to their faces: they are reset (the
-        next projection starts cold). The work arrays are reallocated only when the model's
-        capacity changed."""
+        next projection starts cold). The work arrays are reallocated only for a new model."""
         m = self.model
         ws = self._ws
-        if ws is None or ws.f_cap != m.f_cap or ws.v_cap != m.v_cap:
-            self._ws = ws = Workspace(m.f_cap, m.v_cap)
-        ws.lam.fill(0.0)
-        ws.lam_c.fill(0.0)                     # vertices are renumbered too
-        ws.lam_t.fill(0.0)
-        ws.contact_mu.fill(0.0)
+        if ws is None or ws.face_verts is not m.face_verts:    # a new model
+            self._ws = ws = Workspace(m)
+        ndarrays.zero(ws.lam)
+        ndarrays.zero(ws.lam_c)                # vertices are renumbered too
+        ndarrays.zero(ws.lam_t)
+        ndarrays.zero(ws.contact_mu)
         self.set_stitches(self._stitches)
         buffers.clear_contacts(m.v_cap, ws.contact)
         self._upload_params()                  # the contact scale follows the mesh
-        # The model's rest data, copied once per mesh (kernels read only the work arrays).
-        ws.face_verts.from_numpy(m.face_verts.to_numpy())
-        ws.Dm_inv.from_numpy(m.face_Dm_inv.to_numpy())
-        ws.grain.from_numpy(m.face_grain.to_numpy())
-        ws.rest_area.from_numpy(m.face_rest_area.to_numpy())
-        ws.mass.from_numpy(m.vert_mass.to_numpy())
-        ws.pinned.from_numpy(m.vert_pinned.to_numpy())
         self._mass_metric = system_matrix.diagonal(m.n_verts, m.mass)
         self._full_mass = None
         self._chol = None
@@ -370,7 +362,7 @@ class StrainLimiter:
         else:
             if self._full_mass is None:
                 self._full_mass = self._build_pattern()
-                self._full_mass.val.fill(0.0)
+                ndarrays.zero(self._full_mass.val)
                 system_matrix.fill_diagonal(self.model.n_verts, self._full_mass.diag,
                                             self._full_mass.val, self.model.mass)
             metric = self._full_mass
@@ -463,11 +455,10 @@ class StrainLimiter:
         ws, m = self._ws, self.model
         nv, nf = m.n_verts, m.n_faces
         mid, K = METHOD_IDS[self.method], N_CONSTRAINTS[self.method]
-        ws.pinned.from_numpy(m.vert_pinned.to_numpy())      # a scene may re-pin at any time
         if not contacts:
             buffers.clear_contacts(nv, ws.contact)
-        buffers.field_to_array(m.state.x, ws.x, nv)
-        buffers.field_to_array(m.state.v, ws.v, nv)
+        al.copy_vectors(nv, m.state.x, ws.x)
+        al.copy_vectors(nv, m.state.v, ws.v)
         # Friction holds contact vertices against sliding over the substep (from x - h v).
         al.set_friction(nv, float(h), int(contacts and h > 0 and self.friction), ws.x, ws.v,
                        ws.contact_mu, ws.fric)
@@ -478,7 +469,7 @@ class StrainLimiter:
             if not warm:
                 saved = [a.to_numpy() for a in (ws.lam, ws.lam_c, ws.lam_s, ws.lam_t)]
                 for a in (ws.lam, ws.lam_c, ws.lam_s, ws.lam_t):
-                    a.fill(0.0)
+                    ndarrays.zero(a)
             use_system = self.coupling == "implicit" and h > 0 and self._system_ready
             if self.linear_solver == "cholesky" or _host_loop_only():
                 rounds, newton, converged = self._solve_direct(mid, K, use_system)
@@ -510,8 +501,8 @@ class StrainLimiter:
         kick = 0.5 * self.model.typical_edge() / h if (self.solver == "al" and not converged
                                                 and h > 0) else -1.0
         al.finish_solve(nv, float(h), kick, ws.x, ws.x_start, ws.v)
-        buffers.array_to_field(ws.x, m.state.x, nv)
-        buffers.array_to_field(ws.v, m.state.v, nv)
+        al.copy_vectors(nv, ws.x, m.state.x)
+        al.copy_vectors(nv, ws.v, m.state.v)
         self.last_iterations = int(rounds)
         self.last_violation_max = float(max(stats[ST_VIOL], 0.0))
         self.last_converged = bool(converged)
@@ -574,7 +565,7 @@ class StrainLimiter:
             return np.zeros((n, 0))
         self._sync_mesh()
         ws, K = self._ws, N_CONSTRAINTS[self.method]
-        buffers.field_to_array(self.model.state.x, ws.x_trial, self.model.n_verts)
+        al.copy_vectors(self.model.n_verts, self.model.state.x, ws.x_trial)
         self._assemble(METHOD_IDS[self.method], ws.x_trial)
         g = ws.g.to_numpy()[:n, :K].astype(np.float64)
         return g / np.sqrt(self.model.rest_area[:n])[:, None]
