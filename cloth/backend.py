@@ -66,6 +66,14 @@ def _use_plain_debug_info():
         ASTTransformerContext.get_pos_info = _plain_pos_info
 
 
+# Taichi's offline cache keeps at most 100 MB by default and then drops its least recently used
+# quarter. One full-optimisation AL solve is ~4-5 MB per method and costs ~5 min to compile on
+# this 2-core VM (hanging, mapping, 2026-12-02), while a test run writes its fast-compiled
+# kernels to the same cache: measured here, test runs pushed the demo's solver out (the oldest
+# entries left were younger than it) and the next run compiled it again. 1 GiB keeps both.
+CACHE_BYTES = 1 << 30
+
+
 def default_precision(arch):
     return "f32" if arch in F32_ONLY else "f64"
 
@@ -91,7 +99,8 @@ def init(arch="cpu", precision=None, debug=False):
     fp = ti.f64 if precision == "f64" else ti.f32
     _use_plain_debug_info()
     ti.init(arch=getattr(ti, ARCHES[arch]), default_fp=fp, log_level=ti.ERROR,
-            debug=debug, offline_cache=True, advanced_optimization=not fast_compile())
+            debug=debug, offline_cache=True, offline_cache_max_size_of_files=CACHE_BYTES,
+            advanced_optimization=not fast_compile())
     _state.update(arch=arch, precision=precision)
 
 
