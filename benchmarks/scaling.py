@@ -14,7 +14,7 @@ Each size runs in its own child process (so its peak memory is its own):
                         continuous sampling per vertex), ``self_collision`` the spatial-hash
                         pass;
   remesh                ``cloth.remesh.remesh`` on the moving analytic sheet of the remesher's
-                        own benchmark (``cloth.remesh._bench_shape``, 'hanging'), with
+                        own benchmark (``benchmarks.remesh_speed.sheet_shape``, 'hanging'), with
                         size_max 1.8 x the grid spacing so the count stays near N.
 Every run starts from the scene's start; frame 1 is untimed (it compiles the kernels), then
 the median over the next --frames frames (frames 2 to 4 by default: the start of the sheet's
@@ -89,6 +89,7 @@ def child(res, methods, frames):
     from cloth import backend
     backend.init("cpu", "f64")
     import scenes
+    from benchmarks.remesh_speed import sheet_shape
     from cloth import remesh
     from cloth.collision import Plane, Sphere
     from cloth.model import MeshArrays
@@ -150,7 +151,7 @@ def child(res, methods, frames):
     mesh = MeshArrays(uv=uv, x=np.c_[uv, np.zeros(len(uv))], faces=faces)
     times, counts = [], []
     for frame in range(frames + 3):                       # 3 frames to settle the count
-        mesh.x, mesh.v = remesh._bench_shape(mesh.uv, "hanging", 0.1 * frame)
+        mesh.x, mesh.v = sheet_shape(mesh.uv, "hanging", 0.1 * frame)
         t1 = time.perf_counter()
         mesh, _, st = remesh.remesh(mesh, params)
         if frame >= 3:
