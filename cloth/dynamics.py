@@ -490,6 +490,15 @@ def _energy(kw: float, kf: float, ks: float, kb: float, kst: float, nf: ti.i32, 
 
 
 @ti.func
+def free_residual(res: T, rhs: T, Ap: T, vert_pinned: T, nv: ti.i32):
+    """res = rhs - Ap on the free rows and 0 on the pinned ones: CG's starting residual."""
+    for i in range(nv):
+        res[i] = rhs[i] - Ap[i]
+        if vert_pinned[i] != 0:
+            res[i] = ti.Vector([0.0, 0.0, 0.0])
+
+
+@ti.func
 def apply_A(src: T, dst: T, h, alpha, beta, kw, kf, ks, kb, kst, nv: ti.i32, nf: ti.i32,
             ne: ti.i32, nst: ti.i32, vert_mass: T, vert_pinned: T, face_verts: T,
             face_rest_area: T, edge_verts: T, edge_faces: T, edge_opp: T,
@@ -566,10 +575,7 @@ def _step(h: float, g: ti.types.vector(3, float), kw: float, kf: float, ks: floa
                 vert_pinned, face_verts, face_rest_area, edge_verts, edge_faces, edge_opp,
                 edge_bend_weight, face_fu, face_fv, face_E, face_wa, face_wb, edge_grad,
                 stitch)
-        for i in range(nv):
-            res[i] = rhs[i] - Ap[i]
-            if vert_pinned[i] != 0:
-                res[i] = ti.Vector([0.0, 0.0, 0.0])
+        free_residual(res, rhs, Ap, vert_pinned, nv)
         # (Free rows of A dv include the coupling to the prescribed pinned dv.)
         rz = 0.0
         bnorm = 0.0

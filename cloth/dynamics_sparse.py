@@ -26,7 +26,7 @@ import numpy as np
 import taichi as ti
 
 from .dynamics import (A, T, DynamicsSettings, ImplicitEuler, apply_A, edge_vertex, face_block,
-                       linearise)
+                       free_residual, linearise)
 from .model import ClothModel
 
 LINEAR_SOLVERS = ("llt", "ldlt", "sparse-cg", "matrix-free")
@@ -215,10 +215,7 @@ def _prepare(h: float, g: ti.types.vector(3, float), kw: float, kf: float, ks: f
                 vert_pinned, face_verts, face_rest_area, edge_verts, edge_faces, edge_opp,
                 edge_bend_weight, face_fu, face_fv, face_E, face_wa, face_wb, edge_grad,
                 stitch)
-        for i in range(nv):
-            res[i] = rhs[i] - Ap[i]
-            if vert_pinned[i] != 0:
-                res[i] = ti.Vector([0.0, 0.0, 0.0])
+        free_residual(res, rhs, Ap, vert_pinned, nv)
         scalars[2] = n_free
     return ti.cast(scalars[2], ti.i32)
 
