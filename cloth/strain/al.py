@@ -237,7 +237,8 @@ def near_weight(s, near):
 def fill_c_curvature(method: ti.template(), K, nf, mu, x: T, face_verts: T, Dm_inv: T,
                      grain: T, rest_area: T, params: T, lam: T, g: T, curv: T):
     """The exact constraint curvature of every face at x (c_curvature.py), when the
-    params ask for it (P_CURVATURE); the Newton matrix then uses it instead of the model."""
+    params ask for it (P_CURVATURE); the Newton matrix then uses it instead of the model.
+    (The direct path's kernels; solve_al compiles it in only with ``exact``.)"""
     if params[P_CURVATURE] > 0.0:
         params_w = ti.Vector([params[k] for k in ti.static(range(6))])
         for f in range(nf):
@@ -250,7 +251,7 @@ def build_preconditioner(K, nv, nf, ns, mu, margin, use_twist, w_ptr: T, w_col: 
                          face_verts: T, rest_area: T, lam: T, g: T,
                          grad: T, cm: T, what: T, kappa: T, twist: T, x: T, contact: T,
                          lam_c: T, stitch: T, lam_s: T, fric: T, lam_t: T, c_scale,
-                         exact, curv: T, P_inv: T):
+                         exact: ti.template(), curv: T, P_inv: T):
     """3x3 block Jacobi of the projected-Newton matrix (see apply_hessian)."""
     for n in range(nv):
         P_inv[n] = w_val[w_diag[n]]
@@ -264,7 +265,7 @@ def build_preconditioner(K, nv, nf, ns, mu, margin, use_twist, w_ptr: T, w_col: 
         for c in range(K):
             s = lam[f, c] + mu * g[f, c]
             sc = ti.max(s, 0.0)        # curvature weight (inactive: none)
-            if exact:
+            if ti.static(exact):
                 sc = 0.0               # the exact curvature is added per face below
             if s + near > 0.0:
                 gr, w = grad[f, c], what[f, c]
@@ -278,7 +279,7 @@ def build_preconditioner(K, nv, nf, ns, mu, margin, use_twist, w_ptr: T, w_col: 
                     for n in ti.static(range(3)):
                         tn = ti.Vector([tw[3 * n], tw[3 * n + 1], tw[3 * n + 2]])
                         P_inv[ids[n]] += sc * tn.outer_product(tn)
-        if exact:
+        if ti.static(exact):
             for n in ti.static(range(3)):
                 P_inv[ids[n]] += c_curvature_block(curv, f, n, n)
     for k in range(ns):
@@ -299,7 +300,8 @@ def build_preconditioner(K, nv, nf, ns, mu, margin, use_twist, w_ptr: T, w_col: 
 def apply_hessian(K, nv, nf, ns, mu, margin, use_twist, w_ptr: T, w_col: T, w_val: T, w_diag: T, pinned: T,
                   face_verts: T, rest_area: T, lam: T, g: T, grad: T,
                   cm: T, what: T, kappa: T, twist: T, x: T, contact: T, lam_c: T, stitch: T,
-                  lam_s: T, fric: T, lam_t: T, c_scale, exact, curv: T, p: T, Ap: T):
+                  lam_s: T, fric: T, lam_t: T, c_scale, exact: ti.template(), curv: T, p: T,
+                  Ap: T):
     """Ap = (M + sum_near [mu grad g grad g^T] + sum_active (lam + mu g) curvature(g)) p, the
     projected-Newton matrix applied without forming it. "Near" includes constraints within
     ``margin`` (strain) of activating: a Newton step that ignores them runs straight into
@@ -325,7 +327,7 @@ def apply_hessian(K, nv, nf, ns, mu, margin, use_twist, w_ptr: T, w_col: T, w_va
                 gr = grad[f, c]
                 scatter(Ap, ids, gr, near_weight(s, near) * mu * gr.dot(pf))
                 sc = ti.max(s, 0.0)
-                if sc > 0.0 and not exact:
+                if sc > 0.0 and not ti.static(exact):
                     # Curvature of ||F e||: dw = sum_n (M_n.e) p_n, projected off w^.
                     cmv, w = cm[f, c], what[f, c]
                     dw = cmv[0] * p[ids[0]] + cmv[1] * p[ids[1]] + cmv[2] * p[ids[2]]
@@ -335,7 +337,7 @@ def apply_hessian(K, nv, nf, ns, mu, margin, use_twist, w_ptr: T, w_col: T, w_va
                     if use_twist:
                         tw = twist[f, c]
                         scatter(Ap, ids, tw, sc * tw.dot(pf))
-        if exact:
+        if ti.static(exact):
             add_c_curvature_product(curv, f, ids, p, Ap)
     for k in range(ns):
         t = mu * (p[stitch[k][0]] - p[stitch[k][1]])
@@ -359,7 +361,8 @@ def apply_hessian(K, nv, nf, ns, mu, margin, use_twist, w_ptr: T, w_col: T, w_va
 
 
 @ti.func
-def pcg_direction(method: ti.template(), K, nv, nf, ns, mu, max_cg, rtol, margin, use_twist,
+def pcg_direction(method: ti.template(), exact: ti.template(), K, nv, nf, ns, mu, max_cg, rtol,
+                  margin, use_twist,
                   x: T, x_hat: T,
                   w_ptr: T, w_col: T, w_val: T, w_diag: T, pinned: T, face_verts: T, Dm_inv: T,
                   grain: T, rest_area: T, params: T, lam: T, g: T, grad: T,
@@ -372,9 +375,9 @@ def pcg_direction(method: ti.template(), K, nv, nf, ns, mu, max_cg, rtol, margin
     b = -grad L_A; returns (slope grad L_A . d, CG iterations)."""
     residual(K, nv, nf, ns, mu, x, x_hat, w_ptr, w_col, w_val, w_diag, pinned, face_verts, lam, g, grad,
              contact, lam_c, stitch, lam_s, fric, lam_t, r)
-    exact = params[P_CURVATURE] > 0.0
-    fill_c_curvature(method, K, nf, mu, x, face_verts, Dm_inv, grain, rest_area, params, lam,
-                     g, curv)
+    if ti.static(exact):
+        fill_c_curvature(method, K, nf, mu, x, face_verts, Dm_inv, grain, rest_area, params,
+                         lam, g, curv)
     build_preconditioner(K, nv, nf, ns, mu, margin, use_twist, w_ptr, w_col, w_val, w_diag, pinned, face_verts,
                          rest_area, lam, g, grad, cm, what, kappa, twist, x, contact, lam_c,
                          stitch, lam_s, fric, lam_t, c_scale, exact, curv, P_inv)
@@ -508,7 +511,8 @@ def choose_start(method: ti.template(), K, nv, nf, ns, mu, x: T, x_hat: T, x_tri
 
 
 @ti.kernel
-def solve_al(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu0: float,
+def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: int, ns: int,
+             mu0: float,
              mu_grow: float,
              mu_max: float, max_rounds: int, max_newton: int, max_cg: int, rtol: float,
              tol: float, step_tol: float, adaptive: int, from_prev: int, params: A, x: A,
@@ -547,7 +551,7 @@ def solve_al(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu0: floa
                 slope, cg_it = 0.0, 0
                 L0 = 0.0
                 if first == 0:
-                    slope, cg_it = pcg_direction(method, K, nv, nf, ns, mu, max_cg, rtol,
+                    slope, cg_it = pcg_direction(method, exact, K, nv, nf, ns, mu, max_cg, rtol,
                                                  margin, use_twist, x, x_hat, w_ptr, w_col,
                                                  w_val, w_diag, pinned, face_verts, Dm_inv,
                                                  grain, rest_area, params, lam, g, grad, cm,

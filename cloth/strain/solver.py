@@ -282,9 +282,7 @@ class StrainLimiter:
         params[buffers.P_DELTA] = self.mapping_delta
         params[buffers.P_SVD_DELTA] = self.svd_delta
         params[buffers.P_ISO] = self.mapping_iso
-        # The host experiment (exact_curvature.py) replaces the model itself.
-        params[buffers.P_CURVATURE] = float(self.curvature == "exact" and not self.exact_curvature
-                                            and self.method in EXACT_CURVATURE_FOR)
+        params[buffers.P_CURVATURE] = float(self._kernel_curvature())
         params[buffers.P_C_STEP] = C_STEP_F32 if backend.precision() == "f32" else C_STEP_F64
         # Contact violations are metres; divided by the typical edge they read like strains.
         m = self.model
@@ -524,6 +522,16 @@ class StrainLimiter:
         step_tol = 0.01 * self.tol * m.typical_edge()
         return direct.solve(self, mid, K, metric, chol, mu, mu_max, step_tol)
 
+    def _kernel_curvature(self):
+        """1 where the kernels use the exact curvature (c_curvature.py), 0 for the model.
+        The host experiment (exact_curvature.py) replaces the model itself. For solve_al it
+        is a compile-time switch, so the default kernel does not carry the exact curvature's
+        code: cold, full optimisation, hanging res 9 with mapping built and ran its first
+        frame in 122 s against 339 s with both in one kernel (2026-12-02, 2 cores, the other
+        one busy). Choosing "exact" compiles its own variant once."""
+        return int(self.curvature == "exact" and not self.exact_curvature
+                   and self.method in EXACT_CURVATURE_FOR)
+
     def _solve_al(self, mid, K, metric):
         """The AL loop (METHOD 4), one kernel launch (al.solve_al): rounds of inexact
         minimisation of L_A by projected Newton with a backtracking line search, then the
@@ -539,7 +547,7 @@ class StrainLimiter:
         # hanging scene at 3.9k faces: 50 iterations left 3-7 of 20 substeps unconverged,
         # ~100 none (mapping) and 2 (warp-weft), at half the time of the old defaults.
         max_cg = int(round(self.max_cg * max(1.0, np.sqrt(m.n_faces / 1000.0))))
-        al.solve_al(mid, K, m.n_verts, m.n_faces, len(self._stitches), mu, self.mu_grow,
+        al.solve_al(mid, self._kernel_curvature(), K, m.n_verts, m.n_faces, len(self._stitches), mu, self.mu_grow,
                    mu_max, self.max_iters,
                    self.max_newton, max_cg, self.cg_rtol, self.tol, step_tol,
                    int(self.adaptive_margin),
