@@ -38,6 +38,7 @@ import taichi as ti
 from .. import ndarrays
 from ..ndarrays import A, T
 from .geom import closest_on_triangle, closest_segments, safe_normalize
+from .obstacles import THICKNESS
 
 
 # Indices into SelfCollision._sums (written by _prepare) and _cnt (entry and pair counts).
@@ -53,7 +54,7 @@ def _pow2(n):
 
 
 class SelfCollision:
-    def __init__(self, model, thickness=0.004, iterations=6, restore=0.5,
+    def __init__(self, model, thickness=THICKNESS, iterations=6, restore=0.5,
                  contact_mass_ratio=0.01):
         if not thickness > 0:
             raise ValueError(f"self-collision thickness must be > 0 m (got {thickness})")
