@@ -46,7 +46,7 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
-from . import ndarrays
+from . import backend, ndarrays
 from .model import ClothModel
 from .ndarrays import A, T
 
@@ -86,6 +86,9 @@ class ImplicitEuler:
             np.asarray(stitches, np.int32).reshape(-1, 2)
         self.last_cg_iters = 0
         self.last_cg_residual = 0.0
+        # The CG loop on the host, a launch per iteration, where one long launch fails
+        # (backend.HOST_LOOP_AL: Vulkan, Metal; see ``_begin``). Settable, for tests.
+        self.host_loop = backend.arch() in backend.HOST_LOOP_AL
         # Every work array is allocated once, here, sized from the model's capacities (the
         # model never grows in place: the simulator builds a new model and new solvers). They
         # are kernel arguments, so a new solver compiles nothing.
@@ -134,6 +137,8 @@ class ImplicitEuler:
     # -- public API ---------------------------------------------------------------------------
     def step(self, h):
         """Advance model.state by one backward-Euler step of ``h`` seconds."""
+        if self.host_loop:
+            return self._step_host_loop(h)
         m, mat, s = self.model, self.model.material, self.settings
         rel, iters = _step(h, ti.Vector(list(s.gravity)), mat.k_warp, mat.k_weft, mat.k_shear,
                            mat.k_bend, mat.damp_mass, mat.damp_stiff, s.stitch_stiffness,
@@ -144,6 +149,38 @@ class ImplicitEuler:
         self.last_cg_iters = int(iters)
         self.last_cg_residual = float(rel)
         return self.last_cg_iters
+
+    def _step_host_loop(self, h):
+        """``step`` with the CG loop on the host, one launch per iteration (Vulkan, Metal:
+        see ``_begin``). The same arithmetic as the one-launch kernel."""
+        m, mat, s = self.model, self.model.material, self.settings
+        k = (mat.k_warp, mat.k_weft, mat.k_shear, mat.k_bend)
+        alpha, beta, kst = mat.damp_mass, mat.damp_stiff, s.stitch_stiffness
+        counts = (m.n_verts, m.n_faces, m.n_edges, self.n_stitches)
+        mesh = self._mesh()                  # MESH_ARRAYS, x, v
+        (vert_mass, vert_pinned, vert_pin_target, face_verts, _, face_rest_area, _, edge_verts,
+         edge_faces, edge_opp, _, edge_bend_weight) = mesh[:len(MESH_ARRAYS)]
+        x, v = mesh[-2:]
+        face_fu, face_fv, face_E, face_wa, face_wb, edge_grad, _, stitch = self._elements()
+        rz, bnorm = _begin(h, ti.Vector(list(s.gravity)), *k, alpha, beta, kst, *counts, *mesh,
+                           *self._elements(), self.force, self.dv, self.rhs, self.res, self.z,
+                           self.p, self.Ap, self.precond)
+        rel = float(np.sqrt(abs(rz) / max(bnorm, 1e-300)))
+        iters = 0
+        while iters < s.cg_max_iters and rel > s.cg_tol:
+            rz_new, stalled = _iteration(
+                rz, h, alpha, beta, *k, kst, *counts, vert_mass, vert_pinned, face_verts,
+                face_rest_area, edge_verts, edge_faces, edge_opp, edge_bend_weight, face_fu,
+                face_fv, face_E, face_wa, face_wb, edge_grad, stitch, self.dv, self.res,
+                self.z, self.p, self.Ap, self.precond)
+            if stalled:
+                break
+            rz = rz_new
+            rel = float(np.sqrt(abs(rz) / max(bnorm, 1e-300)))
+            iters += 1
+        _advance(h, m.n_verts, vert_pinned, vert_pin_target, x, v, self.dv)
+        self.last_cg_iters, self.last_cg_residual = iters, rel
+        return iters
 
     def energy(self):
         """Elastic energy (membrane + bending + stitches) of the current positions, J."""
@@ -544,6 +581,92 @@ def linearise(h, g, kw, kf, ks, kb, alpha, beta, kst, nv: ti.i32, nf: ti.i32, ne
                   face_fv, face_E, face_wa, face_wb, edge_grad, stitch)
 
 
+# The step's phases, shared by the one-launch kernel and the host-loop kernels.
+@ti.func
+def cg_begin(h, g, kw, kf, ks, kb, alpha, beta, kst, nv: ti.i32, nf: ti.i32, ne: ti.i32,
+             nst: ti.i32, vert_mass: T, vert_pinned: T, vert_pin_target: T, face_verts: T,
+             face_Dm_inv: T, face_rest_area: T, face_grain: T, edge_verts: T, edge_faces: T,
+             edge_opp: T, edge_rest_angle: T, edge_bend_weight: T, x: T, v: T, face_fu: T,
+             face_fv: T, face_E: T, face_wa: T, face_wb: T, edge_grad: T, edge_theta: T,
+             stitch: T, force: T, dv: T, rhs: T, res: T, z: T, p: T, Ap: T, precond: T):
+    """Linearise, prescribe the pinned dv, and start PCG: returns (r.z, b.P b) (CG's scale:
+    the free rows only)."""
+    linearise(h, g, kw, kf, ks, kb, alpha, beta, kst, nv, nf, ne, nst, force, precond, rhs,
+              vert_mass, face_verts, face_Dm_inv, face_rest_area, face_grain, edge_verts,
+              edge_faces, edge_opp, edge_rest_angle, edge_bend_weight, x, v, face_fu,
+              face_fv, face_E, face_wa, face_wb, edge_grad, edge_theta, stitch)
+    # Pinned vertices: the dv that lands them on their target at the end of the step.
+    # Free vertices start CG from the last step's dv (warm start: near rest, successive
+    # velocity changes are alike); on_mesh_changed zeroes it after a remesh.
+    for i in range(nv):
+        if vert_pinned[i] != 0:
+            dv[i] = (vert_pin_target[i] - x[i]) / h - v[i]
+        precond[i] = precond[i].inverse()
+    # r = b - A dv over the free vertices (pinned dv enters through the coupling).
+    apply_A(dv, Ap, h, alpha, beta, kw, kf, ks, kb, kst, nv, nf, ne, nst, vert_mass,
+            vert_pinned, face_verts, face_rest_area, edge_verts, edge_faces, edge_opp,
+            edge_bend_weight, face_fu, face_fv, face_E, face_wa, face_wb, edge_grad, stitch)
+    free_residual(res, rhs, Ap, vert_pinned, nv)
+    rz = 0.0
+    bnorm = 0.0
+    for i in range(nv):
+        z[i] = precond[i] @ res[i]
+        p[i] = z[i]
+        rz += res[i].dot(z[i])
+        if vert_pinned[i] == 0:
+            bnorm += rhs[i].dot(precond[i] @ rhs[i])
+    return ti.Vector([rz, bnorm])
+
+
+@ti.func
+def cg_iteration(rz, h, alpha, beta, kw, kf, ks, kb, kst, nv: ti.i32, nf: ti.i32,
+                 ne: ti.i32, nst: ti.i32, vert_mass: T, vert_pinned: T, face_verts: T,
+                 face_rest_area: T, edge_verts: T, edge_faces: T, edge_opp: T,
+                 edge_bend_weight: T, face_fu: T, face_fv: T, face_E: T, face_wa: T,
+                 face_wb: T, edge_grad: T, stitch: T, dv: T, res: T, z: T, p: T, Ap: T,
+                 precond: T):
+    """One preconditioned CG iteration on the free vertices: returns (new r.z, 1 if it
+    stalled on p.A p <= 0 and changed nothing)."""
+    apply_A(p, Ap, h, alpha, beta, kw, kf, ks, kb, kst, nv, nf, ne, nst, vert_mass,
+            vert_pinned, face_verts, face_rest_area, edge_verts, edge_faces, edge_opp,
+            edge_bend_weight, face_fu, face_fv, face_E, face_wa, face_wb, edge_grad, stitch)
+    pAp = 0.0
+    for i in range(nv):
+        pAp += p[i].dot(Ap[i])
+    rz_new = rz
+    stalled = 1.0
+    if pAp > 0.0:
+        stalled = 0.0
+        step = rz / pAp
+        rz_new = 0.0
+        for i in range(nv):
+            dv[i] += step * p[i]
+            res[i] -= step * Ap[i]
+            z[i] = precond[i] @ res[i]
+            rz_new += res[i].dot(z[i])
+        beta_cg = rz_new / rz
+        for i in range(nv):
+            p[i] = z[i] + beta_cg * p[i]
+            if vert_pinned[i] != 0:
+                p[i] = ti.Vector([0.0, 0.0, 0.0])
+    return ti.Vector([rz_new, stalled])
+
+
+@ti.func
+def advance(h, nv: ti.i32, vert_pinned: T, vert_pin_target: T, x: T, v: T, dv: T):
+    """v += dv, x += h v; pins exactly on target."""
+    for i in range(nv):
+        v[i] += dv[i]
+        x[i] += h * v[i]
+        if vert_pinned[i] != 0:
+            x[i] = vert_pin_target[i]
+
+
+@ti.func
+def relative(rz, bnorm):
+    return ti.sqrt(ti.abs(rz) / ti.max(bnorm, 1e-300))
+
+
 @ti.kernel
 def _step(h: float, g: ti.types.vector(3, float), kw: float, kf: float, ks: float, kb: float,
           alpha: float, beta: float, kst: float, nv: ti.i32, nf: ti.i32, ne: ti.i32,
@@ -559,66 +682,75 @@ def _step(h: float, g: ti.types.vector(3, float), kw: float, kf: float, ks: floa
     # Returning both numbers costs less than reading them back (~0.05 vs ~0.17 ms).
     ti.loop_config(serialize=True)
     for _ in range(1):
-        linearise(h, g, kw, kf, ks, kb, alpha, beta, kst, nv, nf, ne, nst, force, precond, rhs,
-                  vert_mass, face_verts, face_Dm_inv, face_rest_area, face_grain, edge_verts,
-                  edge_faces, edge_opp, edge_rest_angle, edge_bend_weight, x, v, face_fu,
-                  face_fv, face_E, face_wa, face_wb, edge_grad, edge_theta, stitch)
-        # Pinned vertices: the dv that lands them on their target at the end of the step.
-        # Free vertices start CG from the last step's dv (warm start: near rest, successive
-        # velocity changes are alike); on_mesh_changed zeroes it after a remesh.
-        for i in range(nv):
-            if vert_pinned[i] != 0:
-                dv[i] = (vert_pin_target[i] - x[i]) / h - v[i]
-            precond[i] = precond[i].inverse()
-        # r = b - A dv over the free vertices (pinned dv enters through the coupling).
-        apply_A(dv, Ap, h, alpha, beta, kw, kf, ks, kb, kst, nv, nf, ne, nst, vert_mass,
-                vert_pinned, face_verts, face_rest_area, edge_verts, edge_faces, edge_opp,
-                edge_bend_weight, face_fu, face_fv, face_E, face_wa, face_wb, edge_grad,
-                stitch)
-        free_residual(res, rhs, Ap, vert_pinned, nv)
-        # (Free rows of A dv include the coupling to the prescribed pinned dv.)
-        rz = 0.0
-        bnorm = 0.0
-        for i in range(nv):
-            z[i] = precond[i] @ res[i]
-            p[i] = z[i]
-            rz += res[i].dot(z[i])
-            if vert_pinned[i] == 0:    # CG's scale: the free rows only
-                bnorm += rhs[i].dot(precond[i] @ rhs[i])
-        # Preconditioned CG on the free vertices.
+        rb = cg_begin(h, g, kw, kf, ks, kb, alpha, beta, kst, nv, nf, ne, nst, vert_mass,
+                      vert_pinned, vert_pin_target, face_verts, face_Dm_inv, face_rest_area,
+                      face_grain, edge_verts, edge_faces, edge_opp, edge_rest_angle,
+                      edge_bend_weight, x, v, face_fu, face_fv, face_E, face_wa, face_wb,
+                      edge_grad, edge_theta, stitch, force, dv, rhs, res, z, p, Ap, precond)
+        rz, bnorm = rb[0], rb[1]
         iters = 0
-        rel = ti.sqrt(ti.abs(rz) / ti.max(bnorm, 1e-300))
-        while iters < max_iters and rel > tol:
-            apply_A(p, Ap, h, alpha, beta, kw, kf, ks, kb, kst, nv, nf, ne, nst, vert_mass,
-                    vert_pinned, face_verts, face_rest_area, edge_verts, edge_faces, edge_opp,
-                    edge_bend_weight, face_fu, face_fv, face_E, face_wa, face_wb, edge_grad,
-                    stitch)
-            pAp = 0.0
-            for i in range(nv):
-                pAp += p[i].dot(Ap[i])
-            if pAp <= 0.0:
-                break
-            step = rz / pAp
-            rz_new = 0.0
-            for i in range(nv):
-                dv[i] += step * p[i]
-                res[i] -= step * Ap[i]
-                z[i] = precond[i] @ res[i]
-                rz_new += res[i].dot(z[i])
-            beta_cg = rz_new / rz
-            for i in range(nv):
-                p[i] = z[i] + beta_cg * p[i]
-                if vert_pinned[i] != 0:
-                    p[i] = ti.Vector([0.0, 0.0, 0.0])
-            rz = rz_new
-            rel = ti.sqrt(ti.abs(rz) / ti.max(bnorm, 1e-300))
-            iters += 1
+        stalled = 0.0
+        rel = relative(rz, bnorm)
+        while iters < max_iters and rel > tol and stalled == 0.0:
+            out = cg_iteration(rz, h, alpha, beta, kw, kf, ks, kb, kst, nv, nf, ne, nst,
+                               vert_mass, vert_pinned, face_verts, face_rest_area, edge_verts,
+                               edge_faces, edge_opp, edge_bend_weight, face_fu, face_fv, face_E,
+                               face_wa, face_wb, edge_grad, stitch, dv, res, z, p, Ap, precond)
+            stalled = out[1]
+            if stalled == 0.0:
+                rz = out[0]
+                rel = relative(rz, bnorm)
+                iters += 1
         scalars[0] = rel
-        # Update: v += dv, x += h v; pins exactly on target.
-        for i in range(nv):
-            v[i] += dv[i]
-            x[i] += h * v[i]
-            if vert_pinned[i] != 0:
-                x[i] = vert_pin_target[i]
+        advance(h, nv, vert_pinned, vert_pin_target, x, v, dv)
         scalars[1] = iters
     return ti.Vector([scalars[0], scalars[1]])
+
+
+# The same step as three kinds of launch with the CG loop on the host, for Vulkan and Metal
+# (backend.HOST_LOOP_AL). Measured on lavapipe (Debian's software Vulkan), f32, hanging res 20:
+# the one-launch step computed dv but never wrote v and x once it ran 14 CG iterations or more
+# (13 were fine; KE stayed exactly 0 and the cloth never fell), like the strain solver's
+# one-launch solve, which crashed that driver.
+@ti.kernel
+def _begin(h: float, g: ti.types.vector(3, float), kw: float, kf: float, ks: float, kb: float,
+           alpha: float, beta: float, kst: float, nv: ti.i32, nf: ti.i32, ne: ti.i32,
+           nst: ti.i32, vert_mass: A, vert_pinned: A, vert_pin_target: A, face_verts: A,
+           face_Dm_inv: A, face_rest_area: A, face_grain: A, edge_verts: A, edge_faces: A,
+           edge_opp: A, edge_rest_angle: A, edge_bend_weight: A, x: A, v: A, face_fu: A,
+           face_fv: A, face_E: A, face_wa: A, face_wb: A, edge_grad: A, edge_theta: A,
+           stitch: A, force: A, dv: A, rhs: A, res: A, z: A, p: A, Ap: A,
+           precond: A) -> ti.types.vector(2, float):
+    ti.loop_config(serialize=True)
+    out = ti.Vector([0.0, 0.0])
+    for _ in range(1):
+        out = cg_begin(h, g, kw, kf, ks, kb, alpha, beta, kst, nv, nf, ne, nst, vert_mass,
+                       vert_pinned, vert_pin_target, face_verts, face_Dm_inv, face_rest_area,
+                       face_grain, edge_verts, edge_faces, edge_opp, edge_rest_angle,
+                       edge_bend_weight, x, v, face_fu, face_fv, face_E, face_wa, face_wb,
+                       edge_grad, edge_theta, stitch, force, dv, rhs, res, z, p, Ap, precond)
+    return out
+
+
+@ti.kernel
+def _iteration(rz: float, h: float, alpha: float, beta: float, kw: float, kf: float,
+               ks: float, kb: float, kst: float, nv: ti.i32, nf: ti.i32, ne: ti.i32,
+               nst: ti.i32, vert_mass: A, vert_pinned: A, face_verts: A, face_rest_area: A,
+               edge_verts: A, edge_faces: A, edge_opp: A, edge_bend_weight: A, face_fu: A,
+               face_fv: A, face_E: A, face_wa: A, face_wb: A, edge_grad: A, stitch: A, dv: A,
+               res: A, z: A, p: A, Ap: A, precond: A) -> ti.types.vector(2, float):
+    ti.loop_config(serialize=True)
+    out = ti.Vector([0.0, 0.0])
+    for _ in range(1):
+        out = cg_iteration(rz, h, alpha, beta, kw, kf, ks, kb, kst, nv, nf, ne, nst, vert_mass,
+                           vert_pinned, face_verts, face_rest_area, edge_verts, edge_faces,
+                           edge_opp, edge_bend_weight, face_fu, face_fv, face_E, face_wa,
+                           face_wb, edge_grad, stitch, dv, res, z, p, Ap, precond)
+    return out
+
+
+@ti.kernel
+def _advance(h: float, nv: ti.i32, vert_pinned: A, vert_pin_target: A, x: A, v: A, dv: A):
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        advance(h, nv, vert_pinned, vert_pin_target, x, v, dv)
