@@ -27,7 +27,7 @@ curvature under compression, the indefinite shear curvature, the bending angle's
 the one Newton step robust instead of exact; ``force_jacobian_product(exact=True)`` gives the
 exact membrane Jacobian for testing.
 
-Why one module of ~620 lines: forces, their Jacobian product, its diagonal and its assembled
+Why one module of ~750 lines: forces, their Jacobian product, its diagonal and its assembled
 blocks must stay the same K; they share the element kinematics and ``face_block``.
 
 Every kernel is a module-level ``@ti.kernel`` taking all its arrays (the model's and the
@@ -157,28 +157,24 @@ class ImplicitEuler:
         k = (mat.k_warp, mat.k_weft, mat.k_shear, mat.k_bend)
         alpha, beta, kst = mat.damp_mass, mat.damp_stiff, s.stitch_stiffness
         counts = (m.n_verts, m.n_faces, m.n_edges, self.n_stitches)
-        mesh = self._mesh()                  # MESH_ARRAYS, x, v
-        (vert_mass, vert_pinned, vert_pin_target, face_verts, _, face_rest_area, _, edge_verts,
-         edge_faces, edge_opp, _, edge_bend_weight) = mesh[:len(MESH_ARRAYS)]
-        x, v = mesh[-2:]
-        face_fu, face_fv, face_E, face_wa, face_wb, edge_grad, _, stitch = self._elements()
-        rz, bnorm = _begin(h, ti.Vector(list(s.gravity)), *k, alpha, beta, kst, *counts, *mesh,
-                           *self._elements(), self.force, self.dv, self.rhs, self.res, self.z,
-                           self.p, self.Ap, self.precond)
+        rz, bnorm = _begin(h, ti.Vector(list(s.gravity)), *k, alpha, beta, kst, *counts,
+                           *self._mesh(), *self._elements(), self.force, self.dv, self.rhs,
+                           self.res, self.z, self.p, self.Ap, self.precond)
         rel = float(np.sqrt(abs(rz) / max(bnorm, 1e-300)))
         iters = 0
         while iters < s.cg_max_iters and rel > s.cg_tol:
             rz_new, stalled = _iteration(
-                rz, h, alpha, beta, *k, kst, *counts, vert_mass, vert_pinned, face_verts,
-                face_rest_area, edge_verts, edge_faces, edge_opp, edge_bend_weight, face_fu,
-                face_fv, face_E, face_wa, face_wb, edge_grad, stitch, self.dv, self.res,
-                self.z, self.p, self.Ap, self.precond)
+                rz, h, alpha, beta, *k, kst, *counts, m.vert_mass, m.vert_pinned, m.face_verts,
+                m.face_rest_area, m.edge_verts, m.edge_faces, m.edge_opp, m.edge_bend_weight,
+                self.face_fu, self.face_fv, self.face_E, self.face_wa, self.face_wb,
+                self.edge_grad, self.stitch, self.dv, self.res, self.z, self.p, self.Ap,
+                self.precond)
             if stalled:
                 break
             rz = rz_new
             rel = float(np.sqrt(abs(rz) / max(bnorm, 1e-300)))
             iters += 1
-        _advance(h, m.n_verts, vert_pinned, vert_pin_target, x, v, self.dv)
+        _advance(h, m.n_verts, m.vert_pinned, m.vert_pin_target, m.state.x, m.state.v, self.dv)
         self.last_cg_iters, self.last_cg_residual = iters, rel
         return iters
 
