@@ -172,6 +172,9 @@ def main():
                          "settings' default)")
     ap.add_argument("--frames", type=int, default=40)
     ap.add_argument("--ke-from", type=int, default=120)
+    ap.add_argument("--budget-sweep", action="store_true",
+                    help="the PCG budget (StrainLimiter.max_cg) against speed and rest: writes "
+                         "OUT/cg_budget.md and .json (~10 min)")
     ap.add_argument("--set", action="append", default=[], metavar="ATTR=JSON",
                     help="StrainLimiter attribute for --probe, e.g. --set active_margin=0.005")
     args = ap.parse_args()
@@ -189,6 +192,9 @@ def main():
         print(json.dumps(child(*json.loads(args.child))))
         return
     os.makedirs(args.out, exist_ok=True)
+    if args.budget_sweep:
+        budget_sweep(args.out, curvature)
+        return
     if args.rerun_rest:
         # Re-measure the rest rows of one coupling / Newton solver (after a solver change),
         # keep every other row, and rewrite the docs.
@@ -214,6 +220,47 @@ def main():
         print(json.dumps((rest if kind == "rest" else speed)[-1]), file=sys.stderr, flush=True)
     write_docs(rest, speed, args.out, f"`python -m benchmarks.solver"
                f"{' --quick' if args.quick else ''}`")
+
+
+# PCG iterations per Newton step (per 1000 faces: the budget grows like sqrt(faces / 1000)).
+BUDGETS = (4, 8, 15, 25, 50)
+
+
+def budget_sweep(out, curvature):
+    """Speed (each method from the start at resolution 46, mapping at 91) and rest (each
+    method at resolution 9, mapping at 25) per PCG budget, every row in its own process."""
+    rows = []
+    jobs = [(b, (46, m, 30, 100)) for m in ("mapping", "svd", "warp-weft") for b in BUDGETS]
+    jobs += [(b, (91, "mapping", 12, 100)) for b in (15, 50)]
+    jobs += [(b, (25, "mapping", 150, 120)) for b in BUDGETS]
+    jobs += [(b, (9, m, 150, 120)) for b in BUDGETS for m in ("mapping", "svd", "warp-weft")]
+    t0 = time.time()
+    for i, (budget, (res, method, frames, ke_from)) in enumerate(jobs):
+        print(f"[{i + 1}/{len(jobs)}] max_cg {budget}: {method} res {res} "
+              f"({time.time() - t0:.0f} s)", file=sys.stderr, flush=True)
+        row = run_child(res, method, "implicit", "pcg", curvature, frames, ke_from,
+                        {"max_cg": budget})
+        row["max_cg"] = budget
+        rows.append(row)
+    with open(os.path.join(out, "cg_budget.json"), "w") as fh:
+        json.dump(rows, fh, indent=1)
+    keys = ["faces", "method", "max_cg", "frames", "ms_median", "ms_p90", "rounds_median",
+            "rounds_max", "newton_median", "cg_median", "converged", "viol_max", "ke_mean",
+            "commit"]
+    heads = ["faces", "method", "max_cg", "frames", "SL ms median", "p90", "rounds", "max",
+             "Newton", "CG", "converged", "max viol", "KE 120-150 (J)", "commit"]
+    md = ["# The PCG budget of the strain solve: speed against rest (issue #13)", "",
+          f"`python -m benchmarks.solver --budget-sweep` ({time.time() - t0:.0f} s), "
+          f"{time.strftime('%Y-%m-%d')}, 2-core CPU, f64, full optimisation. hanging, "
+          "coupling implicit, one substep per frame; `max_cg` is the PCG budget per Newton "
+          "step at 1000 faces (it grows like sqrt(faces / 1000)). Speed rows: from the start, "
+          "median over frames 2-F. Rest rows: KE = mean kinetic energy over frames 120-150 "
+          "(targets: <= 1e-6 J at resolution 9, <= 3e-7 J for mapping at 25).", "",
+          table(sorted(rows, key=lambda r: (r.get("faces", 0), r.get("method", ""),
+                                            r["max_cg"])), keys, heads), ""]
+    with open(os.path.join(out, "cg_budget.md"), "w") as fh:
+        fh.write("\n".join(md) + "\n")
+    print("\n".join(md))
 
 
 def write_docs(rest, speed, out, how):

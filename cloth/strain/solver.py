@@ -55,6 +55,21 @@ CURVATURES = ("exact", "model")
 EXACT_CURVATURE_FOR = ("mapping",)
 
 
+# PCG iterations per Newton step at 1000 faces (``StrainLimiter.cg_budget``). The split
+# projection: measured on hanging at 3.9k faces, 50 left 3-7 of 20 substeps unconverged, ~100
+# none (mapping) and 2 (warp-weft), at half the time of the older defaults.
+CG_BUDGET_PROJECTION = 50
+# Under coupling "implicit", per method (``python -m benchmarks.solver --budget-sweep``,
+# docs/speed/cg_budget.md, 2026-12-02): an inexact Newton step costs less than an accurate one
+# and the AL rounds absorb the difference, but too few iterations leave the resting cloth
+# shimmering. Against 50: mapping at 15 takes resolution 46 from 248 to 95 ms per frame, 91
+# from 3.1 to 1.6 s, 25 (at rest) from 35 to 21 ms, with the rest KE 2.0e-7 -> 3.0e-7 J at 25
+# and 9.2e-8 -> 6.4e-7 J at 9 (at 8 it shimmers: 1.8e-6 J at 25). svd and warp-weft rest at
+# 25 (7.5e-8 and 1.1e-7 J at resolution 9; warp-weft at 15: 5e-6 J), and run resolution 46 in
+# 53 and 128 ms instead of 80 and 205. Single runs of a chaotic sweep: neighbouring budgets
+# can differ by a round (e.g. svd at 15 needs 3 where 25 needs 1).
+CG_BUDGET = {"mapping": 15, "svd": 25, "warp-weft": 25}
+
 _host_loop_noted = False
 
 
@@ -118,8 +133,8 @@ class StrainLimiter:
     ``last_factorizations`` the numeric factorisations).
 
     AL settings: ``max_newton`` Newton steps per round, each a PCG solve of at most
-    ``max_cg`` iterations (times sqrt(n_faces / 1000) above 1000 faces) to the relative
-    residual ``cg_rtol``; penalty ``mu_scale`` x the
+    ``max_cg`` iterations (times sqrt(n_faces / 1000) above 1000 faces; None: per method,
+    ``CG_BUDGET``) to the relative residual ``cg_rtol``; penalty ``mu_scale`` x the
     mean vertex mass, x ``mu_grow`` per round, capped at ``mu_max_scale`` x the mean mass.
     ``active_margin`` (strain): constraints this close to activating are already in the
     Newton model. ``adaptive_margin`` adapts that margin like a trust region (a full step
@@ -143,7 +158,7 @@ class StrainLimiter:
 
     def __init__(self, model, method="mapping", warp=(-0.01, 0.01), weft=(-0.05, 0.05),
                  bias=None, solver="al", tol=1e-4, max_iters=None, max_newton=5,
-                 max_cg=50, cg_rtol=0.1, mu_scale=None, mu_grow=4.0, mu_max_scale=1e6,
+                 max_cg=None, cg_rtol=0.1, mu_scale=None, mu_grow=4.0, mu_max_scale=1e6,
                  mapping_delta=MAPPING_DELTA, mapping_iso=MAPPING_ISO, jacobi_omega=1.0,
                  active_margin=1e-2,
                  adaptive_margin=False, stitches=None, coupling="projection",
@@ -165,7 +180,7 @@ class StrainLimiter:
         if max_iters is None:
             max_iters = AL_ROUNDS if solver == "al" else 2000
         for name, val in (("max_iters", max_iters), ("max_newton", max_newton),
-                          ("max_cg", max_cg)):
+                          ("max_cg", 1 if max_cg is None else max_cg)):
             if int(val) < 1:
                 raise StrainLimitError(f"{name} must be >= 1 (got {val})")
         if mu_scale is None:
@@ -192,7 +207,8 @@ class StrainLimiter:
         self._system_ready = False
         self.tol = float(tol)
         self.max_iters = int(max_iters)
-        self.max_newton, self.max_cg, self.cg_rtol = int(max_newton), int(max_cg), cg_rtol
+        self.max_newton, self.cg_rtol = int(max_newton), cg_rtol
+        self.max_cg = None if max_cg is None else int(max_cg)
         self.mu_scale, self.mu_grow, self.mu_max_scale = mu_scale, mu_grow, mu_max_scale
         self.mapping_delta = float(mapping_delta)
         self.mapping_iso = float(mapping_iso)
@@ -522,6 +538,17 @@ class StrainLimiter:
         step_tol = 0.01 * self.tol * m.typical_edge()
         return direct.solve(self, mid, K, metric, chol, mu, mu_max, step_tol)
 
+    def cg_budget(self):
+        """PCG iterations per Newton step: ``max_cg`` or, when that is None, the method's
+        ``CG_BUDGET`` (coupling "implicit") or ``CG_BUDGET_PROJECTION``, per 1000 faces. CG
+        iterations grow with the cloth's diameter in triangles (corrections travel across it),
+        so above 1000 faces the budget grows like sqrt(n_faces / 1000)."""
+        per_1000 = self.max_cg
+        if per_1000 is None:
+            per_1000 = CG_BUDGET.get(self.method, CG_BUDGET_PROJECTION) \
+                if self.coupling == "implicit" else CG_BUDGET_PROJECTION
+        return int(round(per_1000 * max(1.0, np.sqrt(self.model.n_faces / 1000.0))))
+
     def _kernel_curvature(self):
         """1 where the kernels use the exact curvature (c_curvature.py), 0 for the model.
         The host experiment (exact_curvature.py) replaces the model itself. For solve_al it
@@ -542,11 +569,7 @@ class StrainLimiter:
         mu, mu_max = self.mu_scale * mean_mass, self.mu_max_scale * mean_mass
         # An inner loop stops once its steps are far below the tolerance (in metres).
         step_tol = 0.01 * self.tol * m.typical_edge()
-        # CG iterations grow with the cloth's diameter in triangles (corrections travel across
-        # it): above 1000 faces the budget grows like sqrt(n_faces / 1000). Measured on the
-        # hanging scene at 3.9k faces: 50 iterations left 3-7 of 20 substeps unconverged,
-        # ~100 none (mapping) and 2 (warp-weft), at half the time of the old defaults.
-        max_cg = int(round(self.max_cg * max(1.0, np.sqrt(m.n_faces / 1000.0))))
+        max_cg = self.cg_budget()
         al.solve_al(mid, self._kernel_curvature(), K, m.n_verts, m.n_faces, len(self._stitches), mu, self.mu_grow,
                    mu_max, self.max_iters,
                    self.max_newton, max_cg, self.cg_rtol, self.tol, step_tol,
