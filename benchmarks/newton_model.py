@@ -1,0 +1,82 @@
+"""How far the AL's Newton matrix (the model the PCG and Cholesky paths solve with) is from the
+true Hessian of the merit it minimises, per ``strain.active_margin`` (issue #13).
+
+    python -m benchmarks.newton_model [--methods mapping svd] [--resolution 9] [--frames 20]
+
+At a real substep of ``hanging`` (coupling implicit, after F frames, penalty 4x the first
+round's), along random directions d (pinned vertices fixed): the true Hessian times d is the
+central difference of the residual r = -grad L_A (r is checked against the merit in
+tests/test_al_merit.py), the model's is H d with H as ``direct.newton_system`` assembles it.
+Prints |H d - H_true d| / |H_true d| and the Rayleigh ratio d.H.d / d.H_true.d: a ratio of q
+means the model is q times too stiff along d, and a full Newton step then covers about 1/q of
+the way (linear convergence, rate ~ 1 - 1/q).
+"""
+import argparse
+
+import numpy as np
+
+
+def measure(method, resolution, frames, margins, directions=4, seed=0):
+    from cloth.strain import direct
+    from cloth.strain.constraints import METHOD_IDS, N_CONSTRAINTS
+    from tests.test_coupling import _hanging
+    sim = _hanging(method, "implicit", res=resolution)
+    for _ in range(frames):
+        sim.step_frame()
+    lim, m = sim.strain, sim.model
+    ws = lim._ws
+    nv, mid, K = m.n_verts, METHOD_IDS[method], N_CONSTRAINTS[method]
+    metric, chol = lim._direct_metric(True)
+    mu = 4.0 * lim.mu_scale * lim._mean_mass(metric)
+    x0 = ws.x.to_numpy()
+    free = (m.pinned == 0)[:, None]
+    rng = np.random.default_rng(seed)
+
+    def residual_and_matrix(xs):
+        ws.x.from_numpy(xs)
+        lim._assemble(mid, ws.x)
+        direct.fill_newton_system(lim, mid, K, mu, metric)
+        return ws.r.to_numpy()[:nv].ravel().copy(), chol.matrix(ws.H.to_numpy()[:metric.nnz])
+
+    rows = []
+    for margin in margins:
+        lim.active_margin = margin
+        lim._upload_params()
+        _, H = residual_and_matrix(x0)
+        rel, ratio = [], []
+        for _ in range(directions):
+            d = np.zeros_like(x0)
+            d[:nv] = rng.standard_normal((nv, 3)) * free
+            eps = 1e-7
+            rp, _ = residual_and_matrix(x0 + eps * d)
+            rm, _ = residual_and_matrix(x0 - eps * d)
+            true_d = -(rp - rm) / (2 * eps)
+            model_d = H @ d[:nv].ravel()
+            rel.append(np.linalg.norm(model_d - true_d) / np.linalg.norm(true_d))
+            ratio.append(d[:nv].ravel() @ model_d / (d[:nv].ravel() @ true_d))
+        ws.x.from_numpy(x0)
+        rows.append((method, resolution, margin, rel, ratio))
+    return rows
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--methods", nargs="+", default=["mapping", "svd", "warp-weft"])
+    ap.add_argument("--resolution", type=int, default=9)
+    ap.add_argument("--frames", type=int, default=20)
+    ap.add_argument("--margins", nargs="+", type=float, default=[1e-2, 3e-3, 1e-3, 0.0])
+    args = ap.parse_args()
+    from cloth import backend
+    backend.init("cpu", "f64")
+    print("| method | faces res | active_margin | rel. error of H d | d.H.d / d.H_true.d |")
+    print("|---|---|---|---|---|")
+    for method in args.methods:
+        for method_, res, margin, rel, ratio in measure(method, args.resolution, args.frames,
+                                                        args.margins):
+            print(f"| {method_} | {res} | {margin:g} | "
+                  f"{min(rel):.3f} ... {max(rel):.3f} | {min(ratio):.2f} ... {max(ratio):.2f} |",
+                  flush=True)
+
+
+if __name__ == "__main__":
+    main()
