@@ -17,10 +17,13 @@ import numpy as np
 
 
 def measure(method, resolution, frames, margins, directions=4, seed=0):
+    from benchmarks.harness import configure
+    from cloth.simulator import Simulator
     from cloth.strain import direct
     from cloth.strain.constraints import METHOD_IDS, N_CONSTRAINTS
-    from tests.test_coupling import _hanging
-    sim = _hanging(method, "implicit", res=resolution)
+    _, cfg, setup = configure("hanging", {"cloth": {"resolution": resolution},
+                                          "strain": {"method": method, "coupling": "implicit"}})
+    sim = Simulator(setup, cfg)
     for _ in range(frames):
         sim.step_frame()
     lim, m = sim.strain, sim.model
