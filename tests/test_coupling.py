@@ -138,3 +138,24 @@ def test_strain_limited_cloth_comes_to_rest(method):
             assert sim.strain.last_converged
     assert np.mean(ke) < 1e-6, np.mean(ke)
     assert sim.strain.last_iterations <= 2
+
+
+def test_pcg_budget_is_per_method_under_implicit_coupling():
+    """Under coupling "implicit" each method has its measured PCG budget (CG_BUDGET, per 1000
+    faces, growing like sqrt(faces / 1000) above); the split projection keeps its own; an
+    explicit max_cg overrides both, and a method switch follows the table."""
+    from cloth.strain.solver import CG_BUDGET, CG_BUDGET_PROJECTION
+    sim = _hanging("mapping", "implicit", res=6)
+    lim = sim.strain
+    assert lim.max_cg is None
+    for method in ("mapping", "svd", "warp-weft"):
+        lim.set_method(method)
+        assert lim.cg_budget() == CG_BUDGET[method]          # 50 faces: no growth
+    lim.set_coupling("projection")
+    assert lim.cg_budget() == CG_BUDGET_PROJECTION
+    lim.max_cg = 7
+    assert lim.cg_budget() == 7
+    lim.set_coupling("implicit")
+    assert lim.cg_budget() == 7
+    big = _hanging("mapping", "implicit", res=46)              # 4050 faces
+    assert big.strain.cg_budget() == round(CG_BUDGET["mapping"] * np.sqrt(4050 / 1000))
