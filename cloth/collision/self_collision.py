@@ -281,23 +281,24 @@ def _fill_entries(x0: A, tri_count: A, tri_start: A, edge_count: A, edge_start: 
     ti.loop_config(serialize=True)
     for t in range(nf):
         lo, hi = _tri_box(x0, x, fv, t, r)
-        c0, c1 = _cell(lo, cs), _cell(hi, cs)
-        for i, j, k in ti.ndrange((c0[0], c1[0] + 1), (c0[1], c1[1] + 1), (c0[2], c1[2] + 1)):
-            c = ti.Vector([i, j, k])
-            hb = _hash(c, nb)
-            slot = tri_start[hb] + ti.atomic_add(tri_count[hb], 1)
-            te_id[slot] = t
-            te_cell[slot] = c
+        _insert(t, lo, hi, cs, nb, tri_start, tri_count, te_id, te_cell)
     ti.loop_config(serialize=True)
     for e in range(ne):
         lo, hi = _edge_box(x0, x, ev, e, r)
-        c0, c1 = _cell(lo, cs), _cell(hi, cs)
-        for i, j, k in ti.ndrange((c0[0], c1[0] + 1), (c0[1], c1[1] + 1), (c0[2], c1[2] + 1)):
-            c = ti.Vector([i, j, k])
-            hb = _hash(c, nb)
-            slot = edge_start[hb] + ti.atomic_add(edge_count[hb], 1)
-            ee_id[slot] = e
-            ee_cell[slot] = c
+        _insert(e, lo, hi, cs, nb, edge_start, edge_count, ee_id, ee_cell)
+
+
+@ti.func
+def _insert(elem, lo, hi, cs, nb, start: T, count: T, ids: T, cells: T):
+    """Element ``elem`` into every hash bucket its box [lo, hi] overlaps (the bucket's next
+    free slot of the counting sort)."""
+    c0, c1 = _cell(lo, cs), _cell(hi, cs)
+    for i, j, k in ti.ndrange((c0[0], c1[0] + 1), (c0[1], c1[1] + 1), (c0[2], c1[2] + 1)):
+        c = ti.Vector([i, j, k])
+        hb = _hash(c, nb)
+        slot = start[hb] + ti.atomic_add(count[hb], 1)
+        ids[slot] = elem
+        cells[slot] = c
 
 
 @ti.func
