@@ -26,7 +26,7 @@ face fit   per face, the quadratic X(u) through its three vertices and the three
            A (|X_uu|^2 + |X_vv|^2 + 2 |X_uv|^2) / 2. Exact for quadratic fields, isotropic.
 mixed      (tr H)^2 / 2 from the cotangent Laplacian at interior vertices (the face fit's
            trace at boundary vertices) plus the face fit's deviatoric part |dev H|^2: again
-           |H|^2 in the continuum.
+           |H|^2 in the continuum. The simulator's isotropic bending (cloth/bending.py).
 """
 import argparse
 import os
@@ -45,10 +45,9 @@ SIZES = (0.005, 0.01, 0.02)
 
 
 def _mesh(pattern, direction, h):
-    from benchmarks.calibration import strip_mesh
+    from benchmarks.calibration import cantilever_mesh
     from cloth.model import build_edges, signed_material_areas
-    uv, faces, _ = strip_mesh(2 * L_HALF, WIDTH, h, pattern, direction,
-                              cuts=(0.0, L_HALF, 2 * L_HALF))
+    uv, faces, _ = cantilever_mesh(L_HALF, WIDTH, h, pattern, direction)
     ev, ef, eo = build_edges(faces)
     return dict(uv=uv, faces=faces.astype(np.int64), ev=ev, ef=ef, eo=eo,
                 area=signed_material_areas(uv, faces))
@@ -109,78 +108,19 @@ def hinge_energy_exact(m, x):
     return 0.5 * float(np.sum(w * th ** 2))
 
 
-# ---- per-face quadratic fit -----------------------------------------------------------------
-def face_fit(m):
-    """(stencil (F, 6), C (F, 3, 6)): X_uu, X_vv, X_uv of face f = C[f] @ x[stencil[f]];
-    slots 0-2 the face's vertices, 3 + n the vertex across the edge opposite vertex n (a
-    missing one: the face's vertex 0 with zero weight, and X_nn = 0 across that edge)."""
-    uv, faces, ef, eo = m["uv"], m["faces"], m["ef"], m["eo"]
-    nf = len(faces)
-    sten = np.concatenate([faces, -np.ones((nf, 3), np.int64)], axis=1)
-    for side in (0, 1):
-        sel = np.flatnonzero(ef[:, side] >= 0) if side == 0 else np.flatnonzero(ef[:, 1] >= 0)
-        sel = sel[eo[sel, 1 - side] >= 0]
-        f = ef[sel, side]
-        slot = np.argmax(faces[f] == eo[sel, side][:, None], axis=1)
-        sten[f, 3 + slot] = eo[sel, 1 - side]
-    tri = uv[faces]
-    cen = tri.mean(axis=1)
-    s = np.sqrt(2.0 * m["area"])[:, None]
-    present = sten >= 0
-    p = (uv[np.maximum(sten, 0)] - cen[:, None]) / s[:, :, None]
-    V = np.stack([np.ones((nf, 6)), p[..., 0], p[..., 1], 0.5 * p[..., 0] ** 2,
-                  0.5 * p[..., 1] ** 2, p[..., 0] * p[..., 1]], axis=2)
-    for n in range(3):
-        miss = np.flatnonzero(~present[:, 3 + n])
-        t = tri[miss, (n + 2) % 3] - tri[miss, (n + 1) % 3]
-        t /= np.linalg.norm(t, axis=1, keepdims=True)
-        a, b = t[:, 1], -t[:, 0]
-        V[miss, 3 + n] = np.stack([0 * a, 0 * a, 0 * a, a * a, b * b, 2 * a * b], 1)
-    C = np.linalg.inv(V)[:, 3:6, :] / (s[:, :, None] ** 2) * present[:, None, :]
-    return np.where(present, sten, faces[:, :1]), C
-
-
-def _face_op(sten, comps, n):
-    F, k = len(sten), len(comps)
-    D = np.stack(comps, 1)
-    rows = np.repeat((np.arange(F)[:, None] * k + np.arange(k)[None, :])[:, :, None], 6, 2)
-    return _sparse(rows, np.repeat(sten[:, None, :], k, 1), D, (k * F, n))
-
-
+# ---- the isotropic energies (cloth/bending.py) -----------------------------------------------
 def K_face_fit(m):
-    sten, C = face_fit(m)
-    H = _face_op(sten, [C[:, 0], C[:, 1], np.sqrt(2.0) * C[:, 2]], len(m["uv"]))
+    """The face fit alone: A (|X_uu|^2 + |X_vv|^2 + 2 |X_uv|^2) / 2 per face."""
+    from cloth.bending import _face_rows, face_fit
+    sten, C = face_fit(m["uv"], m["faces"], m["ef"], m["eo"], m["area"])
+    H = _face_rows(sten, [C[:, 0], C[:, 1], np.sqrt(2.0) * C[:, 2]], len(m["uv"]))
     return H.T @ sp.diags(np.repeat(m["area"], 3)) @ H
 
 
-def cotan_laplacian(m):
-    uv, faces = m["uv"], m["faces"]
-    n = len(uv)
-    rows, cols, vals = [], [], []
-    for k in range(3):
-        i, j, o = faces[:, k], faces[:, (k + 1) % 3], faces[:, (k + 2) % 3]
-        a, b = uv[i] - uv[o], uv[j] - uv[o]
-        w = 0.5 * (a * b).sum(1) / np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])
-        rows += [i, j, i, j]
-        cols += [j, i, i, j]
-        vals += [-w, -w, w, w]
-    return _sparse(np.concatenate(rows), np.concatenate(cols), np.concatenate(vals), (n, n))
-
-
 def K_mixed(m):
-    uv, faces, ev, ef, A = m["uv"], m["faces"], m["ev"], m["ef"], m["area"]
-    n = len(uv)
-    M = np.zeros(n)
-    np.add.at(M, faces.ravel(), np.repeat(A / 3, 3))
-    boundary = np.zeros(n, bool)
-    boundary[ev[ef[:, 1] < 0].ravel()] = True
-    Li = sp.diags((~boundary) / M) @ cotan_laplacian(m)            # tr H at interior vertices
-    sten, C = face_fit(m)
-    T = _face_op(sten, [C[:, 0] + C[:, 1]], n)                      # face fit's tr H
-    wb = sum(np.where(boundary[faces[:, k]], A / 3, 0.0) for k in range(3))
-    Kt = Li.T @ sp.diags(np.where(boundary, 0.0, M)) @ Li + T.T @ sp.diags(wb) @ T
-    D = _face_op(sten, [(C[:, 0] - C[:, 1]) / np.sqrt(2.0), np.sqrt(2.0) * C[:, 2]], n)
-    return 0.5 * Kt + D.T @ sp.diags(np.repeat(A, 2)) @ D
+    """The simulator's isotropic energy: Laplacian trace plus face-fit deviator."""
+    from cloth.bending import isotropic_matrix
+    return isotropic_matrix(m["uv"], m["faces"], m["ev"], m["ef"], m["eo"], m["area"])
 
 
 MODELS = (("hinge (= per-edge quadratic)", K_hinge), ("face fit", K_face_fit), ("mixed", K_mixed))

@@ -36,9 +36,11 @@ VARIANTS = (("projection", "pcg"), ("implicit", "pcg"), ("implicit", "cholesky")
 OLD_CURVATURE = "model"
 
 
-def child(res, method, coupling, linear_solver, curvature, frames, ke_from, overrides=None):
+def child(res, method, coupling, linear_solver, curvature, frames, ke_from, overrides=None,
+          bending=None):
     """One configuration: ``overrides`` sets StrainLimiter attributes after the build (e.g.
-    {"active_margin": 0.005}, a probe of a setting the scene files do not expose)."""
+    {"active_margin": 0.005}, a probe of a setting the scene files do not expose);
+    ``bending``: sim.bending (default: the settings')."""
     from cloth import backend
     backend.init("cpu", "f64")
     import scenes
@@ -49,7 +51,8 @@ def child(res, method, coupling, linear_solver, curvature, frames, ke_from, over
     cfg = resolve(mod.DEFAULTS, [{"cloth": {"resolution": res},
                                   "strain": {"method": method, "coupling": coupling,
                                              "linear_solver": linear_solver,
-                                             "curvature": curvature}}])
+                                             "curvature": curvature}}]
+                  + ([{"sim": {"bending": bending}}] if bending else []))
     sim = Simulator(mod.build(cfg), cfg)
     for key, value in (overrides or {}).items():
         if not hasattr(sim.strain, key):
@@ -72,6 +75,7 @@ def child(res, method, coupling, linear_solver, curvature, frames, ke_from, over
         factorizations.append(sim.strain.last_factorizations)
     ms, rounds = np.array(ms[1:]), np.array(rounds[1:])
     return dict(commit=_commit(), res=res, faces=sim.model.n_faces, method=method,
+                bending=sim.model.bending,
                 coupling=coupling, curvature=sim.strain.curvature,
                 linear_solver=linear_solver, frames=frames,
                 ke_mean=float(np.mean(ke[ke_from:])) if ke_from < frames else None,
@@ -175,6 +179,8 @@ def main():
     ap.add_argument("--budget-sweep", action="store_true",
                     help="the PCG budget (StrainLimiter.max_cg) against speed and rest: writes "
                          "OUT/cg_budget.md and .json (~10 min)")
+    ap.add_argument("--bending", choices=("isotropic", "hinge"),
+                    help="sim.bending for --probe (default: the settings')")
     ap.add_argument("--set", action="append", default=[], metavar="ATTR=JSON",
                     help="StrainLimiter attribute for --probe, e.g. --set active_margin=0.005")
     args = ap.parse_args()
@@ -186,7 +192,7 @@ def main():
             overrides[key] = json.loads(value)
         print(json.dumps(child(int(args.probe[0]), args.probe[1], args.coupling,
                                args.linear_solver, curvature, args.frames, args.ke_from,
-                               overrides)))
+                               overrides, args.bending)))
         return
     if args.child:
         print(json.dumps(child(*json.loads(args.child))))

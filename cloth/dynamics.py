@@ -14,12 +14,19 @@ Membrane: St. Venant-Kirchhoff in the triangle's grain frame. With F_g = F [e_wa
 ``A (k_warp E11^2 / 2 + k_weft E22^2 / 2 + 2 k_shear E12^2)``: separate warp, weft and shear
 stiffness, exact for large rotations.
 
-Bending: the hinge (discrete-shells) energy ``k_bend w_e (theta - theta_0)^2 / 2`` of every
-interior edge, theta its dihedral angle, with ``w_e = BEND_CONSTANT |e|^2 / (A1 + A2)`` (material
-edge length and areas of its two faces; Grinspun et al. 2003 have 3 for BEND_CONSTANT, here the
-measured 1.17), so that ``k_bend`` is the flexural rigidity B of the plate energy (B / 2) kappa^2
-per area (cloth/model.py); the dihedral-angle gradient is Bridson et al.'s (2003). B holds
-within 5-11 % for strips along the mesh lines, not on the bias (docs/calibration/).
+Bending, one of two energies (``ClothModel.bending``):
+- isotropic (the default): ``(k_bend / 2) sum_c x_c^T Q x_c`` with Q a constant matrix built
+  from the material mesh (cloth/bending.py), the plate energy (B / 2) |II|^2 of an isometric
+  bend; k_bend is the flexural rigidity B in every direction (0.96-1.05 B over the
+  calibration's patterns, directions and 0.5-2 cm triangles, docs/calibration/). Its forces
+  are -k_bend Q x and its stiffness k_bend Q, exactly; Q is stored by rows (``bend_ptr``,
+  ``bend_col``, ``bend_val``), and it couples vertices two rings apart.
+- hinge (discrete shells, for a curved rest shape): ``k_bend w_e (theta - theta_0)^2 / 2``
+  per interior edge, theta its dihedral angle, ``w_e = BEND_CONSTANT |e|^2 / (A1 + A2)``
+  (cloth/model.py); the dihedral-angle gradient is Bridson et al.'s (2003). B holds within
+  5-11 % for strips along the mesh lines, not on the bias (up to 2.7 B).
+The model leaves the other energy's arrays empty (zero hinge weights, or rows without
+entries), so every kernel evaluates both.
 
 Positive semi-definite K: the solver uses the Gauss-Newton part of every Hessian plus the
 curvature terms that are non-negative (the stretch terms in tension). The dropped parts (stretch
@@ -54,7 +61,7 @@ from .ndarrays import A, T
 # The model's arrays the kernels read, in the order the kernels take them (then x and v).
 MESH_ARRAYS = ("vert_mass", "vert_pinned", "vert_pin_target", "face_verts", "face_Dm_inv",
                "face_rest_area", "face_grain", "edge_verts", "edge_faces", "edge_opp",
-               "edge_rest_angle", "edge_bend_weight")
+               "edge_rest_angle", "edge_bend_weight", "bend_ptr", "bend_col", "bend_val")
 
 
 @dataclass
@@ -87,7 +94,7 @@ class ImplicitEuler:
         self.last_cg_iters = 0
         self.last_cg_residual = 0.0
         # The CG loop on the host, a launch per iteration, where one long launch fails
-        # (backend.HOST_LOOP_AL: Vulkan, Metal; see ``_begin``). Settable, for tests.
+        # (backend.HOST_LOOP_AL: Vulkan, Metal; see ``_linearise``). Settable, for tests.
         self.host_loop = backend.arch() in backend.HOST_LOOP_AL
         # Every work array is allocated once, here, sized from the model's capacities (the
         # model never grows in place: the simulator builds a new model and new solvers). They
@@ -152,20 +159,27 @@ class ImplicitEuler:
 
     def _step_host_loop(self, h):
         """``step`` with the CG loop on the host, one launch per iteration (Vulkan, Metal:
-        see ``_begin``). The same arithmetic as the one-launch kernel."""
+        see ``_linearise``). The same arithmetic as the one-launch kernel."""
         m, mat, s = self.model, self.model.material, self.settings
         k = (mat.k_warp, mat.k_weft, mat.k_shear, mat.k_bend)
         alpha, beta, kst = mat.damp_mass, mat.damp_stiff, s.stitch_stiffness
         counts = (m.n_verts, m.n_faces, m.n_edges, self.n_stitches)
-        rz, bnorm = _begin(h, ti.Vector(list(s.gravity)), *k, alpha, beta, kst, *counts,
-                           *self._mesh(), *self._elements(), self.force, self.dv, self.rhs,
-                           self.res, self.z, self.p, self.Ap, self.precond)
+        _linearise(h, ti.Vector(list(s.gravity)), *k, alpha, beta, kst, *counts, *self._mesh(),
+                   *self._elements(), self.force, self.rhs, self.precond)
+        rz, bnorm = _start(h, alpha, beta, *k, kst, *counts, m.vert_mass, m.vert_pinned,
+                           m.vert_pin_target, m.face_verts, m.face_rest_area, m.edge_verts,
+                           m.edge_faces, m.edge_opp, m.edge_bend_weight, m.bend_ptr, m.bend_col,
+                           m.bend_val, m.state.x, m.state.v, self.face_fu, self.face_fv,
+                           self.face_E, self.face_wa, self.face_wb, self.edge_grad,
+                           self.stitch, self.dv, self.rhs, self.res, self.z, self.p, self.Ap,
+                           self.precond)
         rel = float(np.sqrt(abs(rz) / max(bnorm, 1e-300)))
         iters = 0
         while iters < s.cg_max_iters and rel > s.cg_tol:
             rz_new, stalled = _iteration(
                 rz, h, alpha, beta, *k, kst, *counts, m.vert_mass, m.vert_pinned, m.face_verts,
                 m.face_rest_area, m.edge_verts, m.edge_faces, m.edge_opp, m.edge_bend_weight,
+                m.bend_ptr, m.bend_col, m.bend_val,
                 self.face_fu, self.face_fv, self.face_E, self.face_wa, self.face_wb,
                 self.edge_grad, self.stitch, self.dv, self.res, self.z, self.p, self.Ap,
                 self.precond)
@@ -215,19 +229,24 @@ class ImplicitEuler:
         K_psd, linearised where that step started (the element data its ``linearise`` left).
         Pinned rows are not filtered (the strain solver keeps pins fixed itself)."""
         mat, s, m = self.model.material, self.settings, self.model
+        if getattr(B, "n_bend", 0) != m.n_bend:
+            raise ValueError(f"the block pattern holds {getattr(B, 'n_bend', 0)} bending entries, "
+                             f"the model {m.n_bend}: build it with system_matrix.pattern_of")
         _fill_blocks(h, mat.damp_mass, mat.damp_stiff, mat.k_warp, mat.k_weft, mat.k_shear,
                      mat.k_bend, s.stitch_stiffness, m.n_verts, m.n_faces, m.n_edges,
                      self.n_stitches, B.nnz, B.val, B.diag, B.face_slot, B.edge_slot,
-                     B.stitch_slot, *self._mesh(), *self._elements())
+                     B.stitch_slot, B.bend_slot, *self._mesh(), *self._elements())
 
 
 @ti.kernel
 def _fill_blocks(h: float, alpha: float, beta: float, kw: float, kf: float, ks: float,
                  kb: float, kst: float, nv: ti.i32, nf: ti.i32, ne: ti.i32, nst: ti.i32,
                  nnz: ti.i32, val: A, diag: A, face_slot: A, edge_slot: A, stitch_slot: A,
+                 bend_slot: A,
                  vert_mass: A, vert_pinned: A, vert_pin_target: A, face_verts: A,
                  face_Dm_inv: A, face_rest_area: A, face_grain: A, edge_verts: A,
-                 edge_faces: A, edge_opp: A, edge_rest_angle: A, edge_bend_weight: A, x: A,
+                 edge_faces: A, edge_opp: A, edge_rest_angle: A, edge_bend_weight: A, bend_ptr: A,
+                 bend_col: A, bend_val: A, x: A,
                  v: A, face_fu: A, face_fv: A, face_E: A, face_wa: A, face_wb: A,
                  edge_grad: A, edge_theta: A, stitch: A):
     # The blocks of add_K_product (exact = 0) written out: serial, as elements share blocks.
@@ -255,6 +274,9 @@ def _fill_blocks(h: float, alpha: float, beta: float, kw: float, kf: float, ks: 
                     for q in ti.static(range(4)):
                         gq = ti.Vector([G[q, 0], G[q, 1], G[q, 2]])
                         val[edge_slot[e, 4 * n + q]] += k * gn.outer_product(gq)
+        for i in range(bend_ptr.shape[0] - 1):
+            for kq in range(bend_ptr[i], bend_ptr[i + 1]):
+                val[bend_slot[kq]] += scale * kb * bend_val[kq] * I
         for s in range(nst):
             k = scale * kst
             val[stitch_slot[s, 0]] += k * I
@@ -362,11 +384,23 @@ def update_kinematics(nf: ti.i32, ne: ti.i32, x: T, face_verts: T, face_Dm_inv: 
         update_edge(e, x, edge_verts, edge_faces, edge_opp, edge_grad, edge_theta)
 
 
+@ti.func
+def bend_apply(src: T, dst: T, scale, bend_ptr: T, bend_col: T, bend_val: T):
+    """dst += scale * Q src, Q the isotropic bending matrix (cloth/bending.py; its rows are
+    empty when the model uses the hinge energy). Row by row: no atomics."""
+    for i in range(bend_ptr.shape[0] - 1):
+        acc = ti.Vector([0.0, 0.0, 0.0])
+        for k in range(bend_ptr[i], bend_ptr[i + 1]):
+            acc += bend_val[k] * src[bend_col[k]]
+        dst[i] += scale * acc
+
+
 # -- forces -----------------------------------------------------------------------------------
 @ti.func
 def add_elastic_forces(force: T, kw, kf, ks, kb, kst, nf: ti.i32, ne: ti.i32, nst: ti.i32,
                        x: T, face_verts: T, face_rest_area: T, edge_verts: T, edge_faces: T,
-                       edge_opp: T, edge_rest_angle: T, edge_bend_weight: T, face_fu: T,
+                       edge_opp: T, edge_rest_angle: T, edge_bend_weight: T, bend_ptr: T,
+                       bend_col: T, bend_val: T, face_fu: T,
                        face_fv: T, face_E: T, face_wa: T, face_wb: T, edge_grad: T,
                        edge_theta: T, stitch: T):
     for f in range(nf):
@@ -385,6 +419,7 @@ def add_elastic_forces(force: T, kw, kf, ks, kb, kst, nf: ti.i32, ne: ti.i32, ns
             for n in ti.static(range(4)):
                 vid = edge_vertex(e, n, edge_verts, edge_opp)
                 force[vid] -= coef * ti.Vector([G[n, 0], G[n, 1], G[n, 2]])
+    bend_apply(x, force, -kb, bend_ptr, bend_col, bend_val)
     for s in range(nst):
         a, b = stitch[s][0], stitch[s][1]
         d = x[a] - x[b]
@@ -395,7 +430,8 @@ def add_elastic_forces(force: T, kw, kf, ks, kb, kst, nf: ti.i32, ne: ti.i32, ns
 @ti.func
 def add_K_product(src: T, dst: T, scale, kw, kf, ks, kb, kst, nf: ti.i32, ne: ti.i32,
                   nst: ti.i32, exact: ti.i32, face_verts: T, face_rest_area: T, edge_verts: T,
-                  edge_faces: T, edge_opp: T, edge_bend_weight: T, face_fu: T, face_fv: T,
+                  edge_faces: T, edge_opp: T, edge_bend_weight: T, bend_ptr: T, bend_col: T,
+                  bend_val: T, face_fu: T, face_fv: T,
                   face_E: T, face_wa: T, face_wb: T, edge_grad: T, stitch: T):
     """dst += scale * K src, with K = -df/dx (PSD-projected unless ``exact``)."""
     for f in range(nf):
@@ -427,6 +463,7 @@ def add_K_product(src: T, dst: T, scale, kw, kf, ks, kb, kst, nf: ti.i32, ne: ti
             for n in ti.static(range(4)):
                 dst[edge_vertex(e, n, edge_verts, edge_opp)] += scale * k * dtheta * \
                     ti.Vector([G[n, 0], G[n, 1], G[n, 2]])
+    bend_apply(src, dst, scale * kb, bend_ptr, bend_col, bend_val)
     for s in range(nst):
         a, b = stitch[s][0], stitch[s][1]
         d = src[a] - src[b]
@@ -437,7 +474,8 @@ def add_K_product(src: T, dst: T, scale, kw, kf, ks, kb, kst, nf: ti.i32, ne: ti
 @ti.func
 def add_K_diagonal(precond: T, scale, kw, kf, ks, kb, kst, nf: ti.i32, ne: ti.i32,
                    nst: ti.i32, face_verts: T, face_rest_area: T, edge_verts: T,
-                   edge_faces: T, edge_opp: T, edge_bend_weight: T, face_fu: T, face_fv: T,
+                   edge_faces: T, edge_opp: T, edge_bend_weight: T, bend_ptr: T, bend_col: T,
+                   bend_val: T, face_fu: T, face_fv: T,
                    face_E: T, face_wa: T, face_wb: T, edge_grad: T, stitch: T):
     """precond += scale * (3x3 diagonal blocks of the PSD K)."""
     for f in range(nf):
@@ -453,6 +491,9 @@ def add_K_diagonal(precond: T, scale, kw, kf, ks, kb, kst, nf: ti.i32, ne: ti.i3
             for n in ti.static(range(4)):
                 g = ti.Vector([G[n, 0], G[n, 1], G[n, 2]])
                 precond[edge_vertex(e, n, edge_verts, edge_opp)] += scale * k * g.outer_product(g)
+    for i in range(bend_ptr.shape[0] - 1):
+        if bend_ptr[i + 1] > bend_ptr[i]:          # the row's diagonal entry comes first
+            precond[i] += scale * kb * bend_val[bend_ptr[i]] * ti.Matrix.identity(float, 3)
     for s in range(nst):
         I = ti.Matrix.identity(float, 3)
         precond[stitch[s][0]] += scale * kst * I
@@ -465,7 +506,8 @@ def _elastic_forces(kw: float, kf: float, ks: float, kb: float, kst: float, nv: 
                     nf: ti.i32, ne: ti.i32, nst: ti.i32, vert_mass: A, vert_pinned: A,
                     vert_pin_target: A, face_verts: A, face_Dm_inv: A, face_rest_area: A,
                     face_grain: A, edge_verts: A, edge_faces: A, edge_opp: A,
-                    edge_rest_angle: A, edge_bend_weight: A, x: A, v: A, face_fu: A,
+                    edge_rest_angle: A, edge_bend_weight: A, bend_ptr: A, bend_col: A, bend_val: A,
+                    x: A, v: A, face_fu: A,
                     face_fv: A, face_E: A, face_wa: A, face_wb: A, edge_grad: A,
                     edge_theta: A, stitch: A, force: A):
     for i in range(nv):
@@ -475,6 +517,7 @@ def _elastic_forces(kw: float, kf: float, ks: float, kb: float, kst: float, nv: 
                       edge_theta)
     add_elastic_forces(force, kw, kf, ks, kb, kst, nf, ne, nst, x, face_verts, face_rest_area,
                        edge_verts, edge_faces, edge_opp, edge_rest_angle, edge_bend_weight,
+                       bend_ptr, bend_col, bend_val,
                        face_fu, face_fv, face_E, face_wa, face_wb, edge_grad, edge_theta,
                        stitch)
 
@@ -484,7 +527,8 @@ def _jacobian_product(kw: float, kf: float, ks: float, kb: float, kst: float, nv
                       nf: ti.i32, ne: ti.i32, nst: ti.i32, exact: ti.i32, vert_mass: A,
                       vert_pinned: A, vert_pin_target: A, face_verts: A, face_Dm_inv: A,
                       face_rest_area: A, face_grain: A, edge_verts: A, edge_faces: A,
-                      edge_opp: A, edge_rest_angle: A, edge_bend_weight: A, x: A, v: A,
+                      edge_opp: A, edge_rest_angle: A, edge_bend_weight: A, bend_ptr: A,
+                      bend_col: A, bend_val: A, x: A, v: A,
                       face_fu: A, face_fv: A, face_E: A, face_wa: A, face_wb: A,
                       edge_grad: A, edge_theta: A, stitch: A, p: A, Ap: A):
     for i in range(nv):
@@ -493,7 +537,8 @@ def _jacobian_product(kw: float, kf: float, ks: float, kb: float, kst: float, nv
                       edge_opp, face_fu, face_fv, face_E, face_wa, face_wb, edge_grad,
                       edge_theta)
     add_K_product(p, Ap, 1.0, kw, kf, ks, kb, kst, nf, ne, nst, exact, face_verts,
-                  face_rest_area, edge_verts, edge_faces, edge_opp, edge_bend_weight, face_fu,
+                  face_rest_area, edge_verts, edge_faces, edge_opp, edge_bend_weight, bend_ptr,
+                  bend_col, bend_val, face_fu,
                   face_fv, face_E, face_wa, face_wb, edge_grad, stitch)
 
 
@@ -501,7 +546,8 @@ def _jacobian_product(kw: float, kf: float, ks: float, kb: float, kst: float, nv
 def _energy(kw: float, kf: float, ks: float, kb: float, kst: float, nf: ti.i32, ne: ti.i32,
             nst: ti.i32, vert_mass: A, vert_pinned: A, vert_pin_target: A, face_verts: A,
             face_Dm_inv: A, face_rest_area: A, face_grain: A, edge_verts: A, edge_faces: A,
-            edge_opp: A, edge_rest_angle: A, edge_bend_weight: A, x: A, v: A, face_fu: A,
+            edge_opp: A, edge_rest_angle: A, edge_bend_weight: A, bend_ptr: A, bend_col: A,
+            bend_val: A, x: A, v: A, face_fu: A,
             face_fv: A, face_E: A, face_wa: A, face_wb: A, edge_grad: A, edge_theta: A,
             stitch: A) -> float:
     update_kinematics(nf, ne, x, face_verts, face_Dm_inv, face_grain, edge_verts, edge_faces,
@@ -516,6 +562,11 @@ def _energy(kw: float, kf: float, ks: float, kb: float, kst: float, nf: ti.i32, 
         if edge_faces[e][1] >= 0:
             d = edge_theta[e] - edge_rest_angle[e]
             total += 0.5 * kb * edge_bend_weight[e] * d * d
+    # x.Qx about vertex 0 (Q annihilates translations): far from the origin the plain sum
+    # loses the energy of small bends to round-off.
+    for i in range(bend_ptr.shape[0] - 1):
+        for k in range(bend_ptr[i], bend_ptr[i + 1]):
+            total += 0.5 * kb * bend_val[k] * (x[i] - x[0]).dot(x[bend_col[k]] - x[0])
     for s in range(nst):
         d = x[stitch[s][0]] - x[stitch[s][1]]
         total += 0.5 * kst * d.dot(d)
@@ -535,13 +586,15 @@ def free_residual(res: T, rhs: T, Ap: T, vert_pinned: T, nv: ti.i32):
 def apply_A(src: T, dst: T, h, alpha, beta, kw, kf, ks, kb, kst, nv: ti.i32, nf: ti.i32,
             ne: ti.i32, nst: ti.i32, vert_mass: T, vert_pinned: T, face_verts: T,
             face_rest_area: T, edge_verts: T, edge_faces: T, edge_opp: T,
-            edge_bend_weight: T, face_fu: T, face_fv: T, face_E: T, face_wa: T, face_wb: T,
+            edge_bend_weight: T, bend_ptr: T, bend_col: T, bend_val: T, face_fu: T, face_fv: T,
+            face_E: T, face_wa: T, face_wb: T,
             edge_grad: T, stitch: T):
     """dst = A src with A = (1 + h alpha) M + h (beta + h) K, pinned rows filtered."""
     for i in range(nv):
         dst[i] = (1.0 + h * alpha) * vert_mass[i] * src[i]
     add_K_product(src, dst, h * (beta + h), kw, kf, ks, kb, kst, nf, ne, nst, 0, face_verts,
-                  face_rest_area, edge_verts, edge_faces, edge_opp, edge_bend_weight, face_fu,
+                  face_rest_area, edge_verts, edge_faces, edge_opp, edge_bend_weight, bend_ptr,
+                  bend_col, bend_val, face_fu,
                   face_fv, face_E, face_wa, face_wb, edge_grad, stitch)
     for i in range(nv):
         if vert_pinned[i] != 0:
@@ -552,7 +605,8 @@ def apply_A(src: T, dst: T, h, alpha, beta, kw, kf, ks, kb, kst, nv: ti.i32, nf:
 def linearise(h, g, kw, kf, ks, kb, alpha, beta, kst, nv: ti.i32, nf: ti.i32, ne: ti.i32,
               nst: ti.i32, force: T, precond: T, rhs: T, vert_mass: T, face_verts: T,
               face_Dm_inv: T, face_rest_area: T, face_grain: T, edge_verts: T, edge_faces: T,
-              edge_opp: T, edge_rest_angle: T, edge_bend_weight: T, x: T, v: T, face_fu: T,
+              edge_opp: T, edge_rest_angle: T, edge_bend_weight: T, bend_ptr: T, bend_col: T,
+              bend_val: T, x: T, v: T, face_fu: T,
               face_fv: T, face_E: T, face_wa: T, face_wb: T, edge_grad: T, edge_theta: T,
               stitch: T):
     """Forces and element quantities at the start of the step, the diagonal blocks of A
@@ -565,15 +619,18 @@ def linearise(h, g, kw, kf, ks, kb, alpha, beta, kst, nv: ti.i32, nf: ti.i32, ne
                       edge_theta)
     add_elastic_forces(force, kw, kf, ks, kb, kst, nf, ne, nst, x, face_verts, face_rest_area,
                        edge_verts, edge_faces, edge_opp, edge_rest_angle, edge_bend_weight,
+                       bend_ptr, bend_col, bend_val,
                        face_fu, face_fv, face_E, face_wa, face_wb, edge_grad, edge_theta,
                        stitch)
     add_K_diagonal(precond, h * (beta + h), kw, kf, ks, kb, kst, nf, ne, nst, face_verts,
-                   face_rest_area, edge_verts, edge_faces, edge_opp, edge_bend_weight, face_fu,
+                   face_rest_area, edge_verts, edge_faces, edge_opp, edge_bend_weight, bend_ptr,
+                   bend_col, bend_val, face_fu,
                    face_fv, face_E, face_wa, face_wb, edge_grad, stitch)
     for i in range(nv):
         rhs[i] = h * (force[i] - alpha * vert_mass[i] * v[i])
     add_K_product(v, rhs, -h * (beta + h), kw, kf, ks, kb, kst, nf, ne, nst, 0, face_verts,
-                  face_rest_area, edge_verts, edge_faces, edge_opp, edge_bend_weight, face_fu,
+                  face_rest_area, edge_verts, edge_faces, edge_opp, edge_bend_weight, bend_ptr,
+                  bend_col, bend_val, face_fu,
                   face_fv, face_E, face_wa, face_wb, edge_grad, stitch)
 
 
@@ -582,15 +639,32 @@ def linearise(h, g, kw, kf, ks, kb, alpha, beta, kst, nv: ti.i32, nf: ti.i32, ne
 def cg_begin(h, g, kw, kf, ks, kb, alpha, beta, kst, nv: ti.i32, nf: ti.i32, ne: ti.i32,
              nst: ti.i32, vert_mass: T, vert_pinned: T, vert_pin_target: T, face_verts: T,
              face_Dm_inv: T, face_rest_area: T, face_grain: T, edge_verts: T, edge_faces: T,
-             edge_opp: T, edge_rest_angle: T, edge_bend_weight: T, x: T, v: T, face_fu: T,
-             face_fv: T, face_E: T, face_wa: T, face_wb: T, edge_grad: T, edge_theta: T,
-             stitch: T, force: T, dv: T, rhs: T, res: T, z: T, p: T, Ap: T, precond: T):
+             edge_opp: T, edge_rest_angle: T, edge_bend_weight: T, bend_ptr: T, bend_col: T,
+             bend_val: T, x: T, v: T, face_fu: T, face_fv: T, face_E: T, face_wa: T,
+             face_wb: T, edge_grad: T, edge_theta: T, stitch: T, force: T, dv: T, rhs: T,
+             res: T, z: T, p: T, Ap: T, precond: T):
     """Linearise, prescribe the pinned dv, and start PCG: returns (r.z, b.P b) (CG's scale:
     the free rows only)."""
     linearise(h, g, kw, kf, ks, kb, alpha, beta, kst, nv, nf, ne, nst, force, precond, rhs,
               vert_mass, face_verts, face_Dm_inv, face_rest_area, face_grain, edge_verts,
-              edge_faces, edge_opp, edge_rest_angle, edge_bend_weight, x, v, face_fu,
-              face_fv, face_E, face_wa, face_wb, edge_grad, edge_theta, stitch)
+              edge_faces, edge_opp, edge_rest_angle, edge_bend_weight, bend_ptr, bend_col,
+              bend_val, x, v, face_fu, face_fv, face_E, face_wa, face_wb, edge_grad,
+              edge_theta, stitch)
+    return cg_start(h, alpha, beta, kw, kf, ks, kb, kst, nv, nf, ne, nst, vert_mass,
+                    vert_pinned, vert_pin_target, face_verts, face_rest_area, edge_verts,
+                    edge_faces, edge_opp, edge_bend_weight, bend_ptr, bend_col, bend_val, x,
+                    v, face_fu, face_fv, face_E, face_wa, face_wb, edge_grad, stitch, dv, rhs,
+                    res, z, p, Ap, precond)
+
+
+@ti.func
+def cg_start(h, alpha, beta, kw, kf, ks, kb, kst, nv: ti.i32, nf: ti.i32, ne: ti.i32,
+             nst: ti.i32, vert_mass: T, vert_pinned: T, vert_pin_target: T, face_verts: T,
+             face_rest_area: T, edge_verts: T, edge_faces: T, edge_opp: T,
+             edge_bend_weight: T, bend_ptr: T, bend_col: T, bend_val: T, x: T, v: T,
+             face_fu: T, face_fv: T, face_E: T, face_wa: T, face_wb: T, edge_grad: T,
+             stitch: T, dv: T, rhs: T, res: T, z: T, p: T, Ap: T, precond: T):
+    """After ``linearise``: prescribe the pinned dv and start PCG."""
     # Pinned vertices: the dv that lands them on their target at the end of the step.
     # Free vertices start CG from the last step's dv (warm start: near rest, successive
     # velocity changes are alike); on_mesh_changed zeroes it after a remesh.
@@ -601,7 +675,8 @@ def cg_begin(h, g, kw, kf, ks, kb, alpha, beta, kst, nv: ti.i32, nf: ti.i32, ne:
     # r = b - A dv over the free vertices (pinned dv enters through the coupling).
     apply_A(dv, Ap, h, alpha, beta, kw, kf, ks, kb, kst, nv, nf, ne, nst, vert_mass,
             vert_pinned, face_verts, face_rest_area, edge_verts, edge_faces, edge_opp,
-            edge_bend_weight, face_fu, face_fv, face_E, face_wa, face_wb, edge_grad, stitch)
+            edge_bend_weight, bend_ptr, bend_col, bend_val, face_fu, face_fv, face_E, face_wa,
+            face_wb, edge_grad, stitch)
     free_residual(res, rhs, Ap, vert_pinned, nv)
     rz = 0.0
     bnorm = 0.0
@@ -618,14 +693,16 @@ def cg_begin(h, g, kw, kf, ks, kb, alpha, beta, kst, nv: ti.i32, nf: ti.i32, ne:
 def cg_iteration(rz, h, alpha, beta, kw, kf, ks, kb, kst, nv: ti.i32, nf: ti.i32,
                  ne: ti.i32, nst: ti.i32, vert_mass: T, vert_pinned: T, face_verts: T,
                  face_rest_area: T, edge_verts: T, edge_faces: T, edge_opp: T,
-                 edge_bend_weight: T, face_fu: T, face_fv: T, face_E: T, face_wa: T,
+                 edge_bend_weight: T, bend_ptr: T, bend_col: T, bend_val: T, face_fu: T,
+                 face_fv: T, face_E: T, face_wa: T,
                  face_wb: T, edge_grad: T, stitch: T, dv: T, res: T, z: T, p: T, Ap: T,
                  precond: T):
     """One preconditioned CG iteration on the free vertices: returns (new r.z, 1 if it
     stalled on p.A p <= 0 and changed nothing)."""
     apply_A(p, Ap, h, alpha, beta, kw, kf, ks, kb, kst, nv, nf, ne, nst, vert_mass,
             vert_pinned, face_verts, face_rest_area, edge_verts, edge_faces, edge_opp,
-            edge_bend_weight, face_fu, face_fv, face_E, face_wa, face_wb, edge_grad, stitch)
+            edge_bend_weight, bend_ptr, bend_col, bend_val, face_fu, face_fv, face_E, face_wa,
+            face_wb, edge_grad, stitch)
     pAp = 0.0
     for i in range(nv):
         pAp += p[i].dot(Ap[i])
@@ -669,7 +746,8 @@ def _step(h: float, g: ti.types.vector(3, float), kw: float, kf: float, ks: floa
           nst: ti.i32, tol: float, max_iters: ti.i32, vert_mass: A, vert_pinned: A,
           vert_pin_target: A, face_verts: A, face_Dm_inv: A, face_rest_area: A,
           face_grain: A, edge_verts: A, edge_faces: A, edge_opp: A, edge_rest_angle: A,
-          edge_bend_weight: A, x: A, v: A, face_fu: A, face_fv: A, face_E: A, face_wa: A,
+          edge_bend_weight: A, bend_ptr: A, bend_col: A, bend_val: A, x: A, v: A, face_fu: A,
+          face_fv: A, face_E: A, face_wa: A,
           face_wb: A, edge_grad: A, edge_theta: A, stitch: A, force: A, dv: A, rhs: A,
           res: A, z: A, p: A, Ap: A, precond: A, scalars: A) -> ti.types.vector(2, float):
     """(relative residual, CG iterations), also left in scalars[0] and scalars[1]."""
@@ -681,7 +759,8 @@ def _step(h: float, g: ti.types.vector(3, float), kw: float, kf: float, ks: floa
         rb = cg_begin(h, g, kw, kf, ks, kb, alpha, beta, kst, nv, nf, ne, nst, vert_mass,
                       vert_pinned, vert_pin_target, face_verts, face_Dm_inv, face_rest_area,
                       face_grain, edge_verts, edge_faces, edge_opp, edge_rest_angle,
-                      edge_bend_weight, x, v, face_fu, face_fv, face_E, face_wa, face_wb,
+                      edge_bend_weight, bend_ptr, bend_col, bend_val, x, v, face_fu, face_fv,
+                      face_E, face_wa, face_wb,
                       edge_grad, edge_theta, stitch, force, dv, rhs, res, z, p, Ap, precond)
         rz, bnorm = rb[0], rb[1]
         iters = 0
@@ -690,7 +769,8 @@ def _step(h: float, g: ti.types.vector(3, float), kw: float, kf: float, ks: floa
         while iters < max_iters and rel > tol and stalled == 0.0:
             out = cg_iteration(rz, h, alpha, beta, kw, kf, ks, kb, kst, nv, nf, ne, nst,
                                vert_mass, vert_pinned, face_verts, face_rest_area, edge_verts,
-                               edge_faces, edge_opp, edge_bend_weight, face_fu, face_fv, face_E,
+                               edge_faces, edge_opp, edge_bend_weight, bend_ptr, bend_col,
+                               bend_val, face_fu, face_fv, face_E,
                                face_wa, face_wb, edge_grad, stitch, dv, res, z, p, Ap, precond)
             stalled = out[1]
             if stalled == 0.0:
@@ -708,23 +788,42 @@ def _step(h: float, g: ti.types.vector(3, float), kw: float, kf: float, ks: floa
 # the one-launch step computed dv but never wrote v and x once it ran 14 CG iterations or more
 # (13 were fine; KE stayed exactly 0 and the cloth never fell), like the strain solver's
 # one-launch solve, which crashed that driver.
+# Two launches where the one-launch step has cg_begin: Vulkan and Metal take at most 31
+# ndarray arguments per kernel (measured on lavapipe: 32 silently drops one, 33 crashes).
 @ti.kernel
-def _begin(h: float, g: ti.types.vector(3, float), kw: float, kf: float, ks: float, kb: float,
-           alpha: float, beta: float, kst: float, nv: ti.i32, nf: ti.i32, ne: ti.i32,
-           nst: ti.i32, vert_mass: A, vert_pinned: A, vert_pin_target: A, face_verts: A,
-           face_Dm_inv: A, face_rest_area: A, face_grain: A, edge_verts: A, edge_faces: A,
-           edge_opp: A, edge_rest_angle: A, edge_bend_weight: A, x: A, v: A, face_fu: A,
-           face_fv: A, face_E: A, face_wa: A, face_wb: A, edge_grad: A, edge_theta: A,
-           stitch: A, force: A, dv: A, rhs: A, res: A, z: A, p: A, Ap: A,
+def _linearise(h: float, g: ti.types.vector(3, float), kw: float, kf: float, ks: float,
+               kb: float, alpha: float, beta: float, kst: float, nv: ti.i32, nf: ti.i32,
+               ne: ti.i32, nst: ti.i32, vert_mass: A, vert_pinned: A, vert_pin_target: A,
+               face_verts: A, face_Dm_inv: A, face_rest_area: A, face_grain: A, edge_verts: A,
+               edge_faces: A, edge_opp: A, edge_rest_angle: A, edge_bend_weight: A,
+               bend_ptr: A, bend_col: A, bend_val: A, x: A, v: A, face_fu: A, face_fv: A,
+               face_E: A, face_wa: A, face_wb: A, edge_grad: A, edge_theta: A, stitch: A,
+               force: A, rhs: A, precond: A):
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        linearise(h, g, kw, kf, ks, kb, alpha, beta, kst, nv, nf, ne, nst, force, precond, rhs,
+                  vert_mass, face_verts, face_Dm_inv, face_rest_area, face_grain, edge_verts,
+                  edge_faces, edge_opp, edge_rest_angle, edge_bend_weight, bend_ptr, bend_col,
+                  bend_val, x, v, face_fu, face_fv, face_E, face_wa, face_wb, edge_grad,
+                  edge_theta, stitch)
+
+
+@ti.kernel
+def _start(h: float, alpha: float, beta: float, kw: float, kf: float, ks: float, kb: float,
+           kst: float, nv: ti.i32, nf: ti.i32, ne: ti.i32, nst: ti.i32, vert_mass: A,
+           vert_pinned: A, vert_pin_target: A, face_verts: A, face_rest_area: A,
+           edge_verts: A, edge_faces: A, edge_opp: A, edge_bend_weight: A, bend_ptr: A,
+           bend_col: A, bend_val: A, x: A, v: A, face_fu: A, face_fv: A, face_E: A, face_wa: A,
+           face_wb: A, edge_grad: A, stitch: A, dv: A, rhs: A, res: A, z: A, p: A, Ap: A,
            precond: A) -> ti.types.vector(2, float):
     ti.loop_config(serialize=True)
     out = ti.Vector([0.0, 0.0])
     for _ in range(1):
-        out = cg_begin(h, g, kw, kf, ks, kb, alpha, beta, kst, nv, nf, ne, nst, vert_mass,
-                       vert_pinned, vert_pin_target, face_verts, face_Dm_inv, face_rest_area,
-                       face_grain, edge_verts, edge_faces, edge_opp, edge_rest_angle,
-                       edge_bend_weight, x, v, face_fu, face_fv, face_E, face_wa, face_wb,
-                       edge_grad, edge_theta, stitch, force, dv, rhs, res, z, p, Ap, precond)
+        out = cg_start(h, alpha, beta, kw, kf, ks, kb, kst, nv, nf, ne, nst, vert_mass,
+                       vert_pinned, vert_pin_target, face_verts, face_rest_area, edge_verts,
+                       edge_faces, edge_opp, edge_bend_weight, bend_ptr, bend_col, bend_val, x,
+                       v, face_fu, face_fv, face_E, face_wa, face_wb, edge_grad, stitch, dv,
+                       rhs, res, z, p, Ap, precond)
     return out
 
 
@@ -732,7 +831,8 @@ def _begin(h: float, g: ti.types.vector(3, float), kw: float, kf: float, ks: flo
 def _iteration(rz: float, h: float, alpha: float, beta: float, kw: float, kf: float,
                ks: float, kb: float, kst: float, nv: ti.i32, nf: ti.i32, ne: ti.i32,
                nst: ti.i32, vert_mass: A, vert_pinned: A, face_verts: A, face_rest_area: A,
-               edge_verts: A, edge_faces: A, edge_opp: A, edge_bend_weight: A, face_fu: A,
+               edge_verts: A, edge_faces: A, edge_opp: A, edge_bend_weight: A, bend_ptr: A,
+               bend_col: A, bend_val: A, face_fu: A,
                face_fv: A, face_E: A, face_wa: A, face_wb: A, edge_grad: A, stitch: A, dv: A,
                res: A, z: A, p: A, Ap: A, precond: A) -> ti.types.vector(2, float):
     ti.loop_config(serialize=True)
@@ -740,7 +840,8 @@ def _iteration(rz: float, h: float, alpha: float, beta: float, kw: float, kf: fl
     for _ in range(1):
         out = cg_iteration(rz, h, alpha, beta, kw, kf, ks, kb, kst, nv, nf, ne, nst, vert_mass,
                            vert_pinned, face_verts, face_rest_area, edge_verts, edge_faces,
-                           edge_opp, edge_bend_weight, face_fu, face_fv, face_E, face_wa,
+                           edge_opp, edge_bend_weight, bend_ptr, bend_col, bend_val, face_fu,
+                           face_fv, face_E, face_wa,
                            face_wb, edge_grad, stitch, dv, res, z, p, Ap, precond)
     return out
 

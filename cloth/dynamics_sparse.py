@@ -174,8 +174,9 @@ class SparseImplicitEuler(ImplicitEuler):
 
     def _ensure_builder(self, n, m):
         # Triplets (full blocks; the lower triangle needs about half): 9 per free vertex
-        # (mass), 81 per face, 144 per interior edge, 36 per stitch.
-        cap = 9 * m.n_verts + 81 * m.n_faces + 144 * m.n_edges + 36 * self.n_stitches
+        # (mass), 81 per face, 144 per interior edge, 36 per stitch, 9 per bending entry.
+        cap = 9 * m.n_verts + 81 * m.n_faces + 144 * m.n_edges + 36 * self.n_stitches + \
+            9 * m.n_bend
         key = (n, cap)
         if self._builder_key != key:
             self._builder = ti.linalg.SparseMatrixBuilder(n, n, max_num_triplets=cap,
@@ -190,7 +191,8 @@ def _prepare(h: float, g: ti.types.vector(3, float), kw: float, kf: float, ks: f
              ne: ti.i32, nst: ti.i32, warm: ti.i32, vert_mass: A, vert_pinned: A,
              vert_pin_target: A, face_verts: A, face_Dm_inv: A, face_rest_area: A,
              face_grain: A, edge_verts: A, edge_faces: A, edge_opp: A, edge_rest_angle: A,
-             edge_bend_weight: A, x: A, v: A, face_fu: A, face_fv: A, face_E: A, face_wa: A,
+             edge_bend_weight: A, bend_ptr: A, bend_col: A, bend_val: A, x: A, v: A, face_fu: A,
+             face_fv: A, face_E: A, face_wa: A,
              face_wb: A, edge_grad: A, edge_theta: A, stitch: A, force: A, dv: A, rhs: A,
              res: A, Ap: A, precond: A, scalars: A, free_index: A) -> ti.i32:
     """Forces, rhs, prescribed pinned dv, residual r = b - A dv0 in ``res`` (free rows),
@@ -199,7 +201,8 @@ def _prepare(h: float, g: ti.types.vector(3, float), kw: float, kf: float, ks: f
     for _ in range(1):
         linearise(h, g, kw, kf, ks, kb, alpha, beta, kst, nv, nf, ne, nst, force, precond, rhs,
                   vert_mass, face_verts, face_Dm_inv, face_rest_area, face_grain, edge_verts,
-                  edge_faces, edge_opp, edge_rest_angle, edge_bend_weight, x, v, face_fu,
+                  edge_faces, edge_opp, edge_rest_angle, edge_bend_weight, bend_ptr, bend_col,
+                  bend_val, x, v, face_fu,
                   face_fv, face_E, face_wa, face_wb, edge_grad, edge_theta, stitch)
         n_free = 0
         for i in range(nv):
@@ -213,7 +216,8 @@ def _prepare(h: float, g: ti.types.vector(3, float), kw: float, kf: float, ks: f
                 n_free += 1
         apply_A(dv, Ap, h, alpha, beta, kw, kf, ks, kb, kst, nv, nf, ne, nst, vert_mass,
                 vert_pinned, face_verts, face_rest_area, edge_verts, edge_faces, edge_opp,
-                edge_bend_weight, face_fu, face_fv, face_E, face_wa, face_wb, edge_grad,
+                edge_bend_weight, bend_ptr, bend_col, bend_val, face_fu, face_fv, face_E, face_wa,
+                face_wb, edge_grad,
                 stitch)
         free_residual(res, rhs, Ap, vert_pinned, nv)
         scalars[2] = n_free
@@ -247,7 +251,8 @@ def _assemble(B: ti.types.sparse_matrix_builder(), h: float, kw: float, kf: floa
               ne: ti.i32, nst: ti.i32, lower: ti.i32, scaled: ti.i32, vert_mass: A,
               vert_pinned: A, vert_pin_target: A, face_verts: A, face_Dm_inv: A,
               face_rest_area: A, face_grain: A, edge_verts: A, edge_faces: A, edge_opp: A,
-              edge_rest_angle: A, edge_bend_weight: A, x: A, v: A, face_fu: A, face_fv: A,
+              edge_rest_angle: A, edge_bend_weight: A, bend_ptr: A, bend_col: A, bend_val: A, x: A,
+              v: A, face_fu: A, face_fv: A,
               face_E: A, face_wa: A, face_wb: A, edge_grad: A, edge_theta: A, stitch: A,
               precond: A, free_index: A):
     """The free-free block of A = (1 + h alpha) M + h (beta + h) K_psd, element by element:
@@ -279,6 +284,10 @@ def _assemble(B: ti.types.sparse_matrix_builder(), h: float, kw: float, kf: floa
                     add_block(B, edge_vertex(e, n, edge_verts, edge_opp),
                               edge_vertex(e, q, edge_verts, edge_opp), kk * gn.outer_product(gq),
                               lower, scaled, precond, free_index)
+        for i in range(bend_ptr.shape[0] - 1):
+            for kq in range(bend_ptr[i], bend_ptr[i + 1]):
+                add_block(B, i, bend_col[kq], sc * kb * bend_val[kq] * I, lower, scaled, precond,
+                          free_index)
         for s in range(nst):
             a, b = stitch[s][0], stitch[s][1]
             add_block(B, a, a, sc * kst * I, lower, scaled, precond, free_index)

@@ -87,8 +87,9 @@ def wrinkle_measures(x, faces, edges, edge_faces, edge_opp, uv):
     """Fold measures over interior edges (flat cloth gives 0):
     ``mean_abs_dihedral``, the mean |dihedral angle| (rad) weighted by material edge length;
     ``curvature_energy``, the discrete-shells sum 3 |e|^2 theta^2 / (A1 + A2) (dimensionless;
-    kept as the wrinkle measure of the Table 1/2 documents: the model's bending energy is
-    k_bend / 2 times this sum scaled by model.BEND_CONSTANT / 3)."""
+    kept as the wrinkle measure of the Table 1/2 documents, whatever bending energy the
+    model uses: under ``bending = "hinge"`` the model's energy is k_bend / 2 times this sum
+    scaled by model.BEND_CONSTANT / 3)."""
     from .model import dihedral_angles
     theta = dihedral_angles(np.asarray(x, np.float64), edges, edge_opp)
     inner = edge_faces[:, 1] >= 0

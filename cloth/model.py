@@ -20,7 +20,7 @@ import numpy as np
 import taichi as ti
 from taichi.lang.util import to_numpy_type
 
-from . import metrics
+from . import bending as bending_energy, metrics
 from .metrics import signed_material_areas  # noqa: F401 (the model's users import it here)
 
 
@@ -31,9 +31,9 @@ class ModelError(ValueError):
 class CapacityExceeded(RuntimeError):
     """A mesh does not fit in a model's arrays (remeshing grew it past the spare capacity)."""
 
-    def __init__(self, nv, nf, ne, caps):
-        super().__init__(f"mesh of {nv} vertices, {nf} faces, {ne} edges exceeds the capacity "
-                         f"{caps}")
+    def __init__(self, nv, nf, ne, caps, nq=0):
+        super().__init__(f"mesh of {nv} vertices, {nf} faces, {ne} edges ({nq} bending "
+                         f"entries) exceeds the capacity {caps}")
         self.needed = (nv, nf, ne)
 
 
@@ -51,15 +51,15 @@ class CapacityExceeded(RuntimeError):
 # along the mesh's warp or weft lines, chord 7 or 41.5 deg, then matches the inextensible
 # elastica of flexural rigidity B = k_bend: 0.96-1.07 B at 0.5-1 cm, 0.95-1.11 B at 2 cm (the
 # high end: random triangulation, large deflection); with 3 it read 2.44-2.71 B.
-# Limit of the hinge energy: a strip cut at 45 deg to the mesh lines reads 0.78-1.11 B on the
-# regular pattern when its diagonals run across the strip (fold lines), 2.6-3.8 B when they
-# run along it (none), 1.05-1.88 B on the alternating and random patterns, stiffer the finer
+# Limit of the hinge energy: a strip cut at 45 deg to the mesh lines reads 0.84-1.04 B on the
+# regular pattern when its diagonals run across the strip (fold lines), 2.2-2.7 B when they
+# run along it (none), 1.2-1.8 B on the alternating and random patterns, stiffer the finer
 # the mesh (same document). No per-edge weight can cure that (on
 # the regular pattern the three edge directions fix the curvature tensor, so any weights give
-# a direction-dependent energy); it would take a bending energy that couples a triangle's edges.
-# The quadratic bending model with cotangent weights per edge is this energy to O(theta^2)
-# (the same out-of-plane stiffness at the flat state), so it measures the same; isotropic fits
-# tried, and what they need (a wider block pattern): docs/calibration/bending_models.md.
+# a direction-dependent energy); it takes a bending energy that couples a triangle's edges.
+# That is the isotropic energy (cloth/bending.py), the default for a flat rest shape; the
+# hinge stays for a curved rest shape (rest_x) and as ``sim.bending = "hinge"``. The energies
+# compared: docs/calibration/bending_models.md.
 BEND_CONSTANT = 1.17
 
 
@@ -199,22 +199,41 @@ class ClothModel:
       face_grain (F, mat2)            columns: warp and weft unit directions in material space
       edge_verts, edge_faces, edge_opp (E, ivec2)  see ``build_edges``
       edge_rest_angle (E, rad), edge_rest_len (E, m), edge_bend_weight (E, 1):
-      w_e, the edge's share of k_bend (BEND_CONSTANT)
+      w_e, the edge's share of k_bend (BEND_CONSTANT); zero under isotropic bending
+      bend_ptr (V + 1, i32), bend_col (Q, i32), bend_val (Q):  the isotropic bending matrix
+      (cloth/bending.py) by rows, each row's diagonal first; ``n_bend`` entries, none (every
+      row empty) under the hinge energy
+
+    ``bending``: "isotropic" (the default for a flat rest shape; k_bend is the plate's B in
+    every direction) or "hinge" (the discrete-shells energy: needed for a curved rest shape
+    ``rest_x``, which is also its default there; its B depends on the direction, 0.9-3 B).
     """
 
+    BENDING = ("isotropic", "hinge")
+
     def __init__(self, mesh: MeshArrays, material: Material, capacity_factor=1.5,
-                 rest_x=None):
+                 rest_x=None, bending=None):
         material.validate()
+        if bending is None:
+            bending = "hinge" if rest_x is not None else "isotropic"
+        if bending not in self.BENDING:
+            raise ModelError(f"unknown bending '{bending}': use isotropic or hinge")
+        if bending == "isotropic" and rest_x is not None:
+            raise ModelError("isotropic bending has a flat rest shape: use bending='hinge' for "
+                             "a curved rest shape (rest_x)")
+        self.bending = bending
         self.material = material
         self.capacity_factor = capacity_factor
-        self.v_cap = self.f_cap = self.e_cap = 0
-        self.n_verts = self.n_faces = self.n_edges = 0
+        self.v_cap = self.f_cap = self.e_cap = self.q_cap = 0
+        self.n_verts = self.n_faces = self.n_edges = self.n_bend = 0
         self.load(mesh, rest_x=rest_x)
 
     # -- allocation ---------------------------------------------------------------------------
-    def _allocate(self, nv, nf, ne):
+    def _allocate(self, nv, nf, ne, nq):
         cf = self.capacity_factor
         self.v_cap, self.f_cap, self.e_cap = (max(int(n * cf) + 8, 16) for n in (nv, nf, ne))
+        # Bending entries: ~19 per vertex on grids (its two rings); room for 24 per vertex.
+        self.q_cap = max(int(nq * cf) + 8, 24 * self.v_cap if nq else 1)
         V, F, E = self.v_cap, self.f_cap, self.e_cap
         vec, mat2 = ti.types.vector, ti.types.matrix(2, 2, float)
         self.vert_uv = ti.ndarray(vec(2, float), V)
@@ -230,10 +249,13 @@ class ClothModel:
         self.edge_opp = ti.ndarray(vec(2, ti.i32), E)
         self.edge_rest_angle = ti.ndarray(float, E)
         self.edge_bend_weight = ti.ndarray(float, E)
+        self.bend_ptr = ti.ndarray(ti.i32, V + 1)
+        self.bend_col = ti.ndarray(ti.i32, self.q_cap)
+        self.bend_val = ti.ndarray(float, self.q_cap)
         self.state = ClothState(V)
 
-    def fits(self, nv, nf, ne):
-        return nv <= self.v_cap and nf <= self.f_cap and ne <= self.e_cap
+    def fits(self, nv, nf, ne, nq=0):
+        return nv <= self.v_cap and nf <= self.f_cap and ne <= self.e_cap and nq <= self.q_cap
 
     # -- filling from numpy -------------------------------------------------------------------
     def load(self, mesh: MeshArrays, rest_x=None):
@@ -260,14 +282,22 @@ class ClothModel:
             raise ModelError("mesh coordinates must be finite")
         ev, ef, eo = build_edges(faces)
         nv, nf, ne = len(uv), len(faces), len(ev)
-        if not self.fits(nv, nf, ne):
+        if self.bending == "isotropic":
+            Q = bending_energy.isotropic_matrix(uv, faces, ev, ef, eo, area)
+            bend_ptr, bend_col, bend_val = bending_energy.rows_with_diagonal_first(Q)
+        else:
+            bend_ptr, bend_col, bend_val = np.zeros(nv + 1, np.int32), np.zeros(0, np.int32), \
+                np.zeros(0)
+        nq = len(bend_col)
+        if not self.fits(nv, nf, ne, nq):
             if self.v_cap > 0:
                 # The solvers size their work arrays from the model's capacities, so a model
                 # never reallocates itself: the owner builds a new model and solvers
                 # (Simulator._rebuild_for; nothing recompiles).
-                raise CapacityExceeded(nv, nf, ne, (self.v_cap, self.f_cap, self.e_cap))
-            self._allocate(nv, nf, ne)
-        self.n_verts, self.n_faces, self.n_edges = nv, nf, ne
+                raise CapacityExceeded(nv, nf, ne, (self.v_cap, self.f_cap, self.e_cap,
+                                                    self.q_cap), nq)
+            self._allocate(nv, nf, ne, nq)
+        self.n_verts, self.n_faces, self.n_edges, self.n_bend = nv, nf, ne, nq
 
         # Per-face rest quantities (METHOD.md section 2).
         Dm_inv = metrics.material_Dm_inv(uv, faces)    # (F, 2, 2): inverse of the edge matrix
@@ -278,7 +308,7 @@ class ClothModel:
         # Bending weight BEND_CONSTANT |e|^2 / (A1 + A2) of the hinge energy, in material
         # space so it does not change as the cloth deforms; with it k_bend is the plate's
         # flexural rigidity B (see BEND_CONSTANT).
-        inner = ef[:, 1] >= 0
+        inner = (ef[:, 1] >= 0) & (self.bending == "hinge")
         elen = np.linalg.norm(uv[ev[:, 1]] - uv[ev[:, 0]], axis=1)
         weight = np.zeros(ne)
         weight[inner] = BEND_CONSTANT * elen[inner] ** 2 / (area[ef[inner, 0]] + area[ef[inner, 1]])
@@ -298,11 +328,19 @@ class ClothModel:
         self._fill_vec(self.edge_opp, eo, self.e_cap)
         self._fill_vec(self.edge_rest_angle, rest_angle, self.e_cap)
         self._fill_vec(self.edge_bend_weight, weight, self.e_cap)
+        # Rows past n_verts stay empty: the padding repeats the last offset.
+        self.bend_ptr.from_numpy(np.r_[bend_ptr, np.full(self.v_cap - nv, bend_ptr[-1])]
+                                 .astype(np.int32))
+        self._fill_vec(self.bend_col, bend_col, self.q_cap)
+        self._fill_vec(self.bend_val, bend_val, self.q_cap)
         self._fill_vec(self.state.x, mesh.x, self.v_cap)
         self._fill_vec(self.state.v, mesh.v, self.v_cap)
         self.state.n = nv
-        self._np_cache = dict(faces=faces.copy(), uv=uv.copy(), area=area, pinned=mesh.pinned.copy(),
-                              grain=grain, edges=ev, edge_faces=ef, mass=mass)
+        self._np_cache = dict(faces=faces.copy(), uv=uv.copy(), area=area,
+                              pinned=mesh.pinned.copy(),
+                              grain=grain, edges=ev, edge_faces=ef, mass=mass,
+                              bend_rows=np.repeat(np.arange(nv), np.diff(bend_ptr)),
+                              bend_cols=bend_col)
 
     @staticmethod
     def _fill_vec(fld, arr, cap):
@@ -340,6 +378,11 @@ class ClothModel:
     @property
     def edges(self):
         return self._np_cache["edges"]
+
+    def bend_pattern(self):
+        """(rows, cols) of the isotropic bending matrix's entries, in the kernels' order
+        (empty under the hinge energy): the block pattern needs them."""
+        return self._np_cache["bend_rows"], self._np_cache["bend_cols"]
 
     def positions(self):
         return self.state.x.to_numpy()[: self.n_verts].astype(np.float64)

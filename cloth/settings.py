@@ -60,6 +60,7 @@ COMMON_DEFAULTS = {
         "cg_tol": 1e-4,           # relative residual that ends the implicit solve's CG
         "cg_iters": 500,          # CG iteration budget per time step
         "linear_solver": "cg",    # cg (matrix-free PCG) | direct (sparse Cholesky)
+        "bending": "isotropic",   # isotropic (B in every direction) | hinge (discrete shells)
     },
     "material": dict(preset="soft", **MATERIAL_PRESETS["soft"]),
     "strain": {
@@ -132,6 +133,9 @@ SCHEMA = {
         "cg_iters": Key("", "CG iteration budget per time step", lo=1),
         "linear_solver": Key("", "implicit step's linear solver: matrix-free PCG or sparse "
                              "Cholesky", choices=("cg", "direct")),
+        "bending": Key("", "bending energy: isotropic (k_bend is the plate's B in every "
+                       "direction, docs/calibration/) or the hinge energy (discrete shells, "
+                       "0.9-3 B depending on the direction)", choices=("isotropic", "hinge")),
     },
     "material": {
         "preset": Key("", "fabric preset (MATERIAL_PRESETS in cloth/settings.py) loaded first; "

@@ -84,7 +84,8 @@ class Simulator:
         self.grow_count = 0
         self.model = ClothModel(setup.mesh, setup.material,
                                 capacity_factor=self._capacity_factor(setup.mesh,
-                                                                      self.settings.remesh))
+                                                                      self.settings.remesh),
+                                bending=sim.bending)
         self._pin_rest = setup.mesh.pin_target.copy()
         self._held = None          # (vertex, was pinned, its own target, uv) while held
         self.dynamics_settings = DynamicsSettings(
@@ -295,7 +296,8 @@ class Simulator:
         self.grow_count += 1
         print(f"loom: remeshing grew the cloth to {len(mesh.faces)} faces; reallocating arrays "
               f"with room for {2 * len(mesh.faces)} (grown {self.grow_count}x)", file=sys.stderr)
-        self.model = ClothModel(mesh, self.setup.material, capacity_factor=2.0)
+        self.model = ClothModel(mesh, self.setup.material, capacity_factor=2.0,
+                                bending=self.model.bending)
         self.dynamics = self._make_dynamics(self.dynamics.stitches_np)
         if self.strain is not None:
             self._make_strain_limiter(self.strain.method)

@@ -26,7 +26,8 @@ class BlockMatrix:
     ptr (n + 1), col (nnz): CSR of the block pattern (rows sorted, diagonal included);
     val (nnz, 3x3): values; diag (n): slot of each row's diagonal block;
     face_slot (F, 9), edge_slot (E, 16), stitch_slot (S, 4): slots of element blocks,
-    row-major over the element's local vertices."""
+    row-major over the element's local vertices; bend_slot (nnz of the bending matrix): the
+    slot of each of its entries, in its row order (``build_pattern``)."""
 
     def __init__(self, n, pairs_i, pairs_j):
         self.n = int(n)
@@ -64,29 +65,46 @@ def _element_pairs(elems):
     return i, j
 
 
-def build_pattern(n_verts, faces, edge_verts, edge_opp, stitches):
+def build_pattern(n_verts, faces, edge_verts, edge_opp, stitches, bend_rows=(), bend_cols=()):
     """The BlockMatrix of the implicit step over a mesh: faces (F, 3), interior edges' bending
-    stencils (x0, x1, x2, x3) = (edge_verts, edge_opp), stitch pairs (S, 2)."""
+    stencils (x0, x1, x2, x3) = (edge_verts, edge_opp), stitch pairs (S, 2) and the entries
+    (bend_rows, bend_cols) of the isotropic bending matrix (cloth/bending.py), whose slots
+    go to ``bend_slot``."""
     faces = np.asarray(faces, np.int64).reshape(-1, 3)
     stencil = np.concatenate([np.asarray(edge_verts, np.int64).reshape(-1, 2),
                               np.asarray(edge_opp, np.int64).reshape(-1, 2)], axis=1)
     boundary = stencil[:, 3] < 0
     stencil[boundary] = stencil[boundary, :1]     # unused: every slot on (x0, x0)
     stitches = np.asarray(stitches, np.int64).reshape(-1, 2)
-    parts = [_element_pairs(faces), _element_pairs(stencil), _element_pairs(stitches)]
+    bend_rows = np.asarray(bend_rows, np.int64).ravel()
+    bend_cols = np.asarray(bend_cols, np.int64).ravel()
+    parts = [_element_pairs(faces), _element_pairs(stencil), _element_pairs(stitches),
+             (bend_rows, bend_cols)]
     pi = np.concatenate([p[0] for p in parts])
     pj = np.concatenate([p[1] for p in parts])
     B = BlockMatrix(n_verts, pi, pj)
-    nf, ne, ns = len(faces), len(stencil), len(stitches)
+    nf, ne, ns, nb = len(faces), len(stencil), len(stitches), len(bend_rows)
     s = B._slots
     B.face_slot = ti.ndarray(ti.i32, (max(nf, 1), 9))
     B.edge_slot = ti.ndarray(ti.i32, (max(ne, 1), 16))
     B.stitch_slot = ti.ndarray(ti.i32, (max(ns, 1), 4))
-    for arr, seg, k in ((B.face_slot, s[: 9 * nf], 9), (B.edge_slot, s[9 * nf: 9 * nf + 16 * ne], 16),
-                        (B.stitch_slot, s[9 * nf + 16 * ne:], 4)):
+    B.bend_slot = ti.ndarray(ti.i32, max(nb, 1))
+    B.n_bend = nb
+    ends = np.cumsum([0, 9 * nf, 16 * ne, 4 * ns, nb])
+    for n, (arr, k) in enumerate(((B.face_slot, 9), (B.edge_slot, 16), (B.stitch_slot, 4),
+                                  (B.bend_slot, 1))):
+        seg = s[ends[n]: ends[n + 1]]
         if len(seg):
-            arr.from_numpy(seg.reshape(-1, k).astype(np.int32))
+            arr.from_numpy(seg.reshape((-1, k) if k > 1 else (-1,)).astype(np.int32))
     return B
+
+
+def pattern_of(model, stitches=()):
+    """``build_pattern`` over a ClothModel's current mesh (its bending stencils and isotropic
+    bending entries) and the seam pairs ``stitches``."""
+    ne = model.n_edges
+    return build_pattern(model.n_verts, model.faces, model.edge_verts.to_numpy()[:ne],
+                         model.edge_opp.to_numpy()[:ne], stitches, *model.bend_pattern())
 
 
 def diagonal(n_verts, mass):

@@ -10,27 +10,27 @@ from cloth.model import Material
 from tests.helpers import set_positions, sheet_model
 
 
-def _bent_model(seed=0):
+def _bent_model(seed=0, bending=None):
     mat = Material(k_warp=200.0, k_weft=120.0, k_shear=10.0, k_bend=1e-4, damp_mass=0.2,
                    damp_stiff=0.01)
-    model = sheet_model(n=6, material=mat)
+    model = sheet_model(n=6, material=mat, bending=bending)
     rng = np.random.default_rng(seed)
     x = model.positions() * [1.05, 0.97, 1.0] + 0.01 * rng.standard_normal((model.n_verts, 3))
     set_positions(model, x)
     return model
 
 
-def test_system_matrix_is_the_implicit_steps_operator():
+@pytest.mark.parametrize("bending", ["isotropic", "hinge"])
+def test_system_matrix_is_the_implicit_steps_operator(bending):
     """BlockMatrix A p == (1 + h a) M p + h (b + h) K_psd p with K_psd from the matrix-free
-    dynamics (force_jacobian_product(exact=False) = -K_psd p), for stitches too."""
-    model = _bent_model()
+    dynamics (force_jacobian_product(exact=False) = -K_psd p), for stitches and either
+    bending energy too."""
+    model = _bent_model(bending=bending)
     stitches = np.array([[0, 7], [3, 20]], np.int32)
     dyn = ImplicitEuler(model, DynamicsSettings(stitch_stiffness=50.0), stitches=stitches)
     h = 1.0 / 30.0
     dyn.forces()                          # element kinematics at the current positions
-    B = system_matrix.build_pattern(model.n_verts, model.faces,
-                                    model.edge_verts.to_numpy()[: model.n_edges],
-                                    model.edge_opp.to_numpy()[: model.n_edges], stitches)
+    B = system_matrix.pattern_of(model, stitches)
     dyn.system_matrix(h, B)
     A = B.to_scipy()
     assert abs(A - A.T).max() < 1e-12 * abs(A).max()
@@ -49,9 +49,7 @@ def _system_and_cholesky():
     model = _bent_model()
     dyn = ImplicitEuler(model)
     dyn.forces()
-    B = system_matrix.build_pattern(model.n_verts, model.faces,
-                                    model.edge_verts.to_numpy()[: model.n_edges],
-                                    model.edge_opp.to_numpy()[: model.n_edges], [])
+    B = system_matrix.pattern_of(model)
     return model, dyn, B, linalg.SparseCholesky(B.ptr_np, B.col_np, B.n)
 
 

@@ -55,10 +55,11 @@ def test_membrane_force_is_minus_energy_gradient(rng, grain_angle):
     assert np.allclose(f, -g, rtol=1e-6, atol=1e-7 * np.abs(g).max())
 
 
-def test_bending_force_is_minus_energy_gradient(rng):
+@pytest.mark.parametrize("bending", ["isotropic", "hinge"])
+def test_bending_force_is_minus_energy_gradient(rng, bending):
     mat = Material(density=0.2, k_warp=1e-9, k_weft=1e-9, k_shear=0.0, k_bend=1e-3,
                    damp_mass=0.0, damp_stiff=0.0)
-    m = sheet_model(n=4, size=0.3, pattern="alternating", material=mat)
+    m = sheet_model(n=4, size=0.3, pattern="alternating", material=mat, bending=bending)
     dyn = ImplicitEuler(m)
     x = deformed(m, rng, scale=0.3)
     x[:, 2] += 0.04 * rng.standard_normal(len(x))
@@ -102,6 +103,43 @@ def test_bending_jacobian_matches_finite_differences_at_the_rest_angle(rng):
         J = dyn.force_jacobian_product(p, exact=True)
         assert np.abs(fd).max() > 1e-5
         assert np.allclose(J, fd, rtol=1e-5, atol=1e-5 * np.abs(fd).max())
+
+
+def test_isotropic_bending_jacobian_is_exact_and_constant(rng):
+    # The isotropic energy is quadratic in x: its force Jacobian, the one the solver uses
+    # (exact=False) included, equals finite differences of the forces at any state.
+    mat = Material(density=0.2, k_warp=1e-9, k_weft=1e-9, k_shear=0.0, k_bend=1e-3,
+                   damp_mass=0.0, damp_stiff=0.0)
+    m = sheet_model(n=5, size=0.3, pattern="random", material=mat)
+    assert m.bending == "isotropic" and m.n_bend > 0
+    dyn = ImplicitEuler(m)
+    x = deformed(m, rng, scale=0.3)
+    x[:, 2] += 0.04 * rng.standard_normal(len(x))
+    for exact in (True, False):
+        p = rng.standard_normal(x.shape)
+        fd = jacobian_fd(dyn, x, p)
+        set_positions(m, x)
+        J = dyn.force_jacobian_product(p, exact=exact)
+        assert np.abs(fd).max() > 1e-4
+        assert np.allclose(J, fd, rtol=1e-6, atol=1e-7 * np.abs(fd).max())
+
+
+def test_flat_sheet_moved_rigidly_has_no_isotropic_bending_energy(rng):
+    mat = Material(density=0.2, k_warp=1e-9, k_weft=1e-9, k_shear=0.0, k_bend=1.0,
+                   damp_mass=0.0, damp_stiff=0.0)
+    m = sheet_model(n=6, size=0.3, pattern="random", material=mat)
+    R, _ = np.linalg.qr(rng.standard_normal((3, 3)))
+    x = np.c_[m.uv, np.zeros(m.n_verts)] @ R.T + [0.3, -1.0, 2.0]
+    set_positions(m, x)
+    dyn = ImplicitEuler(m)
+    rigid_energy, rigid_force = dyn.energy(), np.abs(dyn.forces()).max()
+    x[7, 2] += 0.001                                    # a 1 mm bump costs energy
+    set_positions(m, x)
+    bump_energy, bump_force = dyn.energy(), np.abs(dyn.forces()).max()
+    assert bump_energy > 1e-3
+    # Zero up to round-off (the sum x.Qx of a sheet 2 m from the origin).
+    assert abs(rigid_energy) < 1e-9 * bump_energy
+    assert rigid_force < 1e-9 * bump_force
 
 
 def assemble_stiffness(dyn, n, exact):

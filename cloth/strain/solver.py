@@ -362,10 +362,7 @@ class StrainLimiter:
         return self._system
 
     def _build_pattern(self):
-        m = self.model
-        ne = m.n_edges
-        return system_matrix.build_pattern(m.n_verts, m.faces, m.edge_verts.to_numpy()[:ne],
-                                           m.edge_opp.to_numpy()[:ne], self._stitches)
+        return system_matrix.pattern_of(self.model, self._stitches)
 
     def _direct_metric(self, use_system):
         """The metric for the Cholesky path (it needs every face and seam pair in the
