@@ -266,7 +266,7 @@ def _fill_blocks(h: float, alpha: float, beta: float, kw: float, kf: float, ks: 
                         face_block(f, n, q, kw, kf, ks, face_fu, face_fv, face_E, face_wa,
                                    face_wb)
         for e in range(ne):
-            if edge_faces[e][1] >= 0:
+            if edge_bend_weight[e] != 0.0:      # interior hinges (isotropic: none)
                 k = scale * kb * edge_bend_weight[e]
                 G = edge_grad[e]
                 for n in ti.static(range(4)):
@@ -413,7 +413,7 @@ def add_elastic_forces(force: T, kw, kf, ks, kb, kst, nf: ti.i32, ne: ti.i32, ns
                         + 2.0 * ks * E[2] * (wa[n] * fv + wb[n] * fu))
             force[tri[n]] -= grad
     for e in range(ne):
-        if edge_faces[e][1] >= 0:
+        if edge_bend_weight[e] != 0.0:      # interior hinges (isotropic: none)
             coef = kb * edge_bend_weight[e] * (edge_theta[e] - edge_rest_angle[e])
             G = edge_grad[e]
             for n in ti.static(range(4)):
@@ -453,7 +453,7 @@ def add_K_product(src: T, dst: T, scale, kw, kf, ks, kb, kst, nf: ti.i32, ne: ti
                 + 2.0 * ks * (dE2 * (wa[n] * fv + wb[n] * fu) + E2 * (wa[n] * dfv + wb[n] * dfu))
             dst[tri[n]] += scale * A * out
     for e in range(ne):
-        if edge_faces[e][1] >= 0:
+        if edge_bend_weight[e] != 0.0:      # interior hinges (isotropic: none)
             k = kb * edge_bend_weight[e]
             G = edge_grad[e]
             dtheta = 0.0
@@ -485,7 +485,7 @@ def add_K_diagonal(precond: T, scale, kw, kf, ks, kb, kst, nf: ti.i32, ne: ti.i3
             precond[tri[n]] += scale * A * face_block(f, n, n, kw, kf, ks, face_fu, face_fv,
                                                       face_E, face_wa, face_wb)
     for e in range(ne):
-        if edge_faces[e][1] >= 0:
+        if edge_bend_weight[e] != 0.0:      # interior hinges (isotropic: none)
             k = kb * edge_bend_weight[e]
             G = edge_grad[e]
             for n in ti.static(range(4)):
@@ -559,7 +559,7 @@ def _energy(kw: float, kf: float, ks: float, kb: float, kst: float, nf: ti.i32, 
         total += face_rest_area[f] * (0.5 * kw * E[0] ** 2 + 0.5 * kf * E[1] ** 2
                                       + 2.0 * ks * E[2] ** 2)
     for e in range(ne):
-        if edge_faces[e][1] >= 0:
+        if edge_bend_weight[e] != 0.0:      # interior hinges (isotropic: none)
             d = edge_theta[e] - edge_rest_angle[e]
             total += 0.5 * kb * edge_bend_weight[e] * d * d
     # x.Qx about vertex 0 (Q annihilates translations): far from the origin the plain sum

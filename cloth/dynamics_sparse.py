@@ -275,7 +275,7 @@ def _assemble(B: ti.types.sparse_matrix_builder(), h: float, kw: float, kf: floa
                                                   face_wa, face_wb),
                               lower, scaled, precond, free_index)
         for e in range(ne):
-            if edge_faces[e][1] >= 0:
+            if edge_bend_weight[e] != 0.0:      # interior hinges (isotropic: none)
                 kk = sc * kb * edge_bend_weight[e]
                 G = edge_grad[e]
                 for n, q in ti.ndrange(4, 4):
