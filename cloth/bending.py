@@ -140,6 +140,10 @@ def isotropic_matrix(uv, faces, edge_verts, edge_faces, edge_opp, area):
     D = _face_rows(sten, [(C[:, 0] - C[:, 1]) / np.sqrt(2.0), np.sqrt(2.0) * C[:, 2]], n)
     Q = 0.5 * trace + D.T @ sp.diags(np.repeat(area, 2)) @ D
     Q = (0.5 * (Q + Q.T)).tocsr()
+    # Rows that sum to exactly zero (they do up to round-off: every term is a second
+    # derivative): the kernels then apply Q to differences x_k - x_i, whose accuracy does not
+    # depend on how far the cloth is from the origin.
+    Q = (Q - sp.diags(np.asarray(Q.sum(axis=1)).ravel())).tocsr()
     Q.sum_duplicates()
     Q.eliminate_zeros()
     return Q

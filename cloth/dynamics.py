@@ -387,11 +387,13 @@ def update_kinematics(nf: ti.i32, ne: ti.i32, x: T, face_verts: T, face_Dm_inv: 
 @ti.func
 def bend_apply(src: T, dst: T, scale, bend_ptr: T, bend_col: T, bend_val: T):
     """dst += scale * Q src, Q the isotropic bending matrix (cloth/bending.py; its rows are
-    empty when the model uses the hinge energy). Row by row: no atomics."""
+    empty when the model uses the hinge energy). Row by row: no atomics. Q's rows sum to
+    zero, so row i applies to src_k - src_i: exact for a translated cloth, and without the
+    round-off of large positions (1e-16 |x| |Q| per entry)."""
     for i in range(bend_ptr.shape[0] - 1):
         acc = ti.Vector([0.0, 0.0, 0.0])
         for k in range(bend_ptr[i], bend_ptr[i + 1]):
-            acc += bend_val[k] * src[bend_col[k]]
+            acc += bend_val[k] * (src[bend_col[k]] - src[i])
         dst[i] += scale * acc
 
 
@@ -562,11 +564,13 @@ def _energy(kw: float, kf: float, ks: float, kb: float, kst: float, nf: ti.i32, 
         if edge_bend_weight[e] != 0.0:      # interior hinges (isotropic: none)
             d = edge_theta[e] - edge_rest_angle[e]
             total += 0.5 * kb * edge_bend_weight[e] * d * d
-    # x.Qx about vertex 0 (Q annihilates translations): far from the origin the plain sum
-    # loses the energy of small bends to round-off.
+    # x.Qx = -1/2 sum_ik Q_ik |x_i - x_k|^2 (rows summing to zero): terms the size of the
+    # bends themselves. The plain sum of Q_ik x_i.x_k cancels terms ~1e4 times larger, and its
+    # round-off (the parallel sum's order varies) stalled the calibration's energy descent.
     for i in range(bend_ptr.shape[0] - 1):
         for k in range(bend_ptr[i], bend_ptr[i + 1]):
-            total += 0.5 * kb * bend_val[k] * (x[i] - x[0]).dot(x[bend_col[k]] - x[0])
+            d = x[i] - x[bend_col[k]]
+            total -= 0.25 * kb * bend_val[k] * d.dot(d)
     for s in range(nst):
         d = x[stitch[s][0]] - x[stitch[s][1]]
         total += 0.5 * kst * d.dot(d)
