@@ -502,9 +502,9 @@ def report(rows, out, seconds, command):
                  "along its edges, and a coarse bias mesh has few fold lines across the strip, "
                  "so at large deflection a stiff membrane stiffens the bend. The small "
                  "deflection (G = 1) is unaffected: there the membrane strain is second order. "
-                 "With a woven's shear (tens of N/m) the 2 cm bias strips hold 5 %; with a "
-                 "paper-like 1e4 N/m they read up to the table's maximum. Finer meshes lock "
-                 "less.\n")
+                 + "; ".join(f"k_shear {k:g} N/m: {span([r for r in lock if r['k_shear'] == k])}"
+                             for k in LOCKING_SHEAR)
+                 + ". Finer meshes lock less.\n")
         L.append("| pattern | h (cm) | direction | " + " | ".join(
             f"k_shear {k:g} N/m" for k in LOCKING_SHEAR) + " |")
         L.append("|" + " --- |" * (3 + len(LOCKING_SHEAR)))

@@ -37,8 +37,10 @@ import numpy as np
 import scipy.sparse as sp
 
 # A face whose six points nearly lie on one conic has an ill-posed quadratic fit; beyond this
-# condition number of its (scaled) 6 x 6 system the face gets the least-squares fit of its
-# own vertices and edge conditions instead (rare on remeshed sheets; never on the grids).
+# condition number of its (scaled) 6 x 6 system the face gets the least-squares (pseudo-
+# inverse) fit instead. Measured: never on the grids (condition ~10); on the hanging sheet
+# remeshed for 60 frames from 31 x 31, 3 of 1822 faces, all exactly singular (1e17), the rest
+# under 50.
 MAX_FIT_CONDITION = 1e8
 
 

@@ -71,7 +71,10 @@ def test_obstacle_contacts_keep_the_strain_limits(name, frames):
         worst = max(worst, sim.metrics_row()["own_violation_max"])
         touched = max(touched, sim.collider.last_contacts)
         assert sim.collider.max_penetration() < 1e-6
-    assert touched > 10                      # the cloth did land
+    # The cloth did land. At resolution 11 it touches 10-13 vertices with the default strain
+    # solve, against 41-43 with exact (Cholesky) Newton steps: the inexact solve holds the
+    # sheet back from wrapping the sphere (docs/speed/drape_depth.md, issue #13).
+    assert touched > 5
     assert worst < 2 * sim.strain.tol
 
 
