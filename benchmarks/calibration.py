@@ -154,6 +154,35 @@ def cantilever_mesh(L, width, h, pattern="regular", direction="warp", seed=0):
     return uv2, faces2.astype(np.int32), angle
 
 
+IRREGULAR = "irregular"      # a Delaunay triangulation of jittered points (no lattice)
+
+
+def irregular_strip(length, width, h, seed=0, cuts=()):
+    """[0, length] x [0, width] triangulated by Delaunay from points on a grid of spacing h
+    jittered by up to 0.35 h (interior), plus evenly spaced points on the outline and on the
+    lines u = c of ``cuts``: triangles of every shape and orientation, no mesh lines."""
+    from scipy.spatial import Delaunay
+    rng = np.random.default_rng(seed)
+    nu, nv = max(int(round(length / h)), 1), max(int(round(width / h)), 1)
+    du, dv = length / nu, width / nv
+    U, V = np.meshgrid(np.arange(1, nu) * du, np.arange(1, nv) * dv, indexing="ij")
+    inner = np.c_[U.ravel(), V.ravel()] + rng.uniform(-0.35, 0.35, (U.size, 2)) * [du, dv]
+    us, vs = np.linspace(0.0, length, nu + 1), np.linspace(0.0, width, nv + 1)
+    lines = [np.c_[us, np.zeros_like(us)], np.c_[us, np.full_like(us, width)],
+             np.c_[np.zeros_like(vs), vs], np.c_[np.full_like(vs, length), vs]]
+    lines += [np.c_[np.full_like(vs, c), vs] for c in cuts if 0.0 < c < length]
+    if any(0.0 < c < length for c in cuts):      # interior cut: no jittered point across it
+        for c in cuts:
+            inner = inner[np.abs(inner[:, 0] - c) > 0.45 * du]
+    uv = np.unique(np.round(np.r_[np.concatenate(lines), inner], 12), axis=0)
+    faces = Delaunay(uv).simplices
+    a, b, c = uv[faces[:, 0]], uv[faces[:, 1]], uv[faces[:, 2]]
+    area = 0.5 * ((b - a)[:, 0] * (c - a)[:, 1] - (b - a)[:, 1] * (c - a)[:, 0])
+    faces[area < 0] = faces[area < 0][:, ::-1]
+    faces = faces[np.abs(area) > 1e-3 * h * h]
+    return uv, faces.astype(np.int32), 0.0
+
+
 def strip_mesh(length, width, h, pattern="regular", direction="warp", seed=0, cuts=()):
     """A strip [0, length] x [0, width] in material coordinates (u along the strip) meshed by
     ``make_sheet`` with legs of about ``h``, cut from a sheet meshed along its grain:
@@ -169,6 +198,8 @@ def strip_mesh(length, width, h, pattern="regular", direction="warp", seed=0, cu
     Returns (uv, faces, grain angle): the angle of the warp (the sheet's u lines) from the
     strip's axis, for ``grain_from_angle``."""
     from cloth.sheet import make_sheet, quad_flips
+    if pattern == IRREGULAR:
+        return irregular_strip(length, width, h, seed, cuts)
     if direction == "warp":
         nu, nv = int(round(length / h)) + 1, max(int(round(width / h)) + 1, 2)
         uv, faces = make_sheet(length, width, nu, nv, pattern, seed=seed)
@@ -417,6 +448,14 @@ def run(quick=False, log=print):
                         f"B_eff/B={r['ratio']:.3f} (hinge {r['ratio_hinge']:.3f}; "
                         f"{time.perf_counter() - t:.1f} s)")
                     rows.append(r)
+    # A triangulation without mesh lines: one direction says all.
+    for h in sizes:
+        for G in DEFLECTIONS:
+            r = cantilever(rig, G, h, IRREGULAR, "warp")
+            r["ratio_hinge"] = cantilever(hinge, G, h, IRREGULAR, "warp")["ratio"]
+            log(f"cantilever {IRREGULAR:11s} h={h:<6} G={G:<4} B_eff/B={r['ratio']:.3f} "
+                f"(hinge {r['ratio_hinge']:.3f})")
+            rows.append(r)
     # Membrane locking: large deflection on the bias, against the shear modulus.
     for pattern in PATTERNS:
         for h in (0.01, 0.02):
@@ -460,7 +499,9 @@ def report(rows, out, seconds, command):
              "-45 deg from a sheet meshed along its grain, so no grid lines run across the "
              "strip; the regular pattern's diagonals run across it in `bias`, along it in "
              "`bias-`). A bias strip has straight edges (the lattice quads on its outline are "
-             "cut along it) and mirror-symmetric halves (`cantilever_mesh`).\n")
+             "cut along it) and mirror-symmetric halves (`cantilever_mesh`). `irregular`: a "
+             "Delaunay triangulation of grid points jittered by up to 0.35 h, with no mesh "
+             "lines and triangles of every shape (one direction: the mesh has none).\n")
     L.append("Bending energies: **isotropic** (the default, cloth/bending.py: the plate's "
              "|II|^2 from the cotangent Laplacian's trace and a per-face quadratic fit's "
              "deviator) and, for comparison, the **hinge** energy (discrete shells, weight "
@@ -483,11 +524,15 @@ def report(rows, out, seconds, command):
              f"{sum(abs(r['ratio_hinge'] - 1.0) > 0.05 for r in cant)} of {len(cant)}.\n")
     L.append("| pattern | directions | G | isotropic | hinge |")
     L.append("| --- | --- | --- | --- | --- |")
-    for p in PATTERNS:
-        for name, group in (("warp, weft", along), ("bias, bias-", bias)):
+    for p in PATTERNS + (IRREGULAR,):
+        groups = (("any", along),) if p == IRREGULAR else \
+            (("warp, weft", along), ("bias, bias-", bias))
+        for name, group in groups:
             for G in DEFLECTIONS:
                 rs = [r for r in group if r["pattern"] == p and r["G"] == G]
-                L.append(f"| {p} | {name} | {G:g} | {span(rs)} | {span(rs, 'ratio_hinge')} |")
+                if rs:
+                    L.append(f"| {p} | {name} | {G:g} | {span(rs)} | "
+                             f"{span(rs, 'ratio_hinge')} |")
     L.append("")
     L.append("The hinge energy bends a strip cheaply only about lines of edges: the regular "
              "mesh's diagonals are such lines across the strip in `bias`; along it (`bias-`) "
@@ -548,7 +593,7 @@ def plot(cant, strip, path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(1, 3, figsize=(15, 4.6))
-    marks = {"regular": "o", "alternating": "s", "random": "^"}
+    marks = {"regular": "o", "alternating": "s", "random": "^", IRREGULAR: "D"}
     cols = {"warp": "C0", "weft": "C1", "bias": "C2", "bias-": "C3"}
     for r in cant:
         off = {"warp": -0.09, "weft": -0.03, "bias": 0.03, "bias-": 0.09}[r["direction"]] + \
