@@ -1,7 +1,8 @@
 """How far the drape scene's sheet falls around the sphere, per strain solve: does the
 constrained step's inexactness hold the cloth back?
 
-    python -m benchmarks.drape_depth --out docs/speed     # ~6 min -> drape_depth.md / .json
+    python -m benchmarks.drape_depth --out docs/speed     # ~3 min -> drape_depth.md / .json
+    python -m benchmarks.drape_depth --probe max_newton=20 cg_rtol=0.01   # one row, JSON
 
 The default drape (soft cloth, mapping +-1 % / +-5 %, coupling "implicit", 25 x 25 vertices)
 runs 30 frames. The measure is the lowest vertex height at frames 10, 20 and 30: the sphere
@@ -29,7 +30,8 @@ FRAMES = (10, 20, 30)
 PLAN = [(b, s) for b in ("isotropic", "hinge") for s in ("default", 50, 200, "cholesky")]
 
 
-def child(bending, solve):
+def child(bending, solve, overrides=None):
+    """One run; ``overrides``: StrainLimiter attributes set after the build (a probe)."""
     from cloth import backend
     backend.init("cpu", "f64")
     import numpy as np
@@ -43,13 +45,18 @@ def child(bending, solve):
         sim.strain.linear_solver = "cholesky"
     elif solve != "default":
         sim.strain.max_cg = int(solve)
+    for key, value in (overrides or {}).items():
+        if not hasattr(sim.strain, key):
+            raise SystemExit(f"--probe: StrainLimiter has no setting '{key}'")
+        setattr(sim.strain, key, value)
+    sim.strain._upload_params()
     lowest, ms = [], []
     for frame in range(1, FRAMES[-1] + 1):
         sim.step_frame()
         ms.append(sim.stage("strain_limit").ms)
         if frame in FRAMES:
             lowest.append(float(sim.model.positions()[:, 1].min()))
-    return dict(bending=bending, solve=str(solve), lowest=lowest,
+    return dict(bending=bending, solve=str(solve), overrides=overrides or {}, lowest=lowest,
                 sl_ms_median=float(np.median(ms[1:])), faces=sim.model.n_faces)
 
 
@@ -57,7 +64,14 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=os.path.join(ROOT, "docs", "speed"))
     ap.add_argument("--child")
+    ap.add_argument("--probe", nargs="*", metavar="ATTR=JSON",
+                    help="one run of the default drape with these StrainLimiter attributes")
+    ap.add_argument("--bending", default="isotropic", choices=("isotropic", "hinge"))
     a = ap.parse_args()
+    if a.probe is not None:
+        overrides = {k: json.loads(v) for k, _, v in (item.partition("=") for item in a.probe)}
+        print(json.dumps(child(a.bending, "default", overrides)))
+        return
     if a.child:
         print(json.dumps(child(*json.loads(a.child))))
         return
