@@ -178,6 +178,10 @@ def cases():
     for kb in (1e-9, 1e-2):
         out.append(Case(f"{'very soft' if kb < 1e-6 else 'very stiff'} bending ({kb:g} N m)",
                         "hanging", dict(hang, material={"k_bend": kb}), viol_end_max=1e-3))
+    out.append(Case("16k triangles (resolution 91)", "hanging",
+                    dict(hang, cloth={"resolution": 91}), frames=8, viol_end_max=1e-3,
+                    note="issue #13: the default solve at the size of its speed target; the "
+                         "sheet's first 8 frames (its fall starts)"))
     out.append(Case("remeshing, extreme coarse sizing (0.25 - 0.5 m)", "hanging",
                     dict(hang, remesh={"enabled": True, "size_min": 0.25, "size_max": 0.5}),
                     frames=20, viol_end_max=1e-3,
