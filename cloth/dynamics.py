@@ -26,7 +26,7 @@ Bending, one of two energies (``ClothModel.bending``):
   (cloth/model.py); the dihedral-angle gradient is Bridson et al.'s (2003). B holds within
   5-11 % for strips along the mesh lines, not on the bias (up to 2.7 B).
 The model leaves the other energy's arrays empty (zero hinge weights, or rows without
-entries), so every kernel evaluates both.
+entries); under isotropic bending the kernels get no hinges to loop over (``n_hinges``).
 
 Positive semi-definite K: the solver uses the Gauss-Newton part of every Hessian plus the
 curvature terms that are non-negative (the stretch terms in tension). The dropped parts (stretch
@@ -130,6 +130,13 @@ class ImplicitEuler:
         self.stitches_np = np.asarray(pairs, np.int32).reshape(-1, 2)
         self.on_mesh_changed()
 
+    @property
+    def n_hinges(self):
+        """Edges the kernels' hinge loops run over: all under the hinge energy, none under
+        isotropic bending (its edges carry no weight, and their dihedral angles and gradients
+        would be computed every step for nothing)."""
+        return self.model.n_edges if self.model.bending == "hinge" else 0
+
     # -- kernel arguments ---------------------------------------------------------------------
     def _mesh(self):
         """The model's arrays (``MESH_ARRAYS``), then x and v."""
@@ -149,7 +156,7 @@ class ImplicitEuler:
         m, mat, s = self.model, self.model.material, self.settings
         rel, iters = _step(h, ti.Vector(list(s.gravity)), mat.k_warp, mat.k_weft, mat.k_shear,
                            mat.k_bend, mat.damp_mass, mat.damp_stiff, s.stitch_stiffness,
-                           m.n_verts, m.n_faces, m.n_edges, self.n_stitches, s.cg_tol,
+                           m.n_verts, m.n_faces, self.n_hinges, self.n_stitches, s.cg_tol,
                            s.cg_max_iters, *self._mesh(), *self._elements(), self.force,
                            self.dv, self.rhs, self.res, self.z, self.p, self.Ap, self.precond,
                            self.scalars)
@@ -163,7 +170,7 @@ class ImplicitEuler:
         m, mat, s = self.model, self.model.material, self.settings
         k = (mat.k_warp, mat.k_weft, mat.k_shear, mat.k_bend)
         alpha, beta, kst = mat.damp_mass, mat.damp_stiff, s.stitch_stiffness
-        counts = (m.n_verts, m.n_faces, m.n_edges, self.n_stitches)
+        counts = (m.n_verts, m.n_faces, self.n_hinges, self.n_stitches)
         _linearise(h, ti.Vector(list(s.gravity)), *k, alpha, beta, kst, *counts, *self._mesh(),
                    *self._elements(), self.force, self.rhs, self.precond)
         rz, bnorm = _start(h, alpha, beta, *k, kst, *counts, m.vert_mass, m.vert_pinned,
@@ -197,7 +204,7 @@ class ImplicitEuler:
         mat = self.model.material
         return float(_energy(mat.k_warp, mat.k_weft, mat.k_shear, mat.k_bend,
                              self.settings.stitch_stiffness, self.model.n_faces,
-                             self.model.n_edges, self.n_stitches, *self._mesh(),
+                             self.n_hinges, self.n_stitches, *self._mesh(),
                              *self._elements()))
 
     def forces(self):
@@ -205,7 +212,7 @@ class ImplicitEuler:
         mat = self.model.material
         _elastic_forces(mat.k_warp, mat.k_weft, mat.k_shear, mat.k_bend,
                         self.settings.stitch_stiffness, self.model.n_verts, self.model.n_faces,
-                        self.model.n_edges, self.n_stitches, *self._mesh(), *self._elements(),
+                        self.n_hinges, self.n_stitches, *self._mesh(), *self._elements(),
                         self.force)
         return self.force.to_numpy()[: self.model.n_verts].astype(np.float64)
 
@@ -218,7 +225,7 @@ class ImplicitEuler:
         full[: m.n_verts] = p
         self.p.from_numpy(full.astype(self.p.to_numpy().dtype))
         _jacobian_product(mat.k_warp, mat.k_weft, mat.k_shear, mat.k_bend,
-                          self.settings.stitch_stiffness, m.n_verts, m.n_faces, m.n_edges,
+                          self.settings.stitch_stiffness, m.n_verts, m.n_faces, self.n_hinges,
                           self.n_stitches, 1 if exact else 0, *self._mesh(), *self._elements(),
                           self.p, self.Ap)
         return -self.Ap.to_numpy()[: m.n_verts].astype(np.float64)
@@ -229,11 +236,11 @@ class ImplicitEuler:
         K_psd, linearised where that step started (the element data its ``linearise`` left).
         Pinned rows are not filtered (the strain solver keeps pins fixed itself)."""
         mat, s, m = self.model.material, self.settings, self.model
-        if getattr(B, "n_bend", 0) != m.n_bend:
-            raise ValueError(f"the block pattern holds {getattr(B, 'n_bend', 0)} bending entries, "
-                             f"the model {m.n_bend}: build it with system_matrix.pattern_of")
+        if B.n_bend != m.n_bend:
+            raise ValueError(f"the block pattern holds {B.n_bend} bending entries, the model "
+                             f"{m.n_bend}: build it with system_matrix.pattern_of")
         _fill_blocks(h, mat.damp_mass, mat.damp_stiff, mat.k_warp, mat.k_weft, mat.k_shear,
-                     mat.k_bend, s.stitch_stiffness, m.n_verts, m.n_faces, m.n_edges,
+                     mat.k_bend, s.stitch_stiffness, m.n_verts, m.n_faces, self.n_hinges,
                      self.n_stitches, B.nnz, B.val, B.diag, B.face_slot, B.edge_slot,
                      B.stitch_slot, B.bend_slot, *self._mesh(), *self._elements())
 
@@ -266,7 +273,7 @@ def _fill_blocks(h: float, alpha: float, beta: float, kw: float, kf: float, ks: 
                         face_block(f, n, q, kw, kf, ks, face_fu, face_fv, face_E, face_wa,
                                    face_wb)
         for e in range(ne):
-            if edge_bend_weight[e] != 0.0:      # interior hinges (isotropic: none)
+            if edge_faces[e][1] >= 0:
                 k = scale * kb * edge_bend_weight[e]
                 G = edge_grad[e]
                 for n in ti.static(range(4)):
@@ -415,7 +422,7 @@ def add_elastic_forces(force: T, kw, kf, ks, kb, kst, nf: ti.i32, ne: ti.i32, ns
                         + 2.0 * ks * E[2] * (wa[n] * fv + wb[n] * fu))
             force[tri[n]] -= grad
     for e in range(ne):
-        if edge_bend_weight[e] != 0.0:      # interior hinges (isotropic: none)
+        if edge_faces[e][1] >= 0:
             coef = kb * edge_bend_weight[e] * (edge_theta[e] - edge_rest_angle[e])
             G = edge_grad[e]
             for n in ti.static(range(4)):
@@ -455,7 +462,7 @@ def add_K_product(src: T, dst: T, scale, kw, kf, ks, kb, kst, nf: ti.i32, ne: ti
                 + 2.0 * ks * (dE2 * (wa[n] * fv + wb[n] * fu) + E2 * (wa[n] * dfv + wb[n] * dfu))
             dst[tri[n]] += scale * A * out
     for e in range(ne):
-        if edge_bend_weight[e] != 0.0:      # interior hinges (isotropic: none)
+        if edge_faces[e][1] >= 0:
             k = kb * edge_bend_weight[e]
             G = edge_grad[e]
             dtheta = 0.0
@@ -487,7 +494,7 @@ def add_K_diagonal(precond: T, scale, kw, kf, ks, kb, kst, nf: ti.i32, ne: ti.i3
             precond[tri[n]] += scale * A * face_block(f, n, n, kw, kf, ks, face_fu, face_fv,
                                                       face_E, face_wa, face_wb)
     for e in range(ne):
-        if edge_bend_weight[e] != 0.0:      # interior hinges (isotropic: none)
+        if edge_faces[e][1] >= 0:
             k = kb * edge_bend_weight[e]
             G = edge_grad[e]
             for n in ti.static(range(4)):
@@ -561,7 +568,7 @@ def _energy(kw: float, kf: float, ks: float, kb: float, kst: float, nf: ti.i32, 
         total += face_rest_area[f] * (0.5 * kw * E[0] ** 2 + 0.5 * kf * E[1] ** 2
                                       + 2.0 * ks * E[2] ** 2)
     for e in range(ne):
-        if edge_bend_weight[e] != 0.0:      # interior hinges (isotropic: none)
+        if edge_faces[e][1] >= 0:
             d = edge_theta[e] - edge_rest_angle[e]
             total += 0.5 * kb * edge_bend_weight[e] * d * d
     # x.Qx = -1/2 sum_ik Q_ik |x_i - x_k|^2 (rows summing to zero): terms the size of the

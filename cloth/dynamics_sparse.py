@@ -76,7 +76,7 @@ class SparseImplicitEuler(ImplicitEuler):
         t0 = time.perf_counter()
         # Warm start only helps the iterative solver; a direct solve starts from dv_free = 0.
         n_free = int(_prepare(h, ti.Vector(list(s.gravity)), *k, alpha, beta, kst, m.n_verts,
-                              m.n_faces, m.n_edges, self.n_stitches, 0 if direct else 1,
+                              m.n_faces, self.n_hinges, self.n_stitches, 0 if direct else 1,
                               *self._mesh(), *self._elements(), self.force, self.dv, self.rhs,
                               self.res, self.Ap, self.precond, self.scalars, self.free_index))
         t1 = time.perf_counter()
@@ -90,7 +90,7 @@ class SparseImplicitEuler(ImplicitEuler):
         lower = 1 if direct else 0
         scaled = 0 if direct else 1
         self._ensure_builder(n, m)
-        _assemble(self._builder, h, *k, alpha, beta, kst, m.n_verts, m.n_faces, m.n_edges,
+        _assemble(self._builder, h, *k, alpha, beta, kst, m.n_verts, m.n_faces, self.n_hinges,
                   self.n_stitches, lower, scaled, *self._mesh(), *self._elements(),
                   self.precond, self.free_index)
         A = self._builder.build()
@@ -175,7 +175,7 @@ class SparseImplicitEuler(ImplicitEuler):
     def _ensure_builder(self, n, m):
         # Triplets (full blocks; the lower triangle needs about half): 9 per free vertex
         # (mass), 81 per face, 144 per interior edge, 36 per stitch, 9 per bending entry.
-        cap = 9 * m.n_verts + 81 * m.n_faces + 144 * m.n_edges + 36 * self.n_stitches + \
+        cap = 9 * m.n_verts + 81 * m.n_faces + 144 * self.n_hinges + 36 * self.n_stitches + \
             9 * m.n_bend
         key = (n, cap)
         if self._builder_key != key:
@@ -275,7 +275,7 @@ def _assemble(B: ti.types.sparse_matrix_builder(), h: float, kw: float, kf: floa
                                                   face_wa, face_wb),
                               lower, scaled, precond, free_index)
         for e in range(ne):
-            if edge_bend_weight[e] != 0.0:      # interior hinges (isotropic: none)
+            if edge_faces[e][1] >= 0:
                 kk = sc * kb * edge_bend_weight[e]
                 G = edge_grad[e]
                 for n, q in ti.ndrange(4, 4):

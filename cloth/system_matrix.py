@@ -31,6 +31,7 @@ class BlockMatrix:
 
     def __init__(self, n, pairs_i, pairs_j):
         self.n = int(n)
+        self.n_bend = 0
         key = np.concatenate([pairs_i, np.arange(n)]).astype(np.int64) * n + \
             np.concatenate([pairs_j, np.arange(n)]).astype(np.int64)
         uniq, inverse = np.unique(key, return_inverse=True)
