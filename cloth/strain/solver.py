@@ -118,6 +118,7 @@ def _check_band(name, band, lower_limit=-1.0):
 # (docs/remesh/remesh_limits.md).
 AL_ROUNDS = 100
 
+
 class StrainLimiter:
     """Strain-limiting projection of a ``ClothModel``'s state.
 
@@ -380,7 +381,8 @@ class StrainLimiter:
         if self._chol is None:
             # Both metrics of a mesh are built by _build_pattern, so one analysis serves both
             # (it is dropped with them on a mesh or seam change).
-            self._chol = linalg.SparseCholesky(metric.ptr_np, metric.col_np, metric.n)
+            self._chol = linalg.SparseCholesky(metric.ptr_np, metric.col_np, metric.n,
+                                               core=metric.core_np)
         if self._ws.H is None or self._ws.H.shape[0] < metric.nnz:
             self._ws.H = ti.ndarray(system_matrix.mat3, metric.nnz)
         return metric, self._chol
