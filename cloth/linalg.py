@@ -7,10 +7,13 @@ supernodal from 1k to 16k triangles) when
 it is installed, else SciPy's SuperLU (an LU of the same matrix, re-ordered every call: correct
 but slower). ``make`` installs CHOLMOD (scripts/ensure_suitesparse.sh and requirements.txt).
 
-Cost, measured on the AL's Newton matrix of the hanging cloth (the implicit step's pattern with
-the bending stencil, ~32 entries a row), idle 2-core CPU: 5.3 ms per numeric factorisation at
-1.1k triangles (1875 unknowns), 46 ms at 4k (6348); AMD, METIS and nested-dissection orderings
-within 10 % of each other. A solve with the factor costs ~2 ms at 4k, hence ``solve_reusing``.
+Cost, measured on the AL's Newton matrix of the hanging cloth, idle 2-core CPU: with the hinge
+bending's pattern (~32 entries a row) 5.3 ms per numeric factorisation at 1.1k triangles
+(1875 unknowns) and 46 ms at 4k (6348); AMD, METIS and nested-dissection orderings within
+10 % of each other. The isotropic bending couples two rings of vertices (~53 entries a row):
+240-280 ms at 4k, simplicial or supernodal alike, hence the lumped factorisation of the face
+and seam blocks (``core``): 16-30 ms at 4k, a solve 0.7-1.5 ms. Reusing a factorisation as a
+CG preconditioner (``solve_reusing``) saves new ones where consecutive Newton matrices are alike.
 """
 import numpy as np
 import scipy.sparse as sp
@@ -31,6 +34,11 @@ def _warn_once():
     import sys
     print("loom: CHOLMOD (scikit-sparse) is not installed, so the sparse Cholesky uses SciPy's "
           "SuperLU (slower); `make` installs it (scripts/ensure_cholmod.sh)", file=sys.stderr)
+
+
+# What "solved by a factorisation" means for a lumped one (``SparseCholesky`` with ``core``):
+# CG preconditioned by it runs to this relative residual.
+EXACT_RTOL = 1e-10
 
 
 class FactorizationError(RuntimeError):
@@ -166,9 +174,11 @@ class SparseCholesky:
         self._factorize_matrix(self._to_factor(A))
         if self.exact:
             return self.solve(b), 0, True
-        # The lumped factor is a preconditioner: finish with CG on A (0-2 iterations measured;
-        # the cap only guards a pathological matrix, whose solve is then inexact).
-        x, iters, _ok = pcg(A, b, self.solve, rtol, 4 * max_iters)
+        # The lumped factor is a preconditioner: finish with CG on A, to the accuracy of a
+        # solve by an exact factor (measured on hanging res 25 at rest: with CG to 1e-3
+        # only, the AL needed 2 rounds where the exact factor's steps needed 1). The cap only
+        # guards a pathological matrix, whose solve is then inexact.
+        x, iters, _ok = pcg(A, b, self.solve, min(rtol, EXACT_RTOL), 4 * max_iters)
         return x, iters, True
 
 
