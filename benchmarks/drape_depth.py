@@ -1,7 +1,7 @@
 """How far the drape scene's sheet falls around the sphere, per strain solve: does the
 constrained step's inexactness hold the cloth back?
 
-    python -m benchmarks.drape_depth --out docs/speed     # ~6 min -> drape_depth.md / .json
+    python -m benchmarks.drape_depth --out docs/speed     # ~4 min -> drape_depth.md / .json
     python -m benchmarks.drape_depth --probe max_newton=20 cg_rtol=0.01   # one run, JSON
 
 The default drape (soft cloth, mapping +-1 % / +-5 %, coupling "implicit", 25 x 25 vertices)
