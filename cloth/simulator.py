@@ -348,6 +348,14 @@ class Simulator:
         if self.strain is not None:
             self.strain.max_iters = int(n)
 
+    def set_strain_linear_solver(self, name):
+        """The strain solve's Newton steps, live: "pcg" (the one-kernel default) or
+        "cholesky" (exact steps; slower, but a cloth that lands on an obstacle keeps falling
+        around it instead of stopping dead: docs/speed/drape_depth.md)."""
+        self._change("strain", linear_solver=name)      # the schema refuses other names
+        if self.strain is not None:
+            self.strain.linear_solver = name
+
     def set_substeps(self, n):
         """Time steps per frame (h = 1 / (fps x substeps))."""
         self._change("sim", substeps=int(n))

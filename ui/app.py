@@ -236,6 +236,9 @@ class App:
             iters = g.slider_int("SL iterations", int(st.cfg["strain"]["iters"]), 1, 200)
             if iters != st.cfg["strain"]["iters"]:
                 st.set_iterations(iters)
+            exact = g.checkbox("exact Newton steps (slow)", st.exact_steps)
+            if exact != st.exact_steps:
+                st.set_exact_steps(exact)
 
             # Dynamics.
             g.text("")

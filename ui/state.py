@@ -252,6 +252,19 @@ class AppState:
         if self._each(lambda s: s.set_iterations(n)):
             self.cfg["strain"]["iters"] = n
 
+    @property
+    def exact_steps(self):
+        return self.cfg["strain"]["linear_solver"] == "cholesky"
+
+    def set_exact_steps(self, on):
+        """Exact Newton steps in the strain solve (strain.linear_solver "cholesky") or the
+        default PCG ones: several times slower, but a landing cloth keeps its motion."""
+        solver = "cholesky" if on else "pcg"
+        if self._each(lambda s: s.set_strain_linear_solver(solver)):
+            self.cfg["strain"]["linear_solver"] = solver
+            return True
+        return False
+
     # -- time step and material ---------------------------------------------------------------
     def set_substeps(self, n):
         n = max(1, int(n))
