@@ -14,8 +14,10 @@ The AL itself is the one of ``al.solve_al`` (same merit function, residual, line
 multiplier step, stopping rule); only the loop runs on the host, so a library can do the
 factorisation. Per Newton step: one kernel assembles the residual and the matrix values, the
 host solves (``SparseCholesky.solve_reusing``: CG preconditioned by the last factorisation,
-a new factorisation only when that needs more than 8 iterations for 1e-3), one kernel runs the
-line search. Measured (hanging, svd, LOOM_FAST_COMPILE=1; factorising every step -> reusing):
+a new factorisation when that does not reach 1e-3 in 2 iterations; the factorisation is of the
+face and seam blocks with the bending's two-ring entries lumped, so CG on the full matrix
+finishes each fresh solve to 1e-10), one kernel runs the line search. Measured before the
+lumping (hanging, svd, LOOM_FAST_COMPILE=1; factorising every step -> reusing):
 resolution 25 at rest 47 -> 35 ms per frame (2.9 of 5 Newton steps factorise), resolution 46
 from the start 68 -> 27 ms median, p90 3.1 s -> 0.49 s. mapping gains nothing (its matrix
 changes too much between steps: 9 of 15 refactorise; 140 vs 155 ms at resolution 25).
