@@ -125,6 +125,21 @@ def fail(message, code=EXIT_BAD_INPUT):
 
 def main(argv=None):
     args = parse_args(sys.argv[1:] if argv is None else argv)
+    if not (args.list or args.show_config):
+        # Taichi starts before any scene or cloth module is imported: their module-level
+        # types (``ti.types.matrix(3, 3, float)``, kernel argument types) take the float
+        # type Taichi has when they are created, and before ti.init that is f32. Measured:
+        # started after the imports, the window and the CLI ran the implicit step's matrix
+        # (the strain projection's metric) and the obstacles' kernel arguments in f32 under
+        # --precision f64, and the default drape landed elsewhere (lowest vertex 0.311 m at
+        # frame 30 against 0.637 m in f64).
+        from cloth import backend
+        try:
+            backend.init(args.arch, args.precision)
+        except backend.BackendError as err:
+            return fail(str(err))
+        except Exception as err:  # Taichi could not start this arch (no driver, no device)
+            return fail(f"Taichi could not start on --arch {args.arch} ({err}); use --arch cpu")
     import scenes
     from cloth.config import ConfigError, load_toml, parse_assignment
 
@@ -167,21 +182,14 @@ def main(argv=None):
         return 0
 
     if hasattr(module, "check"):
-        # Scene files: every input check (meshes, pins, obstacles) before Taichi starts.
+        # Scene files: every input check (meshes, pins, obstacles) before the scene is built.
         try:
             module.check(cfg)
         except (ConfigError, ValueError) as err:
             return fail(str(err))
 
-    from cloth import backend
     from cloth.model import ModelError
     from cloth.simulator import Simulator
-    try:
-        backend.init(args.arch, args.precision)
-    except backend.BackendError as err:
-        return fail(str(err))
-    except Exception as err:  # Taichi could not start this arch (no driver, no device)
-        return fail(f"Taichi could not start on --arch {args.arch} ({err}); use --arch cpu")
     try:
         setup = module.build(cfg)
         sim = Simulator(setup, settings)
