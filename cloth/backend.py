@@ -94,6 +94,7 @@ def init(arch="cpu", precision=None, debug=False):
                            f"--arch cpu / cuda for f64")
     if _state["arch"] == arch and _state["precision"] == precision:
         return
+    _check_module_types(precision)
     if _state["arch"] is not None:
         ti.reset()
     fp = ti.f64 if precision == "f64" else ti.f32
@@ -102,6 +103,25 @@ def init(arch="cpu", precision=None, debug=False):
             debug=debug, offline_cache=True, offline_cache_max_size_of_files=CACHE_BYTES,
             advanced_optimization=not fast_compile())
     _state.update(arch=arch, precision=precision)
+
+
+def _check_module_types(precision):
+    """Refuse to start when cloth's module-level Taichi types were already created for the
+    other precision: ``ti.types.matrix(3, 3, float)`` takes the float type Taichi has when the
+    module is imported (f32 before ti.init), and kernel arguments and arrays of those types
+    would then silently run in it (measured: main.py, which imported the scenes first, ran
+    the strain projection's metric in f32 under f64; its frames drifted 3 mm from the
+    library's in 3 frames)."""
+    import sys
+    module = sys.modules.get("cloth.system_matrix")
+    if module is None:
+        return
+    want = ti.f64 if precision == "f64" else ti.f32
+    if module.mat3.dtype != want:
+        have = "f64" if module.mat3.dtype == ti.f64 else "f32"
+        raise BackendError(f"cloth's Taichi types were created in {have} before "
+                           f"backend.init(..., '{precision}'): call cloth.backend.init first, "
+                           "before importing the simulator, the scenes or the solvers")
 
 
 def precision():

@@ -111,12 +111,7 @@ def _check_band(name, band, lower_limit=-1.0):
     return lo, hi
 
 
-# The AL's outer-round budget per projection, the one default (settings strain.iters too): a
-# cap for solves that stall, since converged solves stop at tol (2-8 rounds on hanging). 50
-# was too tight: svd on hanging with remeshing ran out once in 300 frames (violation 1.3e-3);
-# that solve, continued, converged 84 rounds later, and with 100 all 300 frames pass
-# (docs/remesh/remesh_limits.md).
-AL_ROUNDS = 100
+from .defaults import AL_ROUNDS  # noqa: E402 (the settings' default too)
 
 
 class StrainLimiter:
