@@ -105,6 +105,11 @@ def init(arch="cpu", precision=None, debug=False):
     _state.update(arch=arch, precision=precision)
 
 
+# The module-level Taichi types whose float type is fixed when their module is imported.
+PRECISION_TYPES = (("cloth.system_matrix", "mat3"), ("cloth.collision.obstacles", "mat3"),
+                   ("cloth.collision.obstacles", "vec3"), ("cloth.collision.shape", "params_t"))
+
+
 def _check_module_types(precision):
     """Refuse to start when cloth's module-level Taichi types were already created for the
     other precision: ``ti.types.matrix(3, 3, float)`` takes the float type Taichi has when the
@@ -113,15 +118,18 @@ def _check_module_types(precision):
     the strain projection's metric in f32 under f64; its frames drifted 3 mm from the
     library's in 3 frames)."""
     import sys
-    module = sys.modules.get("cloth.system_matrix")
-    if module is None:
-        return
     want = ti.f64 if precision == "f64" else ti.f32
-    if module.mat3.dtype != want:
-        have = "f64" if module.mat3.dtype == ti.f64 else "f32"
-        raise BackendError(f"cloth's Taichi types were created in {have} before "
-                           f"backend.init(..., '{precision}'): call cloth.backend.init first, "
-                           "before importing the simulator, the scenes or the solvers")
+    for module_name, type_name in PRECISION_TYPES:
+        module = sys.modules.get(module_name)
+        if module is None:
+            continue
+        dtype = getattr(module, type_name).dtype
+        if dtype != want:
+            have = "f64" if dtype == ti.f64 else "f32"
+            raise BackendError(f"cloth's Taichi types ({module_name}.{type_name}) were created "
+                               f"in {have} before backend.init(..., '{precision}'): call "
+                               "cloth.backend.init first, before importing the simulator, the "
+                               "scenes or the solvers")
 
 
 def precision():

@@ -120,7 +120,7 @@ class SparseCholesky:
         if self._lumped is None:
             return A
         L = self._lumped
-        data = A.data[L["keep"]].copy()
+        data = A.data[L["keep"]]         # a copy (fancy index)
         data[L["diag_pos"]] += np.bincount(L["drop_rows"], weights=np.abs(A.data[L["drop"]]),
                                            minlength=3 * self.n)
         return sp.csc_matrix((data, L["indices"], L["indptr"]), shape=A.shape)

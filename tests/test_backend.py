@@ -22,3 +22,21 @@ def test_compile_error_names_the_file_line_and_code():
     assert "test_backend.py" in msg and "undefined_name_here" in msg
     line = next(i for i, text in enumerate(open(__file__), 1) if "undefined_name_here *" in text)
     assert f"line {line}" in msg
+
+
+def test_init_refuses_types_created_in_the_other_precision():
+    """Module-level Taichi types made before ti.init are f32; starting f64 afterwards would
+    run them in f32 silently (main.py did). backend.init stops with the fix instead."""
+    import os
+    import subprocess
+    import sys
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    code = ("import cloth.simulator\n"
+            "from cloth import backend\n"
+            "try:\n"
+            "    backend.init('cpu', 'f64')\n"
+            "except backend.BackendError as err:\n"
+            "    print('refused:', err)\n")
+    r = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True,
+                       timeout=300)
+    assert "refused:" in r.stdout and "call cloth.backend.init first" in r.stdout, r.stderr
