@@ -11,7 +11,7 @@ from .buffers import (CONTACT_SLOTS, NO_CONTACT, P_C_STEP, P_CONTACT_SCALE, P_CU
                       P_DELTA, P_ISO, P_MARGIN,
                       P_SHEAR, P_SVD_DELTA, P_WARP, P_WEFT, ST_CG, ST_COMP, ST_CONVERGED,
                       ST_ITERS, ST_NEWTON, ST_START_VIOL, ST_VIOL, A, T)
-from .c_curvature import add_c_curvature_product, c_curvature_block, face_c_curvature
+from .c_curvature import c_curvature_block, face_c_curvature
 from .constraints import face_constraints
 
 
@@ -247,117 +247,91 @@ def fill_c_curvature(method: ti.template(), K, nf, mu, x: T, face_verts: T, Dm_i
 
 
 @ti.func
-def build_preconditioner(K, nv, nf, ns, mu, margin, use_twist, w_ptr: T, w_col: T, w_val: T, w_diag: T, pinned: T,
-                         face_verts: T, rest_area: T, lam: T, g: T,
-                         grad: T, cm: T, what: T, kappa: T, twist: T, x: T, contact: T,
-                         lam_c: T, stitch: T, lam_s: T, fric: T, lam_t: T, c_scale,
-                         exact: ti.template(), curv: T, P_inv: T):
-    """3x3 block Jacobi of the projected-Newton matrix (see apply_hessian)."""
+def newton_matrix(K, nv, nf, ns, mu, margin, c_scale, use_twist, exact, x: T, w_ptr: T,
+                  w_col: T, w_val: T, w_diag: T, pinned: T, face_verts: T, rest_area: T,
+                  lam: T, g: T, grad: T, cm: T, what: T, kappa: T, twist: T, contact: T,
+                  lam_c: T, fric: T, lam_t: T, curv: T, face_slot: T, stitch_slot: T, H: T):
+    """The projected-Newton matrix of L_A at x, written out in W's block pattern (which
+    must hold every face and seam pair: ``system_matrix.build_pattern``):
+
+        H = W + sum_near w mu grad g grad g^T + sum_active (lam + mu g) curvature(g)
+            + mu n n^T (contacts within the margin) + the seams' and friction's terms.
+
+    "Near" includes constraints within ``margin`` (strain) of activating, with the weight w
+    of ``near_weight``: a Newton step that ignores them runs straight into dozens of them
+    (measured on a 10x10 sheet: 112 of 486 constraints switched on within 1e-3 of a step)
+    and the line search then accepts only tiny steps; with the margin the same projection
+    needs 6 instead of > 40 rounds. The curvature is the model of constraints.py (the
+    curvature of ||F e|| with e frozen, plus svd's twist term) or, with ``exact``, the
+    exact curvature of c_curvature.py (``fill_c_curvature`` first). Pinned rows and columns
+    become the identity (their step is zero).
+
+    Why written out rather than applied face by face: one PCG iteration is then a single
+    block-sparse product; measured at 4k faces (mapping, 8 constraints a face) the product
+    costs 0.14 ms against 0.33-0.36 ms for the face-by-face operator, and the ~1 ms of
+    assembly is repaid by the ~20 iterations of a Newton step."""
+    for k in range(w_ptr[nv]):
+        H[k] = w_val[k]
+    I = ti.Matrix.identity(float, 3)
     for n in range(nv):
-        P_inv[n] = w_val[w_diag[n]]
         for j in ti.static(range(CONTACT_SLOTS)):
             if lam_c[n, j] + mu * (contact_g(contact, x, n, j) + margin * c_scale) > 0.0:
                 cn = contact_normal(contact, n, j)
-                P_inv[n] += mu * cn.outer_product(cn)
-    for f in range(nf):
-        ids = face_verts[f]
-        near = mu * margin * ti.sqrt(rest_area[f])
-        for c in range(K):
-            s = lam[f, c] + mu * g[f, c]
-            sc = ti.max(s, 0.0)        # curvature weight (inactive: none)
-            if ti.static(exact):
-                sc = 0.0               # the exact curvature is added per face below
-            if s + near > 0.0:
-                gr, w = grad[f, c], what[f, c]
-                proj = ti.Matrix.identity(float, 3) - w.outer_product(w)
-                for n in ti.static(range(3)):
-                    gn = ti.Vector([gr[3 * n], gr[3 * n + 1], gr[3 * n + 2]])
-                    P_inv[ids[n]] += near_weight(s, near) * mu * gn.outer_product(gn) \
-                        + sc * kappa[f, c] * cm[f, c][n] ** 2 * proj
-                if use_twist and sc > 0.0:
-                    tw = twist[f, c]
-                    for n in ti.static(range(3)):
-                        tn = ti.Vector([tw[3 * n], tw[3 * n + 1], tw[3 * n + 2]])
-                        P_inv[ids[n]] += sc * tn.outer_product(tn)
-        if ti.static(exact):
-            for n in ti.static(range(3)):
-                P_inv[ids[n]] += c_curvature_block(curv, f, n, n)
-    for k in range(ns):
-        P_inv[stitch[k][0]] += mu * ti.Matrix.identity(float, 3)
-        P_inv[stitch[k][1]] += mu * ti.Matrix.identity(float, 3)
-    for n in range(nv):
-        P, y, radius = friction_state(n, mu, x, contact, lam_c, fric, lam_t)
-        if radius > 0.0 and y.norm() <= radius:
-            P_inv[n] += mu * P
-    for n in range(nv):
-        if pinned[n] == 1:
-            P_inv[n] = ti.Matrix.identity(float, 3)
-        else:
-            P_inv[n] = P_inv[n].inverse()
-
-
-@ti.func
-def apply_hessian(K, nv, nf, ns, mu, margin, use_twist, w_ptr: T, w_col: T, w_val: T, w_diag: T, pinned: T,
-                  face_verts: T, rest_area: T, lam: T, g: T, grad: T,
-                  cm: T, what: T, kappa: T, twist: T, x: T, contact: T, lam_c: T, stitch: T,
-                  lam_s: T, fric: T, lam_t: T, c_scale, exact: ti.template(), curv: T, p: T,
-                  Ap: T):
-    """Ap = (M + sum_near [mu grad g grad g^T] + sum_active (lam + mu g) curvature(g)) p, the
-    projected-Newton matrix applied without forming it. "Near" includes constraints within
-    ``margin`` (strain) of activating: a Newton step that ignores them runs straight into
-    dozens of them (measured on a 10x10 sheet: 112 of 486 constraints switched on within
-    1e-3 of a step) and the line search then accepts only tiny steps; with the margin the
-    same projection needs 6 instead of > 40 rounds."""
-    for n in range(nv):
-        Ap[n] = metric_times(n, w_ptr, w_col, w_val, p)
-        for j in ti.static(range(CONTACT_SLOTS)):
-            if lam_c[n, j] + mu * (contact_g(contact, x, n, j) + margin * c_scale) > 0.0:
-                cn = contact_normal(contact, n, j)
-                Ap[n] += mu * cn.dot(p[n]) * cn
-    for f in range(nf):
-        ids = face_verts[f]
-        pf = ti.Vector([0.0] * 9)
-        for n in ti.static(range(3)):
-            for k in ti.static(range(3)):
-                pf[3 * n + k] = p[ids[n]][k]
-        near = mu * margin * ti.sqrt(rest_area[f])
-        for c in range(K):
-            s = lam[f, c] + mu * g[f, c]
-            if s + near > 0.0:
-                gr = grad[f, c]
-                scatter(Ap, ids, gr, near_weight(s, near) * mu * gr.dot(pf))
-                sc = ti.max(s, 0.0)
-                if sc > 0.0 and not ti.static(exact):
-                    # Curvature of ||F e||: dw = sum_n (M_n.e) p_n, projected off w^.
-                    cmv, w = cm[f, c], what[f, c]
-                    dw = cmv[0] * p[ids[0]] + cmv[1] * p[ids[1]] + cmv[2] * p[ids[2]]
-                    t = sc * kappa[f, c] * (dw - w * w.dot(dw))
-                    for n in ti.static(range(3)):
-                        Ap[ids[n]] += cmv[n] * t
-                    if use_twist:
-                        tw = twist[f, c]
-                        scatter(Ap, ids, tw, sc * tw.dot(pf))
-        if ti.static(exact):
-            add_c_curvature_product(curv, f, ids, p, Ap)
-    for k in range(ns):
-        t = mu * (p[stitch[k][0]] - p[stitch[k][1]])
-        Ap[stitch[k][0]] += t
-        Ap[stitch[k][1]] -= t
-    for n in range(nv):
+                H[w_diag[n]] += mu * cn.outer_product(cn)
         # Friction: mu P sticking; on the rim, the curvature of radius |y| (mu radius / |y|
         # times P off the sliding direction).
         P, y, radius = friction_state(n, mu, x, contact, lam_c, fric, lam_t)
         if radius > 0.0:
             ny = y.norm()
-            Pp = P @ p[n]
             if ny <= radius:
-                Ap[n] += mu * Pp
+                H[w_diag[n]] += mu * P
             else:
                 yh = y / ny
-                Ap[n] += (mu * radius / ny) * (Pp - yh * yh.dot(p[n]))
-    for n in range(nv):
-        if pinned[n] == 1:
-            Ap[n] = ti.Vector([0.0, 0.0, 0.0])
+                H[w_diag[n]] += (mu * radius / ny) * (P - yh.outer_product(yh))
+    for f in range(nf):
+        near = mu * margin * ti.sqrt(rest_area[f])
+        Hf = ti.Matrix.zero(float, 9, 9)        # the face's constraint terms, summed first
+        any_near = False
+        for c in range(K):
+            s = lam[f, c] + mu * g[f, c]
+            if s + near > 0.0:
+                any_near = True
+                gr, cmv, w = grad[f, c], cm[f, c], what[f, c]
+                sc = ti.max(s, 0.0)
+                if exact:
+                    sc = 0.0       # the exact curvature is added per face below
+                Hf += near_weight(s, near) * mu * gr.outer_product(gr)
+                if sc > 0.0:
+                    # Curvature of ||F e||: (cm_a cm_b) kappa (I - w w^T) per block (a, b).
+                    proj = sc * kappa[f, c] * (I - w.outer_product(w))
+                    for a in ti.static(range(3)):
+                        for b in ti.static(range(3)):
+                            for i in ti.static(range(3)):
+                                for j in ti.static(range(3)):
+                                    Hf[3 * a + i, 3 * b + j] += cmv[a] * cmv[b] * proj[i, j]
+                    if use_twist:
+                        tw = twist[f, c]
+                        Hf += sc * tw.outer_product(tw)
+        if any_near:
+            for a in ti.static(range(3)):
+                for b in ti.static(range(3)):
+                    blk = ti.Matrix([[Hf[3 * a + i, 3 * b + j] for j in ti.static(range(3))]
+                                     for i in ti.static(range(3))])
+                    H[face_slot[f, 3 * a + b]] += blk
+        if exact:
+            for a in ti.static(range(3)):
+                for b in ti.static(range(3)):
+                    H[face_slot[f, 3 * a + b]] += c_curvature_block(curv, f, a, b)
+    for k in range(ns):
+        H[stitch_slot[k, 0]] += mu * I
+        H[stitch_slot[k, 1]] += -mu * I
+        H[stitch_slot[k, 2]] += -mu * I
+        H[stitch_slot[k, 3]] += mu * I
+    for i in range(nv):
+        for k in range(w_ptr[i], w_ptr[i + 1]):
+            j = w_col[k]
+            if pinned[i] == 1 or pinned[j] == 1:
+                H[k] = I if i == j else ti.Matrix.zero(float, 3, 3)
 
 
 @ti.func
@@ -367,9 +341,10 @@ def pcg_direction(method: ti.template(), exact: ti.template(), K, nv, nf, ns, mu
                   w_ptr: T, w_col: T, w_val: T, w_diag: T, pinned: T, face_verts: T, Dm_inv: T,
                   grain: T, rest_area: T, params: T, lam: T, g: T, grad: T,
                   cm: T, what: T, kappa: T, twist: T, contact: T, lam_c: T, stitch: T,
-                  lam_s: T, fric: T, lam_t: T, c_scale, curv: T, b: T, d: T, r: T, z: T, p: T,
-                  Ap: T, P_inv: T):
-    """Projected-Newton direction: solve H d = -grad L_A by PCG (block Jacobi) from d = 0 to
+                  lam_s: T, fric: T, lam_t: T, c_scale, curv: T, face_slot: T, stitch_slot: T,
+                  H: T, b: T, d: T, r: T, z: T, p: T, Ap: T, P_inv: T):
+    """Projected-Newton direction: solve H d = -grad L_A (H from ``newton_matrix``) by PCG
+    with H's 3x3 diagonal blocks as preconditioner (block Jacobi), from d = 0 to
     |r| <= rtol |grad L_A| (an inexact Newton step: measured on the hanging scene, rtol = 0.1
     needs as many Newton steps as 1e-3 with about half the CG iterations). Leaves
     b = -grad L_A; returns (slope grad L_A . d, CG iterations)."""
@@ -378,32 +353,36 @@ def pcg_direction(method: ti.template(), exact: ti.template(), K, nv, nf, ns, mu
     if ti.static(exact):
         fill_c_curvature(method, K, nf, mu, x, face_verts, Dm_inv, grain, rest_area, params,
                          lam, g, curv)
-    build_preconditioner(K, nv, nf, ns, mu, margin, use_twist, w_ptr, w_col, w_val, w_diag, pinned, face_verts,
-                         rest_area, lam, g, grad, cm, what, kappa, twist, x, contact, lam_c,
-                         stitch, lam_s, fric, lam_t, c_scale, exact, curv, P_inv)
-    r0 = ti.sqrt(dot(r, r, nv))
+    newton_matrix(K, nv, nf, ns, mu, margin, c_scale, use_twist, exact, x, w_ptr, w_col, w_val,
+                  w_diag, pinned, face_verts, rest_area, lam, g, grad, cm, what, kappa, twist,
+                  contact, lam_c, fric, lam_t, curv, face_slot, stitch_slot, H)
+    rz, rr = 0.0, 0.0
     for n in range(nv):
+        P_inv[n] = H[w_diag[n]].inverse()       # pinned rows: the identity
         b[n] = r[n]
         d[n] = ti.Vector([0.0, 0.0, 0.0])
         z[n] = P_inv[n] @ r[n]
         p[n] = z[n]
-    rz = dot(r, z, nv)
+        rz += r[n].dot(z[n])
+        rr += r[n].dot(r[n])
+    stop = rtol * rtol * rr
     it = 0
-    while it < max_cg and ti.sqrt(dot(r, r, nv)) > rtol * r0:
-        apply_hessian(K, nv, nf, ns, mu, margin, use_twist, w_ptr, w_col, w_val, w_diag, pinned, face_verts,
-                      rest_area, lam, g, grad, cm, what, kappa, twist, x, contact, lam_c,
-                      stitch, lam_s, fric, lam_t, c_scale, exact, curv, p, Ap)
-        pAp = dot(p, Ap, nv)
+    while it < max_cg and rr > stop:
+        pAp = 0.0
+        for n in range(nv):
+            Ap[n] = metric_times(n, w_ptr, w_col, H, p)
+            pAp += p[n].dot(Ap[n])
         if pAp <= 0.0:
             break
         alpha = rz / pAp
+        rz_new, rr = 0.0, 0.0
         for n in range(nv):
             d[n] += alpha * p[n]
             r[n] -= alpha * Ap[n]
-        it += 1
-        for n in range(nv):
             z[n] = P_inv[n] @ r[n]
-        rz_new = dot(r, z, nv)
+            rz_new += r[n].dot(z[n])
+            rr += r[n].dot(r[n])
+        it += 1
         beta = rz_new / rz
         rz = rz_new
         for n in range(nv):
@@ -520,7 +499,7 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
              x_trial: A, w_ptr: A, w_col: A, w_val: A, w_diag: A, pinned: A, face_verts: A, Dm_inv: A, grain: A,
              rest_area: A, lam: A, g: A, grad: A, cm: A, what: A, kappa: A,
              twist: A, contact: A, lam_c: A, stitch: A, lam_s: A, fric: A, lam_t: A, curv: A,
-             b: A, d: A, r: A, z: A, p: A, Ap: A,
+             face_slot: A, stitch_slot: A, H: A, b: A, d: A, r: A, z: A, p: A, Ap: A,
              P_inv: A, stats: A):
     """The whole AL projection (METHOD 4) in one launch (measured: with one launch per
     phase, Python's argument handling cost as much as the solve): rounds of inexact
@@ -556,8 +535,9 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
                                                  w_val, w_diag, pinned, face_verts, Dm_inv,
                                                  grain, rest_area, params, lam, g, grad, cm,
                                                  what, kappa, twist, contact, lam_c, stitch,
-                                                 lam_s, fric, lam_t, c_scale, curv, b, d, r,
-                                                 z, p, Ap, P_inv)
+                                                 lam_s, fric, lam_t, c_scale, curv,
+                                                 face_slot, stitch_slot, H, b, d, r, z, p, Ap,
+                                                 P_inv)
                     cg_total += cg_it
                     newton += 1
                     inner += 1

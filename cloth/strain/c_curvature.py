@@ -207,21 +207,6 @@ def dC_row(Mr, w0, w1, n):
 
 
 @ti.func
-def add_c_curvature_product(curv: ti.template(), f, ids, p: ti.template(), Ap: ti.template()):
-    """Ap += (S (x) I3 + J^T H J) p over face f's three vertices."""
-    if curv[f, 1][6] > 0.0:
-        Mr, T, Hc, w0, w1 = _unpack(curv, f)
-        dw0 = Mr[0, 0] * p[ids[0]] + Mr[1, 0] * p[ids[1]] + Mr[2, 0] * p[ids[2]]
-        dw1 = Mr[0, 1] * p[ids[0]] + Mr[1, 1] * p[ids[1]] + Mr[2, 1] * p[ids[2]]
-        u0 = T[0, 0] * dw0 + T[0, 1] * dw1
-        u1 = T[1, 0] * dw0 + T[1, 1] * dw1
-        dC = ti.Vector([2.0 * w0.dot(dw0), w0.dot(dw1) + w1.dot(dw0), 2.0 * w1.dot(dw1)])
-        y = Hc @ dC
-        for n in ti.static(range(3)):
-            Ap[ids[n]] += Mr[n, 0] * u0 + Mr[n, 1] * u1 + dC_row(Mr, w0, w1, n).transpose() @ y
-
-
-@ti.func
 def c_curvature_block(curv: ti.template(), f, a, b):
     """The 3x3 block (vertex a, vertex b) of face f's S (x) I3 + J^T H J (zero if inactive)."""
     out = ti.Matrix.zero(float, 3, 3)

@@ -29,12 +29,9 @@ import taichi as ti
 
 from .. import ndarrays
 from . import exact_curvature
-from .c_curvature import c_curvature_block
-from .al import (assemble_all, choose_start, contact_g, contact_normal, fill_c_curvature,
-                 friction_state, merit, near_weight, residual, update_multipliers,
-                 vertex_violation, violation_of)
-from .buffers import (CONTACT_SLOTS, P_CONTACT_SCALE, P_CURVATURE, P_MARGIN, P_SVD_DELTA,
-                      ST_CG, ST_COMP,
+from .al import (assemble_all, choose_start, fill_c_curvature, merit, newton_matrix,
+                 residual, update_multipliers, vertex_violation, violation_of)
+from .buffers import (P_CONTACT_SCALE, P_CURVATURE, P_MARGIN, P_SVD_DELTA, ST_CG, ST_COMP,
                       ST_CONVERGED, ST_ITERS, ST_NEWTON, ST_START_VIOL, ST_VIOL, A)
 
 # LOOM_DEBUG_DIRECT=1 prints every Newton step (residual, step, line-search alpha).
@@ -71,72 +68,20 @@ def newton_system(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: 
                   Dm_inv: A, grain: A, rest_area: A, params: A, lam: A, g: A, grad: A, cm: A,
                   what: A, kappa: A, twist: A, contact: A, lam_c: A, stitch: A, lam_s: A,
                   fric: A, lam_t: A, curv: A, face_slot: A, stitch_slot: A, H: A, r: A):
-    """r = -grad L_A and the projected-Newton matrix H (the operator of
-    ``al.apply_hessian`` written out in W's block pattern, which must hold every face
-    pair and seam pair: ``system_matrix.build_pattern``). Pinned rows and columns become the
-    identity (their step is zero)."""
+    """r = -grad L_A and the projected-Newton matrix H (``al.newton_matrix``: the matrix the
+    PCG path's Newton steps solve with, in W's block pattern)."""
     ti.loop_config(serialize=True)
     for _ in range(1):
-        margin = params[P_MARGIN]
-        c_scale = params[P_CONTACT_SCALE]
         exact = params[P_CURVATURE] > 0.0
-        use_twist = params[P_SVD_DELTA] > 0.0 and K == 4 and not exact
         residual(K, nv, nf, ns, mu, x, x_hat, w_ptr, w_col, w_val, w_diag, pinned,
                  face_verts, lam, g, grad, contact, lam_c, stitch, lam_s, fric, lam_t, r)
         fill_c_curvature(method, K, nf, mu, x, face_verts, Dm_inv, grain, rest_area, params,
                          lam, g, curv)
-        for k in range(w_ptr[nv]):
-            H[k] = w_val[k]
-        I = ti.Matrix.identity(float, 3)
-        for n in range(nv):
-            for j in ti.static(range(CONTACT_SLOTS)):
-                if lam_c[n, j] + mu * (contact_g(contact, x, n, j) + margin * c_scale) > 0.0:
-                    cn = contact_normal(contact, n, j)
-                    H[w_diag[n]] += mu * cn.outer_product(cn)
-            P, y, radius = friction_state(n, mu, x, contact, lam_c, fric, lam_t)
-            if radius > 0.0:
-                ny = y.norm()
-                if ny <= radius:
-                    H[w_diag[n]] += mu * P
-                else:
-                    yh = y / ny
-                    H[w_diag[n]] += (mu * radius / ny) * (P - yh.outer_product(yh))
-        for f in range(nf):
-            near = mu * margin * ti.sqrt(rest_area[f])
-            for c in range(K):
-                s = lam[f, c] + mu * g[f, c]
-                if s + near > 0.0:
-                    gr, cmv, w = grad[f, c], cm[f, c], what[f, c]
-                    sc = ti.max(s, 0.0)
-                    if exact:
-                        sc = 0.0       # the exact curvature is added per face below
-                    wn = near_weight(s, near)
-                    proj = sc * kappa[f, c] * (I - w.outer_product(w))
-                    tw = twist[f, c]
-                    for a in ti.static(range(3)):
-                        ga = ti.Vector([gr[3 * a], gr[3 * a + 1], gr[3 * a + 2]])
-                        ta = ti.Vector([tw[3 * a], tw[3 * a + 1], tw[3 * a + 2]])
-                        for b in ti.static(range(3)):
-                            gb = ti.Vector([gr[3 * b], gr[3 * b + 1], gr[3 * b + 2]])
-                            blk = wn * mu * ga.outer_product(gb) + cmv[a] * cmv[b] * proj
-                            if use_twist:
-                                tb = ti.Vector([tw[3 * b], tw[3 * b + 1], tw[3 * b + 2]])
-                                blk += sc * ta.outer_product(tb)
-                            H[face_slot[f, 3 * a + b]] += blk
-            if exact:
-                for a in ti.static(range(3)):
-                    for b in ti.static(range(3)):
-                        H[face_slot[f, 3 * a + b]] += c_curvature_block(curv, f, a, b)
-        for k in range(ns):
-            H[stitch_slot[k, 0]] += mu * I
-            H[stitch_slot[k, 1]] += -mu * I
-            H[stitch_slot[k, 2]] += -mu * I
-            H[stitch_slot[k, 3]] += mu * I
-        for i in range(nv):
-            for k in range(w_ptr[i], w_ptr[i + 1]):
-                j = w_col[k]
-                if pinned[i] == 1 or pinned[j] == 1:
-                    H[k] = I if i == j else ti.Matrix.zero(float, 3, 3)
+        newton_matrix(K, nv, nf, ns, mu, params[P_MARGIN], params[P_CONTACT_SCALE],
+                      params[P_SVD_DELTA] > 0.0 and K == 4 and not exact, exact, x, w_ptr,
+                      w_col, w_val, w_diag, pinned, face_verts, rest_area, lam, g, grad, cm,
+                      what, kappa, twist, contact, lam_c, fric, lam_t, curv, face_slot,
+                      stitch_slot, H)
 
 
 @ti.kernel

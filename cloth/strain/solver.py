@@ -196,9 +196,8 @@ class StrainLimiter:
         self.solver = solver
         self.coupling = coupling
         self.linear_solver = linear_solver
-        self._full_mass = None     # M in the full block pattern (for the Cholesky path)
+        self._full_mass = None     # M in the full block pattern (the paper's projection metric)
         self._chol = None          # SparseCholesky of this mesh's block pattern
-        self._mass_metric = None   # M as a block matrix (the paper's projection metric)
         self._system = None        # the implicit step's matrix (coupling "implicit")
         self._system_ready = False
         self.tol = float(tol)
@@ -338,7 +337,6 @@ class StrainLimiter:
         self.set_stitches(self._stitches)
         buffers.clear_contacts(m.v_cap, ws.contact)
         self._upload_params()                  # the contact scale follows the mesh
-        self._mass_metric = system_matrix.diagonal(m.n_verts, m.mass)
         self._full_mass = None
         self._chol = None
         self._system = None
@@ -360,10 +358,10 @@ class StrainLimiter:
     def _build_pattern(self):
         return system_matrix.pattern_of(self.model, self._stitches)
 
-    def _direct_metric(self, use_system):
-        """The metric for the Cholesky path (it needs every face and seam pair in the
-        pattern), with the factorisation object of its pattern."""
-        from .. import linalg
+    def _newton_metric(self, use_system):
+        """The projection's metric in the full block pattern (every face and seam pair), which
+        both Newton paths write their matrix into (``al.newton_matrix``): the implicit step's
+        matrix, or M spread over that pattern; with ws.H sized for it."""
         if use_system:
             metric = self._system
         else:
@@ -373,13 +371,19 @@ class StrainLimiter:
                 system_matrix.fill_diagonal(self.model.n_verts, self._full_mass.diag,
                                             self._full_mass.val, self.model.mass)
             metric = self._full_mass
+        if self._ws.H is None or self._ws.H.shape[0] < metric.nnz:
+            self._ws.H = ti.ndarray(system_matrix.mat3, metric.nnz)
+        return metric
+
+    def _direct_metric(self, use_system):
+        """The metric for the Cholesky path, with the factorisation object of its pattern."""
+        from .. import linalg
+        metric = self._newton_metric(use_system)
         if self._chol is None:
             # Both metrics of a mesh are built by _build_pattern, so one analysis serves both
             # (it is dropped with them on a mesh or seam change).
             self._chol = linalg.SparseCholesky(metric.ptr_np, metric.col_np, metric.n,
                                                core=metric.core_np)
-        if self._ws.H is None or self._ws.H.shape[0] < metric.nnz:
-            self._ws.H = ti.ndarray(system_matrix.mat3, metric.nnz)
         return metric, self._chol
 
     def face_state(self):
@@ -482,8 +486,8 @@ class StrainLimiter:
             if self.linear_solver == "cholesky" or _host_loop_only():
                 rounds, newton, converged = self._solve_direct(mid, K, use_system)
             else:
-                metric = self._system if use_system else self._mass_metric
-                rounds, newton, converged = self._solve_al(mid, K, metric)
+                rounds, newton, converged = self._solve_al(mid, K,
+                                                           self._newton_metric(use_system))
             if saved is not None:
                 for a, val in zip((ws.lam, ws.lam_c, ws.lam_s, ws.lam_t), saved):
                     a.from_numpy(val)
@@ -573,9 +577,8 @@ class StrainLimiter:
                    ws.pinned, ws.face_verts, ws.Dm_inv, ws.grain, ws.rest_area, ws.lam,
                    ws.g,
                    ws.grad, ws.cm, ws.what, ws.kappa, ws.twist, ws.contact, ws.lam_c,
-                   ws.stitch, ws.lam_s, ws.fric, ws.lam_t, ws.curv, ws.b, ws.d, ws.r, ws.z,
-                   ws.p,
-                   ws.Ap, ws.P_inv,
+                   ws.stitch, ws.lam_s, ws.fric, ws.lam_t, ws.curv, metric.face_slot,
+                   metric.stitch_slot, ws.H, ws.b, ws.d, ws.r, ws.z, ws.p, ws.Ap, ws.P_inv,
                    ws.stats)
         stats = ws.stats.to_numpy()
         return int(stats[ST_ITERS]), int(stats[ST_NEWTON]), bool(stats[ST_CONVERGED] > 0)
