@@ -8,7 +8,7 @@ algorithm, in the order the kernel runs them.
 import taichi as ti
 
 from .buffers import (CONTACT_SLOTS, NO_CONTACT, P_C_STEP, P_CONTACT_SCALE, P_CURVATURE,
-                      P_DELTA, P_ISO, P_MARGIN,
+                      P_DELTA, P_INNER_RTOL, P_ISO, P_MARGIN,
                       P_SHEAR, P_SVD_DELTA, P_WARP, P_WEFT, ST_CG, ST_COMP, ST_CONVERGED,
                       ST_ITERS, ST_NEWTON, ST_START_VIOL, ST_VIOL, A, T)
 from .c_curvature import c_curvature_block, face_c_curvature
@@ -335,21 +335,13 @@ def newton_matrix(K, nv, nf, ns, mu, margin, c_scale, use_twist, exact, x: T, w_
 
 
 @ti.func
-def pcg_direction(method: ti.template(), exact: ti.template(), K, nv, nf, ns, mu, max_cg, rtol,
-                  margin, use_twist,
-                  x: T, x_hat: T,
-                  w_ptr: T, w_col: T, w_val: T, w_diag: T, pinned: T, face_verts: T, Dm_inv: T,
-                  grain: T, rest_area: T, params: T, lam: T, g: T, grad: T,
-                  cm: T, what: T, kappa: T, twist: T, contact: T, lam_c: T, stitch: T,
-                  lam_s: T, fric: T, lam_t: T, c_scale, curv: T, face_slot: T, stitch_slot: T,
-                  H: T, b: T, d: T, r: T, z: T, p: T, Ap: T, P_inv: T):
-    """Projected-Newton direction: solve H d = -grad L_A (H from ``newton_matrix``) by PCG
-    with H's 3x3 diagonal blocks as preconditioner (block Jacobi), from d = 0 to
-    |r| <= rtol |grad L_A| (an inexact Newton step: measured on the hanging scene, rtol = 0.1
-    needs as many Newton steps as 1e-3 with about half the CG iterations). Leaves
-    b = -grad L_A; returns (slope grad L_A . d, CG iterations)."""
-    residual(K, nv, nf, ns, mu, x, x_hat, w_ptr, w_col, w_val, w_diag, pinned, face_verts, lam, g, grad,
-             contact, lam_c, stitch, lam_s, fric, lam_t, r)
+def newton_direction(method: ti.template(), exact: ti.template(), K, nv, nf, ns, mu, max_cg,
+                     rtol, margin, use_twist, x: T, w_ptr: T, w_col: T, w_val: T, w_diag: T,
+                     pinned: T, face_verts: T, Dm_inv: T, grain: T, rest_area: T, params: T,
+                     lam: T, g: T, grad: T, cm: T, what: T, kappa: T, twist: T, contact: T,
+                     lam_c: T, fric: T, lam_t: T, c_scale, curv: T, face_slot: T,
+                     stitch_slot: T, H: T, b: T, d: T, r: T, z: T, p: T, Ap: T, P_inv: T):
+    """pcg_direction's matrix and PCG solve, with r = -grad L_A already in r."""
     if ti.static(exact):
         fill_c_curvature(method, K, nf, mu, x, face_verts, Dm_inv, grain, rest_area, params,
                          lam, g, curv)
@@ -388,6 +380,38 @@ def pcg_direction(method: ti.template(), exact: ti.template(), K, nv, nf, ns, mu
         for n in range(nv):
             p[n] = z[n] + beta * p[n]
     return -dot(b, d, nv), it
+
+
+@ti.func
+def pcg_direction(method: ti.template(), exact: ti.template(), K, nv, nf, ns, mu, max_cg, rtol,
+                  margin, use_twist,
+                  x: T, x_hat: T,
+                  w_ptr: T, w_col: T, w_val: T, w_diag: T, pinned: T, face_verts: T, Dm_inv: T,
+                  grain: T, rest_area: T, params: T, lam: T, g: T, grad: T,
+                  cm: T, what: T, kappa: T, twist: T, contact: T, lam_c: T, stitch: T,
+                  lam_s: T, fric: T, lam_t: T, c_scale, curv: T, face_slot: T, stitch_slot: T,
+                  H: T, b: T, d: T, r: T, z: T, p: T, Ap: T, P_inv: T, skip_rr):
+    """Projected-Newton direction: solve H d = -grad L_A (H from ``newton_matrix``) by PCG
+    with H's 3x3 diagonal blocks as preconditioner (block Jacobi), from d = 0 to
+    |r| <= rtol |grad L_A| (an inexact Newton step: measured on the hanging scene, rtol = 0.1
+    needs as many Newton steps as 1e-3 with about half the CG iterations). Leaves
+    b = -grad L_A; returns (slope grad L_A . d, CG iterations, |grad L_A|^2). With
+    |grad L_A|^2 <= skip_rr no step is computed (d = 0, slope 0)."""
+    residual(K, nv, nf, ns, mu, x, x_hat, w_ptr, w_col, w_val, w_diag, pinned, face_verts, lam, g, grad,
+             contact, lam_c, stitch, lam_s, fric, lam_t, r)
+    rr0 = dot(r, r, nv)
+    slope, it = 0.0, 0
+    if rr0 > skip_rr:
+        slope, it = newton_direction(method, exact, K, nv, nf, ns, mu, max_cg, rtol, margin,
+                                     use_twist, x, w_ptr, w_col, w_val, w_diag, pinned,
+                                     face_verts, Dm_inv, grain, rest_area, params, lam, g,
+                                     grad, cm, what, kappa, twist, contact, lam_c, fric, lam_t,
+                                     c_scale, curv, face_slot, stitch_slot, H, b, d, r, z, p,
+                                     Ap, P_inv)
+    else:
+        for n in range(nv):
+            d[n] = ti.Vector([0.0, 0.0, 0.0])
+    return slope, it, rr0
 
 
 @ti.func
@@ -524,25 +548,37 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
         for n in range(nv):
             x_trial[n] = x[n]
         first = 1
+        # The merit at x, kept from the line search that reached x until the multipliers or
+        # the penalty change (saves one merit evaluation per Newton step).
+        L_x, L_known = 0.0, 0
         while rounds < max_rounds and converged == 0:
             inner = 0
+            rr_first = 0.0
             while inner < max_newton:
                 slope, cg_it = 0.0, 0
                 L0 = 0.0
                 if first == 0:
-                    slope, cg_it = pcg_direction(method, exact, K, nv, nf, ns, mu, max_cg, rtol,
+                    skip = -1.0
+                    if inner > 0:
+                        skip = params[P_INNER_RTOL] ** 2 * rr_first
+                    slope, cg_it, rr = pcg_direction(method, exact, K, nv, nf, ns, mu, max_cg, rtol,
                                                  margin, use_twist, x, x_hat, w_ptr, w_col,
                                                  w_val, w_diag, pinned, face_verts, Dm_inv,
                                                  grain, rest_area, params, lam, g, grad, cm,
                                                  what, kappa, twist, contact, lam_c, stitch,
                                                  lam_s, fric, lam_t, c_scale, curv,
                                                  face_slot, stitch_slot, H, b, d, r, z, p, Ap,
-                                                 P_inv)
+                                                 P_inv, skip)
+                    if inner == 0:
+                        rr_first = rr
                     cg_total += cg_it
                     newton += 1
                     inner += 1
-                    L0 = merit(K, nv, nf, ns, mu, x, x_hat, w_ptr, w_col, w_val, w_diag, lam, g, contact,
-                               lam_c, stitch, lam_s, fric, lam_t)
+                    if L_known == 1:
+                        L0 = L_x
+                    else:
+                        L0 = merit(K, nv, nf, ns, mu, x, x_hat, w_ptr, w_col, w_val, w_diag,
+                                   lam, g, contact, lam_c, stitch, lam_s, fric, lam_t)
                 if first == 0 and not slope < 0.0:
                     break
                 alpha, step, tries = 1.0, 0.0, 0
@@ -564,6 +600,7 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
                         for n in range(nv):
                             step = ti.max(step, (x_trial[n] - x[n]).norm())
                             x[n] = x_trial[n]
+                        L_x, L_known = L, 1
                         break
                     alpha *= 0.5
                     tries += 1
@@ -595,6 +632,7 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
             viol, comp = update_multipliers(K, nv, nf, ns, mu, mu_max, x, rest_area, lam, g,
                                             contact, lam_c, stitch, lam_s, fric, lam_t,
                                             c_scale)
+            L_known = 0
             rounds += 1
             if viol < tol and comp < tol:
                 converged = 1

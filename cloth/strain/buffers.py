@@ -33,7 +33,10 @@ P_ISO = 10
 # The Newton matrix's constraint curvature: 0 the model of constraints.py, 1 exact through C
 # (c_curvature.py), with its difference step in C.
 P_CURVATURE, P_C_STEP = 11, 12
-N_PARAMS = 13
+# A round's inner loop stops once |grad L_A| fell below this fraction of its first value (0:
+# run max_newton steps).
+P_INNER_RTOL = 13
+N_PARAMS = 14
 # A vertex without a contact half-space: n = 0 and d far below any position, so d - n.x never
 # comes near activating.
 NO_CONTACT = -1e30

@@ -69,6 +69,18 @@ CG_BUDGET_PROJECTION = 50
 # 53 and 128 ms instead of 80 and 205. Single runs of a chaotic sweep: neighbouring budgets
 # can differ by a round (e.g. svd at 15 needs 3 where 25 needs 1).
 CG_BUDGET = {"mapping": 15, "svd": 25, "warp-weft": 25}
+# A round's inner loop (PCG path) stops once |grad L_A| is below this fraction of its value at
+# the round's first Newton step. Under coupling "implicit" the rounds are set by the
+# multiplier updates, not by how far each round's minimisation gets: on hanging at resolution
+# 46 (mapping, from the start, 30 frames) max_newton 1, 2, 3, 4, 5, 8 all took a median of 3-4
+# rounds, at 29, 49, 67, 87, 119, 169 ms per frame. But the resting cloth needs the inner
+# steps: at resolution 25 (mean KE over frames 120-150) max_newton 1 blew up, 2 shimmered at
+# 6.9e-6 J, 3 at 1.8e-6 J, 5 rested at 4.5e-7 J. Stopping on the residual instead keeps the
+# steps where they matter (``python -m benchmarks.solver --probe RES mapping --set
+# inner_rtol=E``, 2026-12-02): E = 0.2 / 0.25 / 0.3 / 0.35 / 0.5 rested at 4.0e-7 / 3.3e-7 /
+# 3.4e-7 / 5.7e-6 / 3.8e-6 J at resolution 25 (off: 4.5e-7), and 0.3 ran resolution 46 in 72
+# instead of 119 ms and 91 in 377 instead of 827 ms.
+INNER_RTOL = 0.3
 
 _host_loop_noted = False
 
@@ -146,17 +158,18 @@ class StrainLimiter:
     solve runs as one kernel launch (with one launch per phase, Python's handling of the
     kernel arguments cost as much as the solve), ``cg_rtol`` = 0.1 needs as many Newton
     steps as 1e-3 with half the CG iterations, and the svd curvature halves svd's CG work.
-    Tried without gain: fewer Newton steps per round (1-3: more rounds, 1 diverges), a higher
-    or faster-growing penalty, a larger CG budget, starting PCG from the previous call's
-    correction, and an exact Newton step (sparse Cholesky): the rounds are bound by the
-    non-smooth active set, not by the linear solves.
+    Tried without gain: a higher or faster-growing penalty, a larger CG budget, starting PCG
+    from the previous call's correction, and an exact Newton step (sparse Cholesky): the
+    rounds are bound by the non-smooth active set, not by the linear solves. A round's inner
+    loop ends after ``max_newton`` steps or once |grad L_A| fell below ``inner_rtol`` times
+    its value at the round's first step (``INNER_RTOL``; 0 turns it off).
     """
 
     def __init__(self, model, method="mapping", warp=(-0.01, 0.01), weft=(-0.05, 0.05),
                  bias=None, solver="al", tol=1e-4, max_iters=None, max_newton=5,
                  max_cg=None, cg_rtol=0.1, mu_scale=None, mu_grow=4.0, mu_max_scale=1e6,
                  mapping_delta=MAPPING_DELTA, mapping_iso=MAPPING_ISO, jacobi_omega=1.0,
-                 active_margin=1e-2,
+                 active_margin=1e-2, inner_rtol=None,
                  adaptive_margin=False, stitches=None, coupling="projection",
                  linear_solver="pcg", curvature="model"):
         if solver not in SOLVERS:
@@ -212,6 +225,9 @@ class StrainLimiter:
         self.svd_delta = SVD_DELTA
         self.jacobi_omega = float(jacobi_omega)
         self.active_margin = float(active_margin)
+        self.inner_rtol = INNER_RTOL if inner_rtol is None else float(inner_rtol)
+        if not 0 <= self.inner_rtol < 1:
+            raise StrainLimitError(f"inner_rtol must be in [0, 1) (got {inner_rtol})")
         # The Cholesky path's Newton matrix with the constraints' exact (PSD) curvature instead
         # of the model: False, "full" or "split" (exact_curvature.py). An experiment,
         # host-side and slow.
@@ -290,6 +306,7 @@ class StrainLimiter:
         params[buffers.P_WEFT:buffers.P_WEFT + 2] = self.weft
         params[buffers.P_SHEAR:buffers.P_SHEAR + 2] = self.shear_band()
         params[buffers.P_MARGIN] = self.active_margin
+        params[buffers.P_INNER_RTOL] = self.inner_rtol
         params[buffers.P_DELTA] = self.mapping_delta
         params[buffers.P_SVD_DELTA] = self.svd_delta
         params[buffers.P_ISO] = self.mapping_iso
