@@ -19,14 +19,17 @@ import numpy as np
 from benchmarks.harness import commit, configure, machine
 from cloth.strain.constraints import METHODS
 
-EXACT = dict(max_newton=40, cg_rtol=1e-9, max_cg=2000, tol=1e-8)
+EXACT = dict(max_newton=40, cg_rtol=1e-9, max_cg=2000, tol=1e-8, inner_rtol=0.0)
 SETTINGS = {
     "default": {},
+    "inner_rtol 0 (every round runs max_newton steps)": dict(inner_rtol=0.0),
     "cg_rtol 0.01": dict(cg_rtol=0.01),
     "max_newton 10": dict(max_newton=10),
-    "tight inner (max_newton 30, cg_rtol 1e-6)": dict(max_newton=30, cg_rtol=1e-6, max_cg=400),
+    "max_newton 10, inner_rtol 0": dict(max_newton=10, inner_rtol=0.0),
+    "tight inner (max_newton 30, cg_rtol 1e-6, inner_rtol 0)": dict(max_newton=30, cg_rtol=1e-6,
+                                                                   max_cg=400, inner_rtol=0.0),
 }
-KEYS = ("max_newton", "cg_rtol", "max_cg", "tol")
+KEYS = ("max_newton", "cg_rtol", "max_cg", "tol", "inner_rtol")
 
 
 def measure(method, resolution, frames):
@@ -43,6 +46,7 @@ def measure(method, resolution, frames):
     for name, over in [("exact", EXACT)] + list(SETTINGS.items()):
         for k, val in {**base, **over}.items():
             setattr(lim, k, val)
+        lim._upload_params()                # inner_rtol lives in the kernels' params
         sim.model.set_positions(x)
         sim.model.set_velocities(v)
         lim.set_face_state(faces)           # the multipliers (same faces: scale 1)

@@ -11,8 +11,9 @@ cloth, and the hanging sheet never settles: issue #13).
 
 The pattern (which vertex pairs couple: faces, bending stencils, stitches) is built on the
 host when the mesh changes; ``slots`` map every element's local block (n, m) to its place in
-``val``. For the split projection the same structure holds the lumped masses only
-(``diagonal``), so the solver has one code path.
+``val``. For the split projection the same pattern holds the lumped masses on its diagonal
+(``fill_diagonal``), so the solver has one code path, and the strain solve writes its Newton
+matrix into that pattern either way (``al.newton_matrix``).
 """
 import numpy as np
 import taichi as ti
@@ -114,14 +115,6 @@ def pattern_of(model, stitches=()):
     ne = model.n_edges
     return build_pattern(model.n_verts, model.faces, model.edge_verts.to_numpy()[:ne],
                          model.edge_opp.to_numpy()[:ne], stitches, *model.bend_pattern())
-
-
-def diagonal(n_verts, mass):
-    """The mass matrix M as a BlockMatrix (the paper's projection metric)."""
-    empty = np.zeros(0, np.int64)
-    B = BlockMatrix(n_verts, empty, empty)
-    fill_diagonal(n_verts, B.diag, B.val, np.ascontiguousarray(mass, np.float64))
-    return B
 
 
 @ti.kernel
