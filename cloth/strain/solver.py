@@ -79,8 +79,10 @@ CG_BUDGET = {"mapping": 15, "svd": 25, "warp-weft": 25}
 # steps where they matter (``python -m benchmarks.solver --probe RES mapping --set
 # inner_rtol=E``, 2026-12-02): E = 0.2 / 0.25 / 0.3 / 0.35 / 0.5 rested at 4.0e-7 / 3.3e-7 /
 # 3.4e-7 / 5.7e-6 / 3.8e-6 J at resolution 25 (off: 4.5e-7), and 0.3 ran resolution 46 in 72
-# instead of 119 ms and 91 in 377 instead of 827 ms.
-INNER_RTOL = 0.3
+# instead of 119 ms and 91 in 377 instead of 827 ms. The split projection keeps full rounds
+# (0): it is the paper's method and the benchmarks' baseline (with 0.3 its rounds at
+# resolution 46 went from 22 to 34).
+INNER_RTOL = {"implicit": 0.3, "projection": 0.0}
 
 _host_loop_noted = False
 
@@ -162,7 +164,7 @@ class StrainLimiter:
     from the previous call's correction, and an exact Newton step (sparse Cholesky): the
     rounds are bound by the non-smooth active set, not by the linear solves. A round's inner
     loop ends after ``max_newton`` steps or once |grad L_A| fell below ``inner_rtol`` times
-    its value at the round's first step (``INNER_RTOL``; 0 turns it off).
+    its value at the round's first step (None: per coupling, ``INNER_RTOL``; 0 turns it off).
     """
 
     def __init__(self, model, method="mapping", warp=(-0.01, 0.01), weft=(-0.05, 0.05),
@@ -225,7 +227,8 @@ class StrainLimiter:
         self.svd_delta = SVD_DELTA
         self.jacobi_omega = float(jacobi_omega)
         self.active_margin = float(active_margin)
-        self.inner_rtol = INNER_RTOL if inner_rtol is None else float(inner_rtol)
+        self.inner_rtol = INNER_RTOL.get(coupling, 0.0) if inner_rtol is None \
+            else float(inner_rtol)
         if not 0 <= self.inner_rtol < 1:
             raise StrainLimitError(f"inner_rtol must be in [0, 1) (got {inner_rtol})")
         # The Cholesky path's Newton matrix with the constraints' exact (PSD) curvature instead
@@ -266,12 +269,14 @@ class StrainLimiter:
 
     def set_coupling(self, coupling):
         """Switch between the split projection and the implicit step's metric (live); the
-        initial penalty follows (``MU_SCALE``)."""
+        initial penalty and the inner loop's stop follow (``MU_SCALE``, ``INNER_RTOL``)."""
         if coupling not in COUPLINGS:
             raise StrainLimitError(f"unknown strain coupling '{coupling}': use one of "
                                    f"{', '.join(COUPLINGS)}")
         self.coupling = coupling
         self.mu_scale = MU_SCALE[coupling]
+        self.inner_rtol = INNER_RTOL[coupling]
+        self._upload_params()
         self._system_ready = False
 
     def set_bands(self, warp=None, weft=None, bias=None):
