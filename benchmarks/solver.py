@@ -166,6 +166,8 @@ def main():
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--rerun-rest", metavar="COUPLING/SOLVER",
                     help="re-measure only those rest rows in OUT/solver.json, e.g. implicit/pcg")
+    ap.add_argument("--with-speed", action="store_true",
+                    help="with --rerun-rest: re-run that variant's speed rows too")
     ap.add_argument("--probe", nargs=2, metavar=("RES", "METHOD"),
                     help="measure one configuration and print its row (JSON), e.g. "
                          "--probe 25 mapping --frames 150 --ke-from 120")
@@ -207,14 +209,19 @@ def main():
         with open(os.path.join(args.out, "solver.json")) as fh:
             data = json.load(fh)
         coupling, linear_solver = args.rerun_rest.split("/")
-        for i, r in enumerate(data["rest"]):
-            if (r.get("coupling"), r.get("linear_solver")) == (coupling, linear_solver):
-                data["rest"][i] = run_child(r["res"], r["method"], coupling, linear_solver,
-                                            r.get("curvature", OLD_CURVATURE), r["frames"], 120)
-                print(json.dumps(data["rest"][i]), file=sys.stderr, flush=True)
+        kinds = ("rest", "speed") if args.with_speed else ("rest",)
+        for kind in kinds:
+            for i, r in enumerate(data[kind]):
+                if (r.get("coupling"), r.get("linear_solver")) == (coupling, linear_solver):
+                    data[kind][i] = run_child(r["res"], r["method"], coupling, linear_solver,
+                                              r.get("curvature", OLD_CURVATURE), r["frames"],
+                                              120 if kind == "rest" else r["frames"])
+                    print(json.dumps(data[kind][i]), file=sys.stderr, flush=True)
+        what = " and speed" if args.with_speed else ""
         write_docs(data["rest"], data["speed"], args.out,
-                   f"`python -m benchmarks.solver` (rest rows of {args.rerun_rest} re-run with "
-                   f"`--rerun-rest {args.rerun_rest}`)")
+                   f"`python -m benchmarks.solver` (rest{what} rows of {args.rerun_rest} "
+                   f"re-run with `--rerun-rest {args.rerun_rest}"
+                   f"{' --with-speed' if args.with_speed else ''}`)")
         return
     t0 = time.time()
     rest, speed = [], []
