@@ -290,7 +290,9 @@ def newton_matrix(K, nv, nf, ns, mu, margin, c_scale, use_twist, exact, x: T, w_
                 H[w_diag[n]] += (mu * radius / ny) * (P - yh.outer_product(yh))
     for f in range(nf):
         near = mu * margin * ti.sqrt(rest_area[f])
-        Hf = ti.Matrix.zero(float, 9, 9)        # the face's constraint terms, summed first
+        # The face's constraint terms, summed first; symmetric, so only the blocks (a, b) with
+        # a <= b are formed (Hf's lower block triangle stays unused).
+        Hf = ti.Matrix.zero(float, 9, 9)
         any_near = False
         for c in range(K):
             s = lam[f, c] + mu * g[f, c]
@@ -300,24 +302,36 @@ def newton_matrix(K, nv, nf, ns, mu, margin, c_scale, use_twist, exact, x: T, w_
                 sc = ti.max(s, 0.0)
                 if exact:
                     sc = 0.0       # the exact curvature is added per face below
-                Hf += near_weight(s, near) * mu * gr.outer_product(gr)
+                wmu = near_weight(s, near) * mu
+                for a in ti.static(range(3)):
+                    for b in ti.static(range(a, 3)):
+                        for i in ti.static(range(3)):
+                            for j in ti.static(range(3)):
+                                Hf[3 * a + i, 3 * b + j] += wmu * gr[3 * a + i] * gr[3 * b + j]
                 if sc > 0.0:
                     # Curvature of ||F e||: (cm_a cm_b) kappa (I - w w^T) per block (a, b).
                     proj = sc * kappa[f, c] * (I - w.outer_product(w))
                     for a in ti.static(range(3)):
-                        for b in ti.static(range(3)):
+                        for b in ti.static(range(a, 3)):
                             for i in ti.static(range(3)):
                                 for j in ti.static(range(3)):
                                     Hf[3 * a + i, 3 * b + j] += cmv[a] * cmv[b] * proj[i, j]
                     if use_twist:
                         tw = twist[f, c]
-                        Hf += sc * tw.outer_product(tw)
+                        for a in ti.static(range(3)):
+                            for b in ti.static(range(a, 3)):
+                                for i in ti.static(range(3)):
+                                    for j in ti.static(range(3)):
+                                        Hf[3 * a + i, 3 * b + j] += sc * tw[3 * a + i] * \
+                                            tw[3 * b + j]
         if any_near:
             for a in ti.static(range(3)):
-                for b in ti.static(range(3)):
+                for b in ti.static(range(a, 3)):
                     blk = ti.Matrix([[Hf[3 * a + i, 3 * b + j] for j in ti.static(range(3))]
                                      for i in ti.static(range(3))])
                     H[face_slot[f, 3 * a + b]] += blk
+                    if ti.static(a < b):
+                        H[face_slot[f, 3 * b + a]] += blk.transpose()
         if exact:
             for a in ti.static(range(3)):
                 for b in ti.static(range(3)):
