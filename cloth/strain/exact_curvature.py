@@ -1,6 +1,6 @@
 """The constraints' exact curvature in the Newton matrix, on the host (an experiment of #13).
 
-The Newton matrix of the AL (``al.apply_hessian``, ``direct.newton_system``) models the
+The Newton matrix of the AL (``al.newton_matrix``, used by both Newton paths) models the
 curvature of each active constraint as that of ``sqrt(a) ||F e||`` with the direction e frozen
 (``constraints.py``: kappa, cm, what; svd adds its twist term). For the mapping family that
 misses the terms of the rotating principal frame (c_ij = |e_i . v_j| turns with F as
