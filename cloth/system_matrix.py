@@ -52,10 +52,11 @@ class BlockMatrix:
         self.diag.from_numpy(self.diag_np if n else np.zeros(1, np.int32))
         self.val = ti.ndarray(mat3, max(self.nnz, 1))
 
-    def to_scipy(self):
-        """The matrix as a scipy CSR matrix (3n x 3n), for tests and direct solvers."""
+    def to_scipy(self, val=None):
+        """The matrix as a scipy CSR matrix (3n x 3n), for tests and direct solvers; ``val``:
+        other values in this pattern (an ndarray of 3x3 blocks, e.g. a Newton matrix)."""
         import scipy.sparse as sp
-        v = self.val.to_numpy()[: self.nnz]
+        v = (self.val if val is None else val).to_numpy()[: self.nnz]
         return sp.bsr_matrix((v, self.col_np, self.ptr_np), shape=(3 * self.n, 3 * self.n)).tocsr()
 
 

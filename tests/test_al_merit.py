@@ -92,8 +92,7 @@ def test_newton_matrix_is_the_merit_hessian_without_the_margin(method):
     svd, 1e-9 for warp-weft); with the default margin it is 2-5 times stiffer along every
     direction tried (the near constraints enter; docs/speed/inner_solver.md).
     It is symmetric, and the identity on pinned rows."""
-    import scipy.sparse as sp
-    from cloth.strain import direct
+    from benchmarks.newton_model import directional_errors, newton_system_at
     from tests.test_coupling import _hanging
     sim = _hanging(method, "implicit", res=6)
     for _ in range(3):
@@ -108,14 +107,7 @@ def test_newton_matrix_is_the_merit_hessian_without_the_margin(method):
     free = (m.pinned == 0)[:, None]
     x0 = ws.x.to_numpy()
     x0[:nv] += 2e-4 * rng.standard_normal((nv, 3)) * free
-
-    def residual_and_matrix(xs):
-        ws.x.from_numpy(xs)
-        lim._assemble(mid, ws.x)
-        direct.fill_newton_system(lim, mid, K, mu, W)
-        H = sp.bsr_matrix((ws.H.to_numpy()[:W.nnz], W.col_np, W.ptr_np), shape=(3 * nv, 3 * nv))
-        return ws.r.to_numpy()[:nv].ravel().copy(), H.tocsr()
-
+    residual_and_matrix = newton_system_at(lim, mid, K, mu, W)
     errors, ratios = [], []
     for margin in (0.0, lim.active_margin):
         lim.active_margin = margin
@@ -124,17 +116,7 @@ def test_newton_matrix_is_the_merit_hessian_without_the_margin(method):
         assert abs(H - H.T).max() <= 1e-12 * abs(H).max()
         pinned = np.repeat(m.pinned, 3)
         assert np.array_equal(H[pinned].toarray(), np.eye(3 * nv)[pinned])
-        err, ratio = [], []
-        for _ in range(3):
-            d = np.zeros_like(x0)
-            d[:nv] = rng.standard_normal((nv, 3)) * free
-            eps = 1e-7
-            rp, _ = residual_and_matrix(x0 + eps * d)
-            rm, _ = residual_and_matrix(x0 - eps * d)
-            true_d = -(rp - rm) / (2 * eps)
-            model_d = H @ d[:nv].ravel()
-            err.append(np.linalg.norm(model_d - true_d) / np.linalg.norm(true_d))
-            ratio.append(d[:nv].ravel() @ model_d / (d[:nv].ravel() @ true_d))
+        err, ratio = directional_errors(residual_and_matrix, x0, nv, free, rng, 3, H=H)
         errors.append(max(err))
         ratios.append(min(ratio))
     assert errors[0] < 0.1

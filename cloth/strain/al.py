@@ -149,7 +149,8 @@ def metric_row(n, w_ptr: T, w_col: T, w_val: T, a: T, b: T):
 
 @ti.func
 def metric_times(n, w_ptr: T, w_col: T, w_val: T, p: T):
-    """Row n of W p."""
+    """Row n of B p, B a block matrix in W's pattern with values ``w_val`` (W itself, or the
+    Newton matrix H)."""
     acc = ti.Vector([0.0, 0.0, 0.0])
     for k in range(w_ptr[n], w_ptr[n + 1]):
         acc += w_val[k] @ p[w_col[k]]
