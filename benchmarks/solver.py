@@ -31,16 +31,19 @@ import time
 import numpy as np
 
 VARIANTS = (("projection", "pcg"), ("implicit", "pcg"), ("implicit", "cholesky"))
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 # The solver before #13 (the split projection) had only the curvature model in its Newton
 # matrix (strain.curvature, c_curvature.py).
 OLD_CURVATURE = "model"
 
 
 def child(res, method, coupling, linear_solver, curvature, frames, ke_from, overrides=None,
-          bending=None):
+          bending=None, nudge_seed=None):
     """One configuration: ``overrides`` sets StrainLimiter attributes after the build (e.g.
     {"active_margin": 0.005}, a probe of a setting the scene files do not expose);
-    ``bending``: sim.bending (default: the settings')."""
+    ``bending``: sim.bending (default: the settings'). ``nudge_seed``: start from the scene's
+    start moved by 1 nm with that seed (``speed_vs_error.nudge_start``; 0: not moved), and
+    return the kinetic energy of every frame too (the rest ensemble)."""
     from cloth import backend
     backend.init("cpu", "f64")
     import scenes
@@ -53,7 +56,11 @@ def child(res, method, coupling, linear_solver, curvature, frames, ke_from, over
                                              "linear_solver": linear_solver,
                                              "curvature": curvature}}]
                   + ([{"sim": {"bending": bending}}] if bending else []))
-    sim = Simulator(mod.build(cfg), cfg)
+    setup = mod.build(cfg)
+    if nudge_seed:
+        from benchmarks.speed_vs_error import nudge_start
+        setup = nudge_start(setup, seed=nudge_seed)
+    sim = Simulator(setup, cfg)
     for key, value in (overrides or {}).items():
         if not hasattr(sim.strain, key):
             raise SystemExit(f"--set: StrainLimiter has no setting '{key}'")
@@ -86,17 +93,50 @@ def child(res, method, coupling, linear_solver, curvature, frames, ke_from, over
                 cg_median=float(np.median(cg[1:])),
                 frame_ms_median=float(np.median(frame_ms[1:])),
                 factorizations_mean=float(np.mean(factorizations[1:])),
-                overrides=overrides or {})
+                overrides=overrides or {},
+                **({"nudge_seed": nudge_seed, "ke_frames": [float(k) for k in ke]}
+                   if nudge_seed is not None else {}))
 
 
-def run_child(*args):
-    cmd = [sys.executable, "-m", "benchmarks.solver", "--child", json.dumps(args)]
-    out = subprocess.run(cmd, capture_output=True, text=True,
-                         cwd=os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+def _child_cmd(args):
+    return [sys.executable, "-m", "benchmarks.solver", "--child", json.dumps(args)]
+
+
+def _child_result(out, args):
     if out.returncode != 0:
         return {"error": out.stderr.strip().splitlines()[-1] if out.stderr.strip() else "?",
                 "args": args}
     return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def run_child(*args):
+    out = subprocess.run(_child_cmd(args), capture_output=True, text=True, cwd=ROOT)
+    return _child_result(out, args)
+
+
+def run_children(arg_lists, jobs):
+    """Children ``jobs`` at a time (each its own process); results in the order given."""
+    results, running, pending = [None] * len(arg_lists), {}, list(enumerate(arg_lists))
+    while pending or running:
+        while pending and len(running) < jobs:
+            i, args = pending.pop(0)
+            running[i] = (subprocess.Popen(_child_cmd(args), stdout=subprocess.PIPE,
+                                           stderr=subprocess.PIPE, text=True, cwd=ROOT), args)
+        i = next(iter(running))
+        proc, args = running.pop(i)
+        stdout, stderr = proc.communicate()
+        results[i] = _child_result(subprocess.CompletedProcess(proc.args, proc.returncode,
+                                                                stdout, stderr), args)
+        print(f"  [{sum(r is not None for r in results)}/{len(results)}] "
+              f"{_row_text(results[i])}", file=sys.stderr, flush=True)
+    return results
+
+
+def _row_text(r):
+    if "error" in r:
+        return f"error: {r['error']}"
+    return (f"{r['faces']} faces {r['method']} {r['coupling']}/{r['linear_solver']} "
+            f"seed {r.get('nudge_seed')}: KE {r['ke_mean']:.3g} J, {r['ms_median']:.1f} ms")
 
 
 def table(rows, keys, heads):
@@ -183,15 +223,27 @@ def main():
                          "OUT/cg_budget.md and .json (~10 min)")
     ap.add_argument("--bending", choices=("isotropic", "hinge"),
                     help="sim.bending for --probe (default: the settings')")
+    ap.add_argument("--rest-ensemble", type=int, metavar="SEEDS",
+                    help="the rest measure from the start and SEEDS starts moved by 1 nm, PCG "
+                         "and Cholesky (rest_ensemble.md/png)")
+    ap.add_argument("--ensemble-res", type=int, default=25)
+    ap.add_argument("--ensemble-solvers", default="pcg,cholesky",
+                    help="Newton solves of the ensemble (--set applies to pcg)")
+    ap.add_argument("--jobs", type=int, default=2, help="children side by side (ensemble)")
     ap.add_argument("--set", action="append", default=[], metavar="ATTR=JSON",
                     help="StrainLimiter attribute for --probe, e.g. --set active_margin=0.005")
     args = ap.parse_args()
     curvature = args.curvature or _default_curvature()
+    overrides = {}
+    for item in args.set:
+        key, _, value = item.partition("=")
+        overrides[key] = json.loads(value)
+    if args.rest_ensemble:
+        os.makedirs(args.out, exist_ok=True)
+        rest_ensemble(args.out, args.ensemble_res, "mapping", args.rest_ensemble, args.jobs,
+                      curvature, overrides, args.ensemble_solvers.split(","))
+        return
     if args.probe:
-        overrides = {}
-        for item in args.set:
-            key, _, value = item.partition("=")
-            overrides[key] = json.loads(value)
         print(json.dumps(child(int(args.probe[0]), args.probe[1], args.coupling,
                                args.linear_solver, curvature, args.frames, args.ke_from,
                                overrides, args.bending)))
@@ -274,6 +326,114 @@ def budget_sweep(out, curvature):
     with open(os.path.join(out, "cg_budget.md"), "w") as fh:
         fh.write("\n".join(md) + "\n")
     print("\n".join(md))
+
+
+ENSEMBLE_FRAMES = 240
+# The windows of the ensemble's kinetic energy: the issue's (frames 121-150) and a later one.
+REST_WINDOW, LATE_WINDOW = (121, 150), (181, 240)
+REST_TARGET = 3e-7         # J, issue #13, mapping at resolution 25
+
+
+def window_mean(ke_frames, window):
+    """Mean of the per-frame kinetic energies over frames ``window`` = (first, last), counted
+    from 1 (ke_frames[k] belongs to frame k + 1)."""
+    first, last = window
+    if len(ke_frames) < last:
+        raise ValueError(f"{len(ke_frames)} frames, the window needs {last}")
+    return float(np.mean(ke_frames[first - 1:last]))
+
+
+def ensemble_summary(rows, variants):
+    """One row per (Newton solve, settings) of the ensemble's runs: the median, range and
+    count under REST_TARGET of the mean kinetic energy over REST_WINDOW, the median over
+    LATE_WINDOW and the median strain-limiting ms. Failed runs ({"error": ...}) are counted
+    as failed."""
+    summary = []
+    for solver, ov in variants:
+        runs = [r for r in rows if r.get("linear_solver") == solver and
+                r.get("overrides", {}) == (ov or {})]
+        failed = sum(1 for r in rows if "error" in r and r["args"][3] == solver)
+        if not runs:
+            continue
+        ke = np.array([window_mean(r["ke_frames"], REST_WINDOW) for r in runs])
+        late = np.array([window_mean(r["ke_frames"], LATE_WINDOW) for r in runs])
+        summary.append(dict(
+            solver=solver, overrides=json.dumps(ov) if ov else "", runs=len(runs),
+            failed=failed, ke_median=float(np.median(ke)), ke_min=float(ke.min()),
+            ke_max=float(ke.max()),
+            under_target=f"{int((ke <= REST_TARGET).sum())} of {len(ke)}",
+            late_median=float(np.median(late)),
+            ms_median=float(np.median([r["ms_median"] for r in runs])),
+            commit=runs[0]["commit"]))
+    return summary
+
+
+def rest_ensemble(out, res, method, seeds, jobs, curvature, overrides, solvers=("pcg",
+                                                                            "cholesky")):
+    """The rest measure over an ensemble: the same hanging run from its start and from ``seeds``
+    starts moved by 1 nm, for each Newton solve in ``solvers`` (``overrides`` apply to pcg).
+    Why: the mean kinetic energy over frames 121-150 of one run moved by 2-3x with changes
+    that only move round-off (docs/speed/solver.md), so one run cannot say whether a change
+    helps. Writes rest_ensemble.{md,png,json}: per solve the median and range of the mean
+    kinetic energy over REST_WINDOW and LATE_WINDOW (``ensemble_summary``), and every run's
+    kinetic energy per frame."""
+    t0 = time.time()
+    variants = [(s, overrides if s == "pcg" else {}) for s in solvers]
+    # Seed 0: the scene's own start (not moved; a seed makes the child return ke_frames).
+    args = [(res, method, "implicit", solver, curvature, ENSEMBLE_FRAMES, 120, ov, None, seed)
+            for solver, ov in variants for seed in range(seeds + 1)]
+    rows = run_children(args, jobs)
+    summary = ensemble_summary(rows, variants)
+    with open(os.path.join(out, "rest_ensemble.json"), "w") as fh:
+        json.dump(rows, fh)
+    _plot_ensemble(rows, os.path.join(out, "rest_ensemble.png"), res, method)
+    faces = next((r["faces"] for r in rows if "error" not in r), "?")
+    md = [f"# The rest at resolution {res} is chaotic: an ensemble (issue #13)", "",
+          f"`python -m benchmarks.solver --rest-ensemble {seeds} --ensemble-res {res}` "
+          f"({time.time() - t0:.0f} s, {jobs} at a time), {time.strftime('%Y-%m-%d')}, 2-core "
+          f"CPU, f64. hanging, {method}, {faces} faces, coupling implicit, one substep per "
+          "frame; each Newton solve runs from the scene's start and from "
+          f"{seeds} starts moved by 1 nm at random (seeds 1-{seeds}). KE 121-150: the mean "
+          "kinetic energy over frames 121-150 (the issue's measure, target <= 3e-7 J); "
+          "181-240: the same later. ms: the median over runs of each run's median "
+          "strain-limiting ms per frame (children run side by side, so slower than alone).",
+          "",
+          table(summary, ["solver", "overrides", "runs", "failed", "ke_median", "ke_min",
+                          "ke_max", "under_target", "late_median", "ms_median", "commit"],
+                ["Newton solve", "settings", "runs", "failed", "KE 121-150 median (J)", "min",
+                 "max", "<= 3e-7 J", "KE 181-240 median (J)", "SL ms", "commit"]), "",
+          "![kinetic energy of every run](rest_ensemble.png)"]
+    with open(os.path.join(out, "rest_ensemble.md"), "w") as fh:
+        fh.write("\n".join(md) + "\n")
+    print("\n".join(md))
+
+
+def _plot_ensemble(rows, path, res, method):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(9, 4.5))
+    colors = {"pcg": "tab:blue", "cholesky": "tab:orange"}
+    for r in rows:
+        if "error" in r or not r.get("ke_frames"):
+            continue
+        first = r["nudge_seed"] == 0
+        ax.semilogy(range(1, len(r["ke_frames"]) + 1), r["ke_frames"],
+                    color=colors[r["linear_solver"]], lw=1.6 if first else 0.7,
+                    alpha=1.0 if first else 0.6,
+                    label=r["linear_solver"] + (" (from the scene's start)" if first else
+                                                " (starts moved by 1 nm)"))
+    ax.axhline(REST_TARGET, color="k", ls=":", lw=1)
+    ax.axvspan(*REST_WINDOW, color="0.9")
+    handles, labels = ax.get_legend_handles_labels()
+    keep = {l: h for h, l in zip(handles, labels)}
+    ax.legend(keep.values(), keep.keys(), fontsize=8)
+    ax.set_xlabel("frame (1/60 s)")
+    ax.set_ylabel("kinetic energy (J)")
+    ax.set_title(f"hanging, {method}, resolution {res}: every run of the ensemble "
+                 "(grey: frames 121-150; dotted: 3e-7 J)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
 
 
 def write_docs(rest, speed, out, how):
