@@ -135,8 +135,11 @@ def run_children(arg_lists, jobs):
 def _row_text(r):
     if "error" in r:
         return f"error: {r['error']}"
+    ke = (f"KE {window_mean(r['ke_frames'], REST_WINDOW):.3g} J over frames "
+          f"{REST_WINDOW[0]}-{REST_WINDOW[1]}" if r.get("ke_frames") else
+          f"KE {r['ke_mean']:.3g} J")
     return (f"{r['faces']} faces {r['method']} {r['coupling']}/{r['linear_solver']} "
-            f"seed {r.get('nudge_seed')}: KE {r['ke_mean']:.3g} J, {r['ms_median']:.1f} ms")
+            f"seed {r.get('nudge_seed')}: {ke}, {r['ms_median']:.1f} ms")
 
 
 def table(rows, keys, heads):

@@ -350,12 +350,55 @@ def newton_matrix(K, nv, nf, ns, mu, margin, c_scale, use_twist, exact, x: T, w_
 
 
 @ti.func
+def precondition(use_factor, nv, P_inv: T, f_ptr: T, f_idx: T, f_val: T, f_perm: T, f_work: T,
+                 r: T, z: T):
+    """z = P^-1 r; returns r.z. P: H's 3x3 diagonal blocks (their inverses in P_inv), or with
+    ``use_factor`` a sparse Cholesky factor P H~ P^T = L L^T of a matrix like H
+    (factor_precond.py): two triangular solves. The packed arrays hold L twice, by columns
+    (f_ptr[0..n3], the diagonal first in each column) and by rows (f_ptr[n3 + 1..], the
+    diagonal last in each row, offsets into the second half of f_idx and f_val), so both
+    solves read L in the order they use it; f_perm[k] is the original index of permuted row
+    k; f_work holds two scalar vectors."""
+    if use_factor:
+        n3 = 3 * nv
+        for n in range(nv):
+            for c in ti.static(range(3)):
+                f_work[3 * n + c] = r[n][c]
+        for k in range(n3):
+            f_work[n3 + k] = f_work[f_perm[k]]
+        for i in range(n3):                      # L y = P r, by rows of L
+            acc = f_work[n3 + i]
+            last = f_ptr[n3 + 2 + i] - 1
+            for q in range(f_ptr[n3 + 1 + i], last):
+                acc -= f_val[q] * f_work[n3 + f_idx[q]]
+            f_work[n3 + i] = acc / f_val[last]
+        for jj in range(n3):                     # L^T w = y, by columns of L
+            j = n3 - 1 - jj
+            acc = f_work[n3 + j]
+            for q in range(f_ptr[j] + 1, f_ptr[j + 1]):
+                acc -= f_val[q] * f_work[n3 + f_idx[q]]
+            f_work[n3 + j] = acc / f_val[f_ptr[j]]
+        for k in range(n3):
+            f_work[f_perm[k]] = f_work[n3 + k]
+        for n in range(nv):
+            z[n] = ti.Vector([f_work[3 * n], f_work[3 * n + 1], f_work[3 * n + 2]])
+    else:
+        for n in range(nv):
+            z[n] = P_inv[n] @ r[n]
+    rz = 0.0
+    for n in range(nv):
+        rz += r[n].dot(z[n])
+    return rz
+
+
+@ti.func
 def newton_direction(method: ti.template(), exact: ti.template(), K, nv, nf, ns, mu, max_cg,
                      rtol, margin, use_twist, x: T, w_ptr: T, w_col: T, w_val: T, w_diag: T,
                      pinned: T, face_verts: T, Dm_inv: T, grain: T, rest_area: T, params: T,
                      lam: T, g: T, grad: T, cm: T, what: T, kappa: T, twist: T, contact: T,
                      lam_c: T, fric: T, lam_t: T, c_scale, curv: T, face_slot: T,
-                     stitch_slot: T, H: T, b: T, d: T, r: T, z: T, p: T, Ap: T, P_inv: T):
+                     stitch_slot: T, H: T, b: T, d: T, r: T, z: T, p: T, Ap: T, P_inv: T,
+                     use_factor, f_ptr: T, f_idx: T, f_val: T, f_perm: T, f_work: T):
     """pcg_direction's matrix and PCG solve, with r = -grad L_A already in r."""
     if ti.static(exact):
         fill_c_curvature(method, K, nf, mu, x, face_verts, Dm_inv, grain, rest_area, params,
@@ -368,10 +411,10 @@ def newton_direction(method: ti.template(), exact: ti.template(), K, nv, nf, ns,
         P_inv[n] = H[w_diag[n]].inverse()       # pinned rows: the identity
         b[n] = r[n]
         d[n] = ti.Vector([0.0, 0.0, 0.0])
-        z[n] = P_inv[n] @ r[n]
-        p[n] = z[n]
-        rz += r[n].dot(z[n])
         rr += r[n].dot(r[n])
+    rz = precondition(use_factor, nv, P_inv, f_ptr, f_idx, f_val, f_perm, f_work, r, z)
+    for n in range(nv):
+        p[n] = z[n]
     stop = rtol * rtol * rr
     it = 0
     while it < max_cg and rr > stop:
@@ -382,13 +425,12 @@ def newton_direction(method: ti.template(), exact: ti.template(), K, nv, nf, ns,
         if pAp <= 0.0:
             break
         alpha = rz / pAp
-        rz_new, rr = 0.0, 0.0
+        rr = 0.0
         for n in range(nv):
             d[n] += alpha * p[n]
             r[n] -= alpha * Ap[n]
-            z[n] = P_inv[n] @ r[n]
-            rz_new += r[n].dot(z[n])
             rr += r[n].dot(r[n])
+        rz_new = precondition(use_factor, nv, P_inv, f_ptr, f_idx, f_val, f_perm, f_work, r, z)
         it += 1
         beta = rz_new / rz
         rz = rz_new
@@ -405,7 +447,8 @@ def pcg_direction(method: ti.template(), exact: ti.template(), K, nv, nf, ns, mu
                   grain: T, rest_area: T, params: T, lam: T, g: T, grad: T,
                   cm: T, what: T, kappa: T, twist: T, contact: T, lam_c: T, stitch: T,
                   lam_s: T, fric: T, lam_t: T, c_scale, curv: T, face_slot: T, stitch_slot: T,
-                  H: T, b: T, d: T, r: T, z: T, p: T, Ap: T, P_inv: T, skip_rr):
+                  H: T, b: T, d: T, r: T, z: T, p: T, Ap: T, P_inv: T, use_factor, f_ptr: T,
+                  f_idx: T, f_val: T, f_perm: T, f_work: T, skip_rr):
     """Projected-Newton direction: solve H d = -grad L_A (H from ``newton_matrix``) by PCG
     with H's 3x3 diagonal blocks as preconditioner (block Jacobi), from d = 0 to
     |r| <= rtol |grad L_A| (an inexact Newton step: measured on the hanging scene, rtol = 0.1
@@ -422,7 +465,8 @@ def pcg_direction(method: ti.template(), exact: ti.template(), K, nv, nf, ns, mu
                                      face_verts, Dm_inv, grain, rest_area, params, lam, g,
                                      grad, cm, what, kappa, twist, contact, lam_c, fric, lam_t,
                                      c_scale, curv, face_slot, stitch_slot, H, b, d, r, z, p,
-                                     Ap, P_inv)
+                                     Ap, P_inv, use_factor, f_ptr, f_idx, f_val, f_perm,
+                                     f_work)
     else:
         for n in range(nv):
             d[n] = ti.Vector([0.0, 0.0, 0.0])
@@ -539,7 +583,8 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
              rest_area: A, lam: A, g: A, grad: A, cm: A, what: A, kappa: A,
              twist: A, contact: A, lam_c: A, stitch: A, lam_s: A, fric: A, lam_t: A, curv: A,
              face_slot: A, stitch_slot: A, H: A, b: A, d: A, r: A, z: A, p: A, Ap: A,
-             P_inv: A, stats: A):
+             P_inv: A, use_factor: int, f_ptr: A, f_idx: A, f_val: A, f_perm: A, f_work: A,
+             stats: A):
     """The whole AL projection (METHOD 4) in one launch (measured: with one launch per
     phase, Python's argument handling cost as much as the solve): rounds of inexact
     minimisation of L_A by projected Newton + PCG with a backtracking (Armijo) line search,
@@ -583,7 +628,8 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
                                                  what, kappa, twist, contact, lam_c, stitch,
                                                  lam_s, fric, lam_t, c_scale, curv,
                                                  face_slot, stitch_slot, H, b, d, r, z, p, Ap,
-                                                 P_inv, skip)
+                                                 P_inv, use_factor, f_ptr, f_idx, f_val,
+                                                 f_perm, f_work, skip)
                     if inner == 0:
                         rr_first = rr
                     cg_total += cg_it

@@ -27,6 +27,7 @@ from .. import system_matrix
 from .constraints import (MAPPING_DELTA, MAPPING_ISO, METHOD_IDS, METHODS, N_CONSTRAINTS,
                           SVD_DELTA)
 from . import al, buffers, pbd
+from .factor_precond import FactorPreconditioner, FactorStub
 from .c_curvature import C_STEP_F32, C_STEP_F64
 from .buffers import (ST_CG, ST_CONVERGED, ST_ITERS, ST_NEWTON, ST_START_VIOL, ST_VIOL,
                       Workspace)
@@ -83,8 +84,27 @@ CG_BUDGET = {"mapping": 15, "svd": 25, "warp-weft": 25}
 # (0): it is the paper's method and the benchmarks' baseline (with 0.3 its rounds at
 # resolution 46 went from 22 to 34).
 INNER_RTOL = {"implicit": 0.3, "projection": 0.0}
+# The PCG solve's preconditioner under coupling "implicit": "factor" (a sparse Cholesky factor
+# of an earlier Newton matrix, factor_precond.py) up to FACTOR_MAX_FACES faces, block Jacobi
+# above (the factor's triangular solves run serially and grow faster than the mesh).
+PRECONDITIONERS = ("factor", "jacobi")
+FACTOR_MAX_FACES = 2000
+# PCG iterations per Newton step with the factor: FACTOR_CG_WORK / faces, between FACTOR_CG
+# and FACTOR_CG_MAX (an iteration's triangular solves cost ~ the faces, so small meshes can
+# afford more). The factor finds most of the step in a few iterations (factor_precond.py);
+# its residual falls slowly on the stiff constraint directions, so cg_rtol rarely stops it.
+# Measured on hanging (mean KE over frames 121-150, ensembles of 8 runs at resolution 25,
+# docs/speed/rest_ensemble.md): 4 / 6 / 8 iterations at 1152 faces rested at a median of
+# 2.5e-7 / 6.6e-8 / 1.1e-7 J; at 128 faces (mapping) 6 / 12 / 20 rested at 2.2e-6 / 3.8e-8 /
+# 1.6e-9 J at the same cost (2.5-2.7 ms a frame).
+FACTOR_CG, FACTOR_CG_MAX, FACTOR_CG_WORK = 6, 20, 6000
 
 _host_loop_noted = False
+
+
+def linalg_has_cholmod():
+    from ..linalg import HAVE_CHOLMOD
+    return HAVE_CHOLMOD
 
 
 def _host_loop_only():
@@ -215,6 +235,11 @@ class StrainLimiter:
         self._chol = None          # SparseCholesky of this mesh's block pattern
         self._system = None        # the implicit step's matrix (coupling "implicit")
         self._system_ready = False
+        self._factor = None        # FactorPreconditioner of the implicit metric's pattern
+        self._factor_stub = None
+        self.precondition = "factor"
+        self.factor_refresh = None
+        self.factor_cg = None          # None: from the mesh size (FACTOR_CG_WORK)
         self.tol = float(tol)
         self.max_iters = int(max_iters)
         self.max_newton, self.cg_rtol = int(max_newton), cg_rtol
@@ -362,6 +387,7 @@ class StrainLimiter:
         self._full_mass = None
         self._chol = None
         self._system = None
+        self._factor = None
         self._system_ready = False
         self._mesh_key = self._current_mesh_key()
 
@@ -590,6 +616,13 @@ class StrainLimiter:
         # An inner loop stops once its steps are far below the tolerance (in metres).
         step_tol = 0.01 * self.tol * m.typical_edge()
         max_cg = self.cg_budget()
+        fp = self._factor_preconditioner(metric)
+        use_factor = int(fp is not None and fp.ready)
+        if use_factor:
+            max_cg = self.factor_cg if self.factor_cg is not None else int(np.clip(
+                round(FACTOR_CG_WORK / max(m.n_faces, 1)), FACTOR_CG, FACTOR_CG_MAX))
+        if fp is None:
+            fp = self._no_factor()
         al.solve_al(mid, self._kernel_curvature(), K, m.n_verts, m.n_faces, len(self._stitches), mu, self.mu_grow,
                    mu_max, self.max_iters,
                    self.max_newton, max_cg, self.cg_rtol, self.tol, step_tol,
@@ -601,9 +634,31 @@ class StrainLimiter:
                    ws.grad, ws.cm, ws.what, ws.kappa, ws.twist, ws.contact, ws.lam_c,
                    ws.stitch, ws.lam_s, ws.fric, ws.lam_t, ws.curv, metric.face_slot,
                    metric.stitch_slot, ws.H, ws.b, ws.d, ws.r, ws.z, ws.p, ws.Ap, ws.P_inv,
-                   ws.stats)
+                   use_factor, fp.ptr, fp.idx, fp.val, fp.perm, fp.work, ws.stats)
         stats = ws.stats.to_numpy()
-        return int(stats[ST_ITERS]), int(stats[ST_NEWTON]), bool(stats[ST_CONVERGED] > 0)
+        rounds, newton = int(stats[ST_ITERS]), int(stats[ST_NEWTON])
+        self.last_factorizations = 0
+        if isinstance(fp, FactorPreconditioner):
+            self.last_factorizations = int(fp.after_solve(m.pinned, self.factor_refresh))
+        return rounds, newton, bool(stats[ST_CONVERGED] > 0)
+
+    def _factor_preconditioner(self, metric):
+        """The FactorPreconditioner of this metric's pattern when the PCG solve uses one
+        (``factor_precond.py``): coupling "implicit", at most FACTOR_MAX_FACES faces, CHOLMOD
+        installed and a CPU backend (the triangular solves are serial); else None."""
+        if not (self.precondition == "factor" and metric is self._system and
+                self.model.n_faces <= FACTOR_MAX_FACES and linalg_has_cholmod() and
+                backend.arch() == "cpu"):
+            return None
+        if self._factor is None or self._factor.metric is not metric:
+            self._factor = FactorPreconditioner(metric)
+        return self._factor
+
+    def _no_factor(self):
+        """Placeholder arrays for solve_al's factor arguments when it uses block Jacobi."""
+        if self._factor_stub is None:
+            self._factor_stub = FactorStub()
+        return self._factor_stub
 
     def constraint_values(self):
         """(n_faces, k) constraint values g / sqrt(a) (strain units, <= 0 satisfied) of the
