@@ -227,11 +227,11 @@ def main():
     ap.add_argument("--bending", choices=("isotropic", "hinge"),
                     help="sim.bending for --probe (default: the settings')")
     ap.add_argument("--rest-ensemble", type=int, metavar="SEEDS",
-                    help="the rest measure from the start and SEEDS starts moved by 1 nm, PCG "
-                         "and Cholesky (rest_ensemble.md/png)")
+                    help="the rest measure from the start and SEEDS starts moved by 1 nm, per "
+                         "variant (rest_ensemble.md/png)")
     ap.add_argument("--ensemble-res", type=int, default=25)
-    ap.add_argument("--ensemble-solvers", default="pcg,cholesky",
-                    help="Newton solves of the ensemble (--set applies to pcg)")
+    ap.add_argument("--ensemble-variants", default=",".join(ENSEMBLE_VARIANTS),
+                    help="variants of the ensemble (ENSEMBLE_VARIANTS; --set applies to each)")
     ap.add_argument("--jobs", type=int, default=2, help="children side by side (ensemble)")
     ap.add_argument("--set", action="append", default=[], metavar="ATTR=JSON",
                     help="StrainLimiter attribute for --probe, e.g. --set active_margin=0.005")
@@ -244,7 +244,7 @@ def main():
     if args.rest_ensemble:
         os.makedirs(args.out, exist_ok=True)
         rest_ensemble(args.out, args.ensemble_res, "mapping", args.rest_ensemble, args.jobs,
-                      curvature, overrides, args.ensemble_solvers.split(","))
+                      curvature, overrides, args.ensemble_variants.split(","))
         return
     if args.probe:
         print(json.dumps(child(int(args.probe[0]), args.probe[1], args.coupling,
@@ -347,23 +347,22 @@ def window_mean(ke_frames, window):
 
 
 def ensemble_summary(rows, variants):
-    """One row per (Newton solve, settings) of the ensemble's runs: the median, range and
-    count under REST_TARGET of the mean kinetic energy over REST_WINDOW, the median over
-    LATE_WINDOW and the median strain-limiting ms. Failed runs ({"error": ...}) are counted
-    as failed."""
+    """One row per variant (label, Newton solve, settings) of the ensemble's runs (each run
+    carries its variant's label): the median, range and count under REST_TARGET of the mean
+    kinetic energy over REST_WINDOW, the median over LATE_WINDOW and the median
+    strain-limiting ms. Failed runs ({"error": ...}) are counted as failed."""
     summary = []
-    for solver, ov in variants:
-        runs = [r for r in rows if r.get("linear_solver") == solver and
-                r.get("overrides", {}) == (ov or {})]
-        failed = sum(1 for r in rows if "error" in r and r["args"][3] == solver)
+    for label, solver, ov in variants:
+        mine = [r for r in rows if r.get("variant") == label]
+        runs = [r for r in mine if "error" not in r]
         if not runs:
             continue
         ke = np.array([window_mean(r["ke_frames"], REST_WINDOW) for r in runs])
         late = np.array([window_mean(r["ke_frames"], LATE_WINDOW) for r in runs])
         summary.append(dict(
-            solver=solver, overrides=json.dumps(ov) if ov else "", runs=len(runs),
-            failed=failed, ke_median=float(np.median(ke)), ke_min=float(ke.min()),
-            ke_max=float(ke.max()),
+            variant=label, solver=solver, overrides=json.dumps(ov) if ov else "",
+            runs=len(runs), failed=len(mine) - len(runs), ke_median=float(np.median(ke)),
+            ke_min=float(ke.min()), ke_max=float(ke.max()),
             under_target=f"{int((ke <= REST_TARGET).sum())} of {len(ke)}",
             late_median=float(np.median(late)),
             ms_median=float(np.median([r["ms_median"] for r in runs])),
@@ -371,21 +370,29 @@ def ensemble_summary(rows, variants):
     return summary
 
 
-def rest_ensemble(out, res, method, seeds, jobs, curvature, overrides, solvers=("pcg",
-                                                                            "cholesky")):
+# The ensemble's variants by name: (Newton solve, StrainLimiter settings).
+ENSEMBLE_VARIANTS = {"pcg": ("pcg", {}), "pcg-jacobi": ("pcg", {"precondition": "jacobi"}),
+                     "cholesky": ("cholesky", {})}
+
+
+def rest_ensemble(out, res, method, seeds, jobs, curvature, overrides,
+                  names=("pcg", "pcg-jacobi", "cholesky")):
     """The rest measure over an ensemble: the same hanging run from its start and from ``seeds``
-    starts moved by 1 nm, for each Newton solve in ``solvers`` (``overrides`` apply to pcg).
-    Why: the mean kinetic energy over frames 121-150 of one run moved by 2-3x with changes
-    that only move round-off (docs/speed/solver.md), so one run cannot say whether a change
-    helps. Writes rest_ensemble.{md,png,json}: per solve the median and range of the mean
-    kinetic energy over REST_WINDOW and LATE_WINDOW (``ensemble_summary``), and every run's
-    kinetic energy per frame."""
+    starts moved by 1 nm, for each variant in ``names`` (ENSEMBLE_VARIANTS; ``overrides`` are
+    added to each). Why: the mean kinetic energy over frames 121-150 of one run moved by 2-3x
+    with changes that only move round-off (docs/speed/solver.md), so one run cannot say
+    whether a change helps. Writes rest_ensemble.{md,png,json}: per variant the median and
+    range of the mean kinetic energy over REST_WINDOW and LATE_WINDOW
+    (``ensemble_summary``), and every run's kinetic energy per frame."""
     t0 = time.time()
-    variants = [(s, overrides if s == "pcg" else {}) for s in solvers]
+    variants = [(name,) + (ENSEMBLE_VARIANTS[name][0],
+                           {**ENSEMBLE_VARIANTS[name][1], **overrides}) for name in names]
     # Seed 0: the scene's own start (not moved; a seed makes the child return ke_frames).
     args = [(res, method, "implicit", solver, curvature, ENSEMBLE_FRAMES, 120, ov, None, seed)
-            for solver, ov in variants for seed in range(seeds + 1)]
+            for _label, solver, ov in variants for seed in range(seeds + 1)]
     rows = run_children(args, jobs)
+    for i, r in enumerate(rows):
+        r["variant"] = variants[i // (seeds + 1)][0]
     summary = ensemble_summary(rows, variants)
     with open(os.path.join(out, "rest_ensemble.json"), "w") as fh:
         json.dump(rows, fh)
@@ -395,15 +402,17 @@ def rest_ensemble(out, res, method, seeds, jobs, curvature, overrides, solvers=(
           f"`python -m benchmarks.solver --rest-ensemble {seeds} --ensemble-res {res}` "
           f"({time.time() - t0:.0f} s, {jobs} at a time), {time.strftime('%Y-%m-%d')}, 2-core "
           f"CPU, f64. hanging, {method}, {faces} faces, coupling implicit, one substep per "
-          "frame; each Newton solve runs from the scene's start and from "
+          "frame; each variant runs from the scene's start and from "
           f"{seeds} starts moved by 1 nm at random (seeds 1-{seeds}). KE 121-150: the mean "
           "kinetic energy over frames 121-150 (the issue's measure, target <= 3e-7 J); "
           "181-240: the same later. ms: the median over runs of each run's median "
-          "strain-limiting ms per frame (children run side by side, so slower than alone).",
+          "strain-limiting ms per frame (children run side by side, so slower than alone). "
+          "pcg: the default (PCG preconditioned by the factor of the implicit step's matrix); "
+          "pcg-jacobi: PCG with block Jacobi (the solver before); cholesky: exact Newton steps.",
           "",
-          table(summary, ["solver", "overrides", "runs", "failed", "ke_median", "ke_min",
+          table(summary, ["variant", "overrides", "runs", "failed", "ke_median", "ke_min",
                           "ke_max", "under_target", "late_median", "ms_median", "commit"],
-                ["Newton solve", "settings", "runs", "failed", "KE 121-150 median (J)", "min",
+                ["variant", "settings", "runs", "failed", "KE 121-150 median (J)", "min",
                  "max", "<= 3e-7 J", "KE 181-240 median (J)", "SL ms", "commit"]), "",
           "![kinetic energy of every run](rest_ensemble.png)"]
     with open(os.path.join(out, "rest_ensemble.md"), "w") as fh:
@@ -416,16 +425,16 @@ def _plot_ensemble(rows, path, res, method):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(9, 4.5))
-    colors = {"pcg": "tab:blue", "cholesky": "tab:orange"}
+    colors = {"pcg": "tab:blue", "pcg-jacobi": "tab:red", "cholesky": "tab:orange"}
     for r in rows:
         if "error" in r or not r.get("ke_frames"):
             continue
         first = r["nudge_seed"] == 0
         ax.semilogy(range(1, len(r["ke_frames"]) + 1), r["ke_frames"],
-                    color=colors[r["linear_solver"]], lw=1.6 if first else 0.7,
+                    color=colors.get(r["variant"], "tab:gray"), lw=1.6 if first else 0.7,
                     alpha=1.0 if first else 0.6,
-                    label=r["linear_solver"] + (" (from the scene's start)" if first else
-                                                " (starts moved by 1 nm)"))
+                    label=r["variant"] + (" (from the scene's start)" if first else
+                                          " (starts moved by 1 nm)"))
     ax.axhline(REST_TARGET, color="k", ls=":", lw=1)
     ax.axvspan(*REST_WINDOW, color="0.9")
     handles, labels = ax.get_legend_handles_labels()

@@ -198,6 +198,7 @@ class Simulator:
             bias=tuple(st.bias) if st.bias else None, solver=st.solver, tol=st.tol,
             max_iters=st.iters, mapping_iso=st.isotropy, stitches=self.dynamics.stitches_np,
             coupling=st.coupling, linear_solver=st.linear_solver, curvature=st.curvature)
+        self.strain.precondition = st.precondition
         self._enable_strain_limit(method != "none")
 
     def _enable_strain_limit(self, on):

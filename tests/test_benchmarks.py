@@ -165,7 +165,7 @@ def test_stability_case_passes(stability_results, name):
 
 def test_rest_ensemble_summary_windows_and_counts():
     """The ensemble's rest measure averages frames 121-150 and 181-240 (counted from 1), counts
-    the runs under the target, keeps the solves and settings apart and counts failed runs."""
+    the runs under the target, keeps the variants apart and counts failed runs."""
     from benchmarks.solver import ensemble_summary, window_mean
     frames = np.arange(1, 241, dtype=float)          # "kinetic energy" = the frame number
     assert window_mean(frames, (121, 150)) == pytest.approx(135.5)
@@ -173,13 +173,13 @@ def test_rest_ensemble_summary_windows_and_counts():
     with pytest.raises(ValueError):
         window_mean(frames[:149], (121, 150))
 
-    def run(solver, ke, ms, overrides=None):
-        return dict(linear_solver=solver, overrides=overrides or {}, commit="abc",
-                    ms_median=ms, ke_frames=[ke] * 150 + [ke / 10] * 90)
+    def run(variant, ke, ms):
+        return dict(variant=variant, commit="abc", ms_median=ms,
+                    ke_frames=[ke] * 150 + [ke / 10] * 90)
     rows = [run("pcg", 1e-7, 10.0), run("pcg", 5e-7, 12.0), run("pcg", 9e-7, 14.0),
-            run("pcg", 1e-8, 99.0, {"max_cg": 30}), run("cholesky", 2e-7, 40.0),
-            {"error": "boom", "args": [25, "mapping", "implicit", "cholesky"]}]
-    out = ensemble_summary(rows, [("pcg", {}), ("cholesky", {})])
+            run("tight", 1e-8, 99.0), run("cholesky", 2e-7, 40.0),
+            {"variant": "cholesky", "error": "boom", "args": []}]
+    out = ensemble_summary(rows, [("pcg", "pcg", {}), ("cholesky", "cholesky", {})])
     pcg, chol = out
     assert (pcg["runs"], pcg["failed"], chol["runs"], chol["failed"]) == (3, 0, 1, 1)
     assert pcg["ke_median"] == pytest.approx(5e-7)
@@ -187,5 +187,6 @@ def test_rest_ensemble_summary_windows_and_counts():
     assert pcg["under_target"] == "1 of 3"
     assert pcg["late_median"] == pytest.approx(5e-8)
     assert pcg["ms_median"] == 12.0
-    only = ensemble_summary(rows, [("pcg", {"max_cg": 30})])
+    only = ensemble_summary(rows, [("tight", "pcg", {"max_cg": 30})])
     assert len(only) == 1 and only[0]["runs"] == 1 and only[0]["ke_median"] == pytest.approx(1e-8)
+    assert only[0]["overrides"] == '{"max_cg": 30}'

@@ -21,8 +21,11 @@ import taichi as ti
 
 from .. import linalg
 
-# Refactorise the metric every REFRESH_SOLVES solves (it changes as the cloth deforms).
+# Refactorise the metric every REFRESH_SOLVES solves (it changes as the cloth deforms). The
+# first factor is made after FIRST_AFTER solves on a mesh: remeshing every frame makes a new
+# pattern each substep, and a factor made after its only solve would never be used.
 REFRESH_SOLVES = 10
+FIRST_AFTER = 2
 
 
 class FactorPreconditioner:
@@ -45,6 +48,16 @@ class FactorPreconditioner:
         self.val = ti.ndarray(float, 1)
         self.ready = False
         self.solves_since = 0
+        self.solves = 0                         # on this pattern
+        self.pinned = None                      # the pinned mask the factor was made with
+
+    def usable(self, pinned):
+        """Whether the kernel may use the factor: it exists and was made with these pins (a
+        vertex pinned since, e.g. held by the mouse, would get a nonzero step from it; the
+        next ``after_solve`` remakes it)."""
+        if self.ready and not np.array_equal(self.pinned, pinned):
+            self.ready = False
+        return self.ready
 
     def refresh(self, values):
         """Factorise the lumped matrix of these block values (the pattern's order) and
@@ -73,19 +86,28 @@ class FactorPreconditioner:
 
     def after_solve(self, pinned, refresh_solves=None):
         """Refactorise the metric when there is no factor yet or the factor is
-        ``refresh_solves`` (default REFRESH_SOLVES) solves old. Returns whether it did."""
+        ``refresh_solves`` (default REFRESH_SOLVES) solves old, but not before FIRST_AFTER
+        solves on this pattern. Returns whether it did."""
         self.solves_since += 1
-        if self.ready and self.solves_since < (refresh_solves or REFRESH_SOLVES):
+        self.solves += 1
+        if self.solves < FIRST_AFTER or (self.ready and self.solves_since <
+                                          (refresh_solves or REFRESH_SOLVES)):
             return False
+        self.refresh(self.pinned_metric(pinned))
+        self.pinned = np.array(pinned[: self.metric.n], bool)
+        self.solves_since = 0
+        return True
+
+    def pinned_metric(self, pinned):
+        """The metric's block values with the rows and columns of pinned vertices made the
+        identity (as in the Newton matrix: a pinned vertex's step is zero)."""
         m = self.metric
         values = m.val.to_numpy()[: m.nnz].copy()
         rows = np.repeat(np.arange(m.n), np.diff(m.ptr_np))
         fixed = pinned[rows] | pinned[m.col_np]
         values[fixed] = 0.0
         values[fixed & (rows == m.col_np)] = np.eye(3)
-        self.refresh(values)
-        self.solves_since = 0
-        return True
+        return values
 
 
 class FactorStub:

@@ -617,7 +617,7 @@ class StrainLimiter:
         step_tol = 0.01 * self.tol * m.typical_edge()
         max_cg = self.cg_budget()
         fp = self._factor_preconditioner(metric)
-        use_factor = int(fp is not None and fp.ready)
+        use_factor = int(fp is not None and fp.usable(m.pinned[: m.n_verts]))
         if use_factor:
             max_cg = self.factor_cg if self.factor_cg is not None else int(np.clip(
                 round(FACTOR_CG_WORK / max(m.n_faces, 1)), FACTOR_CG, FACTOR_CG_MAX))

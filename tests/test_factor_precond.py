@@ -1,0 +1,108 @@
+"""The strain solve's PCG preconditioned by a sparse Cholesky factor of the implicit step's
+matrix (cloth/strain/factor_precond.py, al.precondition): the kernel's triangular solves
+invert the factored matrix, the two preconditioners give the same projection, and the
+factor is chosen, kept and refreshed as documented."""
+import numpy as np
+import pytest
+import taichi as ti
+
+from cloth import linalg
+from cloth.strain import al
+from cloth.strain.buffers import A
+from tests.test_coupling import _hanging
+
+pytestmark = pytest.mark.skipif(not linalg.HAVE_CHOLMOD,
+                                reason="the factor preconditioner needs CHOLMOD")
+
+
+@ti.kernel
+def _apply(use_factor: int, nv: int, P_inv: A, f_ptr: A, f_idx: A, f_val: A, f_perm: A,
+           f_work: A, r: A, z: A) -> float:
+    rz = 0.0
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        rz = al.precondition(use_factor, nv, P_inv, f_ptr, f_idx, f_val, f_perm, f_work, r, z)
+    return rz
+
+
+def test_kernel_applies_the_inverse_of_the_factored_matrix():
+    """z = P^-1 r from the kernel's two triangular solves equals a direct solve with the
+    factored (lumped, pinned-masked) matrix, for a random r; r.z is returned."""
+    sim = _hanging("mapping", "implicit", res=6)
+    sim.step_frame()
+    sim.step_frame()
+    lim = sim.strain
+    fp = lim._factor
+    assert fp is not None and fp.ready and lim.last_factorizations == 1
+    values = fp.pinned_metric(sim.model.pinned)
+    fp.refresh(values)
+    factored = fp.chol._to_factor(fp.chol.matrix(values))
+    nv, ws = sim.model.n_verts, lim._ws
+    rng = np.random.default_rng(3)
+    r = rng.standard_normal((ws.r.shape[0], 3))
+    ws.r.from_numpy(r)
+    rz = _apply(1, nv, ws.P_inv, fp.ptr, fp.idx, fp.val, fp.perm, fp.work, ws.r, ws.z)
+    z = ws.z.to_numpy()[:nv].ravel()
+    want = np.linalg.solve(factored.toarray(), r[:nv].ravel())
+    assert np.abs(z - want).max() < 1e-9 * np.abs(want).max()
+    assert rz == pytest.approx(r[:nv].ravel() @ want, rel=1e-9)
+    pinned = np.repeat(sim.model.pinned, 3)
+    assert pinned.any() and np.allclose(z[pinned], r[:nv].ravel()[pinned])
+
+
+def test_factor_and_block_jacobi_give_the_same_projection():
+    """From one saved state of hanging, the substep solved tightly with either preconditioner
+    lands on the same constrained positions (within what the AL tolerance allows), and the
+    factor is used only where it is meant to be."""
+    sim = _hanging("mapping", "implicit", res=9)
+    lim = sim.strain
+    for _ in range(12):
+        sim.step_frame()
+    x, v, faces = sim.model.positions(), sim.model.velocities(), lim.face_state()
+    out = {}
+    for precondition in ("factor", "jacobi"):
+        lim.precondition = precondition
+        lim.inner_rtol, lim.cg_rtol, lim.max_cg, lim.factor_cg = 0.0, 1e-10, 400, 400
+        lim._upload_params()
+        sim.model.set_positions(x)
+        sim.model.set_velocities(v)
+        lim.set_face_state(faces)
+        sim._update_pins(sim.time + sim.h)
+        sim.dynamics.step(sim.h)
+        metric = lim.system_metric()
+        sim.dynamics.system_matrix(sim.h, metric)
+        assert (lim._factor_preconditioner(metric) is None) == (precondition == "jacobi")
+        lim.project(sim.h)
+        assert lim.last_converged and lim.last_violation_max < lim.tol
+        out[precondition] = sim.model.positions()
+    edge = sim.model.typical_edge()
+    assert np.abs(out["factor"] - out["jacobi"]).max() < 20 * lim.tol * edge
+
+
+def test_factor_is_refreshed_every_few_solves_and_only_for_small_meshes(monkeypatch):
+    """The first FIRST_AFTER solves on a mesh run block Jacobi, and the factor is made after
+    them; it is remade every REFRESH_SOLVES solves, after a pin changes and on a mesh
+    change; above FACTOR_MAX_FACES faces and on the split projection no factor is made."""
+    from cloth.strain import factor_precond, solver
+    sim = _hanging("mapping", "implicit", res=6)
+    lim = sim.strain
+    made = []
+    for _ in range(2 * factor_precond.REFRESH_SOLVES + factor_precond.FIRST_AFTER):
+        sim.step_frame()                             # one substep a frame
+        made.append(lim.last_factorizations)
+    period, first = factor_precond.REFRESH_SOLVES, factor_precond.FIRST_AFTER - 1
+    assert made[:first] == [0] * first and made[first] == 1
+    assert made[first + period] == made[first + 2 * period] == 1 and sum(made) == 3
+    free = int(np.flatnonzero(~sim.model.pinned)[0])
+    sim.model.set_vertex_pin(free, True)             # e.g. held by the mouse
+    assert not lim._factor.usable(sim.model.pinned)
+    sim.step_frame()                                 # block Jacobi, then a new factor
+    assert lim.last_factorizations == 1 and lim._factor.usable(sim.model.pinned)
+    lim.on_mesh_changed()
+    assert lim._factor is None
+    monkeypatch.setattr(solver, "FACTOR_MAX_FACES", sim.model.n_faces - 1)
+    assert lim._factor_preconditioner(lim.system_metric()) is None
+    monkeypatch.setattr(solver, "FACTOR_MAX_FACES", sim.model.n_faces)
+    assert lim._factor_preconditioner(lim.system_metric()) is not None
+    lim.set_coupling("projection")
+    assert lim._factor_preconditioner(lim._newton_metric(False)) is None
