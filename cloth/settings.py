@@ -79,8 +79,8 @@ COMMON_DEFAULTS = {
         "linear_solver": "pcg",
         # The PCG's preconditioner under coupling "implicit": "factor" (a sparse Cholesky factor
         # of the implicit step's matrix, remade every 10 substeps; used up to 2000 faces with
-        # CHOLMOD on the CPU, block Jacobi elsewhere) or "jacobi" (block Jacobi, the earlier
-        # one). The factor reaches the cloth's soft global modes, which block Jacobi does not:
+        # CHOLMOD on the CPU and without contacts, block Jacobi elsewhere) or "jacobi" (block
+        # Jacobi, the earlier one). The factor reaches the cloth's soft global modes, which block Jacobi does not:
         # hanging at resolution 25 rested at a median of 6.6e-8 J against 6.9e-7 J
         # (docs/speed/rest_ensemble.md).
         "precondition": "factor",
@@ -171,7 +171,7 @@ SCHEMA = {
                              choices=("pcg", "cholesky")),
         "precondition": Key("", "the PCG's preconditioner under implicit coupling: a sparse "
                             "Cholesky factor of the implicit step's matrix (up to 2000 faces, "
-                            "CPU) or block Jacobi", choices=("factor", "jacobi")),
+                            "CPU, no contacts) or block Jacobi", choices=("factor", "jacobi")),
         "curvature": Key("", "the constraints' curvature in the AL's Newton matrix: exact "
                          "(mapping: through C = F^T F) or the earlier model (||F e|| with e "
                          "frozen)",

@@ -535,7 +535,8 @@ class StrainLimiter:
                 rounds, newton, converged = self._solve_direct(mid, K, use_system)
             else:
                 rounds, newton, converged = self._solve_al(mid, K,
-                                                           self._newton_metric(use_system))
+                                                           self._newton_metric(use_system),
+                                                           contacts)
             if saved is not None:
                 for a, val in zip((ws.lam, ws.lam_c, ws.lam_s, ws.lam_t), saved):
                     a.from_numpy(val)
@@ -605,7 +606,7 @@ class StrainLimiter:
         return int(self.curvature == "exact" and not self.exact_curvature
                    and self.method in EXACT_CURVATURE_FOR)
 
-    def _solve_al(self, mid, K, metric):
+    def _solve_al(self, mid, K, metric, contacts=False):
         """The AL loop (METHOD 4), one kernel launch (al.solve_al): rounds of inexact
         minimisation of L_A by projected Newton with a backtracking line search, then the
         multiplier step of eq. 27 and mu *= mu_grow. Returns (rounds, Newton steps,
@@ -616,7 +617,7 @@ class StrainLimiter:
         # An inner loop stops once its steps are far below the tolerance (in metres).
         step_tol = 0.01 * self.tol * m.typical_edge()
         max_cg = self.cg_budget()
-        fp = self._factor_preconditioner(metric)
+        fp = None if contacts else self._factor_preconditioner(metric)
         use_factor = int(fp is not None and fp.usable(m.pinned[: m.n_verts]))
         if use_factor:
             max_cg = self.factor_cg if self.factor_cg is not None else int(np.clip(
@@ -645,7 +646,10 @@ class StrainLimiter:
     def _factor_preconditioner(self, metric):
         """The FactorPreconditioner of this metric's pattern when the PCG solve uses one
         (``factor_precond.py``): coupling "implicit", at most FACTOR_MAX_FACES faces, CHOLMOD
-        installed and a CPU backend (the triangular solves are serial); else None."""
+        installed and a CPU backend (the triangular solves are serial); else None. (Solves
+        with contacts use block Jacobi: on drape the factor kept none of the sheet's kinetic
+        energy through the landing and it draped in 0 of 7 drops, against 0.4 % and 2 of 7
+        with block Jacobi; docs/speed/drape_depth.md.)"""
         if not (self.precondition == "factor" and metric is self._system and
                 self.model.n_faces <= FACTOR_MAX_FACES and linalg_has_cholmod() and
                 backend.arch() == "cpu"):
