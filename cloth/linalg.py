@@ -147,6 +147,13 @@ class SparseCholesky:
             return self._factor(np.asarray(b, np.float64))
         return self._lu.solve(np.asarray(b, np.float64))
 
+    def lower_factor(self):
+        """(L, perm) of the last factorisation (CHOLMOD only): L lower triangular (scipy CSC)
+        with P A P^T = L L^T, perm[k] the row of A that is row k of P A P^T."""
+        if self.backend != "cholmod" or self._factor is None:
+            raise RuntimeError("lower_factor needs a CHOLMOD factorisation")
+        return self._factor.L().tocsc(), self._factor.P()
+
     @property
     def has_factor(self):
         return self._factor is not None or self._lu is not None

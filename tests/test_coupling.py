@@ -141,6 +141,26 @@ def _hanging(method, coupling, linear_solver="pcg", res=6):
     return Simulator(mod.build(cfg), cfg)
 
 
+def _saved_state(sim):
+    """What ``_redo_dynamics`` puts back: positions, velocities and the solver's face state."""
+    return sim.model.positions(), sim.model.velocities(), sim.strain.face_state()
+
+
+def _redo_dynamics(sim, state):
+    """Put a saved state back and run the next substep up to its strain projection (pins,
+    dynamics, the implicit step's matrix); returns that matrix's BlockMatrix. The caller
+    then calls ``sim.strain.project(sim.h)``."""
+    x, v, faces = state
+    sim.model.set_positions(x)
+    sim.model.set_velocities(v)
+    sim.strain.set_face_state(faces)
+    sim._update_pins(sim.time + sim.h)
+    sim.dynamics.step(sim.h)
+    metric = sim.strain.system_metric()
+    sim.dynamics.system_matrix(sim.h, metric)
+    return metric
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("linear_solver", ["pcg", "cholesky"])
 def test_direct_and_pcg_newton_give_the_same_projection(linear_solver):
@@ -211,17 +231,12 @@ def test_inner_loop_stops_on_the_residual_under_implicit_coupling():
     lim.set_coupling("implicit")
     for _ in range(10):
         sim.step_frame()
-    x, v, faces = sim.model.positions(), sim.model.velocities(), lim.face_state()
+    state = _saved_state(sim)
     out = {}
     for rtol in (0.0, INNER_RTOL["implicit"]):
         lim.inner_rtol = rtol
         lim._upload_params()
-        sim.model.set_positions(x)
-        sim.model.set_velocities(v)
-        lim.set_face_state(faces)
-        sim._update_pins(sim.time + sim.h)
-        sim.dynamics.step(sim.h)
-        sim.dynamics.system_matrix(sim.h, lim.system_metric())
+        _redo_dynamics(sim, state)
         lim.project(sim.h)
         assert lim.last_converged and lim.last_violation_max < lim.tol
         out[rtol] = (sim.model.positions(), lim.last_newton, lim.last_iterations)

@@ -1,5 +1,5 @@
-"""A sparse Cholesky factor of an earlier Newton matrix as the PCG preconditioner of the
-one-kernel strain solve (``al.solve_al``, argument ``use_factor``).
+"""A sparse Cholesky factor of the implicit step's matrix A (the projection's metric) as the
+PCG preconditioner of the one-kernel strain solve (``al.solve_al``, argument ``use_factor``).
 
 Why: at rest most of an exact Newton step's energy lies in the cloth's soft global modes
 (swinging, bending), which block-Jacobi CG barely reaches: on resting substeps at resolution
@@ -11,10 +11,14 @@ the lumped pattern of ``linalg.SparseCholesky``) only when the old one has gone 
 the kernel applies it by two triangular solves with L (~2 nnz(L) multiply-adds: 54k entries
 at 1.2k faces, 264k at 4k).
 
-The host keeps one ``FactorPreconditioner`` per mesh pattern; ``ready`` says whether the
-kernel may use it; ``after_solve`` refactorises from the solve's last Newton matrix when
-there is no factor yet or the solve needed more than ``REFRESH_CG`` PCG iterations per Newton
-step (the sign that the matrices moved away from the factored one).
+Why A and not the Newton matrix H: a factor of a late round's H (a 4-64x larger penalty)
+made the next solves take 5-100 rounds, and a factor of a round-0 H kicked the resting cloth
+at every refresh (KE 1.5e-7 -> 1.1e-5 J), since the inexact solve's answer depends on the
+preconditioner and H jumps with the active set. A changes slowly.
+
+The host keeps one ``FactorPreconditioner`` per mesh pattern; ``usable`` says whether the
+kernel may use it; ``after_solve`` refactorises A when there is no factor yet or it is
+REFRESH_SOLVES solves old.
 """
 import numpy as np
 import taichi as ti
@@ -63,8 +67,7 @@ class FactorPreconditioner:
         """Factorise the lumped matrix of these block values (the pattern's order) and
         upload L and the permutation."""
         self.chol.factorize(values)
-        factor = self.chol._factor
-        by_cols = factor.L().tocsc()
+        by_cols, perm = self.chol.lower_factor()
         by_cols.sort_indices()                  # the diagonal first in each column
         by_rows = by_cols.tocsr()
         by_rows.sort_indices()                  # the diagonal last in each row
@@ -81,17 +84,17 @@ class FactorPreconditioner:
         self.val.from_numpy(val)
         self.ptr.from_numpy(np.concatenate([by_cols.indptr, by_rows.indptr + cap])
                             .astype(np.int32))
-        self.perm.from_numpy(np.asarray(factor.P(), np.int32))
+        self.perm.from_numpy(np.asarray(perm, np.int32))
         self.ready = True
 
-    def after_solve(self, pinned, refresh_solves=None):
-        """Refactorise the metric when there is no factor yet or the factor is
-        ``refresh_solves`` (default REFRESH_SOLVES) solves old, but not before FIRST_AFTER
-        solves on this pattern. Returns whether it did."""
+    def after_solve(self, pinned):
+        """Refactorise the metric when there is no factor yet or the factor is REFRESH_SOLVES
+        solves old, but not before FIRST_AFTER solves on this pattern. Returns whether it
+        did."""
         self.solves_since += 1
         self.solves += 1
         if self.solves < FIRST_AFTER or (self.ready and self.solves_since <
-                                          (refresh_solves or REFRESH_SOLVES)):
+                                          REFRESH_SOLVES):
             return False
         self.refresh(self.pinned_metric(pinned))
         self.pinned = np.array(pinned[: self.metric.n], bool)

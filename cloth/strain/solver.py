@@ -22,7 +22,7 @@ import time
 import numpy as np
 import taichi as ti
 
-from .. import backend, metrics, ndarrays
+from .. import backend, linalg, metrics, ndarrays
 from .. import system_matrix
 from .constraints import (MAPPING_DELTA, MAPPING_ISO, METHOD_IDS, METHODS, N_CONSTRAINTS,
                           SVD_DELTA)
@@ -84,10 +84,10 @@ CG_BUDGET = {"mapping": 15, "svd": 25, "warp-weft": 25}
 # (0): it is the paper's method and the benchmarks' baseline (with 0.3 its rounds at
 # resolution 46 went from 22 to 34).
 INNER_RTOL = {"implicit": 0.3, "projection": 0.0}
-# The PCG solve's preconditioner under coupling "implicit": "factor" (a sparse Cholesky factor
-# of an earlier Newton matrix, factor_precond.py) up to FACTOR_MAX_FACES faces, block Jacobi
-# above (the factor's triangular solves run serially and grow faster than the mesh).
-PRECONDITIONERS = ("factor", "jacobi")
+# The PCG solve's preconditioner under coupling "implicit" (``precondition``): "factor" (a
+# sparse Cholesky factor of the implicit step's matrix, factor_precond.py) up to
+# FACTOR_MAX_FACES faces, block Jacobi above (the factor's triangular solves run serially and
+# grow faster than the mesh) and in solves with contacts.
 FACTOR_MAX_FACES = 2000
 # PCG iterations per Newton step with the factor: FACTOR_CG_WORK / faces, between FACTOR_CG
 # and FACTOR_CG_MAX (an iteration's triangular solves cost ~ the faces, so small meshes can
@@ -100,11 +100,6 @@ FACTOR_MAX_FACES = 2000
 FACTOR_CG, FACTOR_CG_MAX, FACTOR_CG_WORK = 6, 20, 6000
 
 _host_loop_noted = False
-
-
-def linalg_has_cholmod():
-    from ..linalg import HAVE_CHOLMOD
-    return HAVE_CHOLMOD
 
 
 def _host_loop_only():
@@ -238,7 +233,6 @@ class StrainLimiter:
         self._factor = None        # FactorPreconditioner of the implicit metric's pattern
         self._factor_stub = None
         self.precondition = "factor"
-        self.factor_refresh = None
         self.factor_cg = None          # None: from the mesh size (FACTOR_CG_WORK)
         self.tol = float(tol)
         self.max_iters = int(max_iters)
@@ -640,7 +634,7 @@ class StrainLimiter:
         rounds, newton = int(stats[ST_ITERS]), int(stats[ST_NEWTON])
         self.last_factorizations = 0
         if isinstance(fp, FactorPreconditioner):
-            self.last_factorizations = int(fp.after_solve(m.pinned, self.factor_refresh))
+            self.last_factorizations = int(fp.after_solve(m.pinned))
         return rounds, newton, bool(stats[ST_CONVERGED] > 0)
 
     def _factor_preconditioner(self, metric):
@@ -651,7 +645,7 @@ class StrainLimiter:
         energy through the landing and it draped in 0 of 7 drops, against 0.4 % and 2 of 7
         with block Jacobi; docs/speed/drape_depth.md.)"""
         if not (self.precondition == "factor" and metric is self._system and
-                self.model.n_faces <= FACTOR_MAX_FACES and linalg_has_cholmod() and
+                self.model.n_faces <= FACTOR_MAX_FACES and linalg.HAVE_CHOLMOD and
                 backend.arch() == "cpu"):
             return None
         if self._factor is None or self._factor.metric is not metric:
