@@ -48,7 +48,7 @@ def capture(resolution, settle_frames, substeps):
     solve = lim._solve_al
     systems = []
 
-    def capturing(mid, K, metric):
+    def capturing(mid, K, metric, *rest):
         ws, nv = lim._ws, lim.model.n_verts
         x_hat, lam = ws.x.to_numpy(), ws.lam.to_numpy()
         free = ws.pinned.to_numpy()[:nv] == 0
@@ -63,7 +63,7 @@ def capture(resolution, settle_frames, substeps):
         ws.x.from_numpy(x_hat)          # as the solve expects them
         ws.lam.from_numpy(lam)
         systems.append((x0[:nv], free, out))
-        return solve(mid, K, metric)
+        return solve(mid, K, metric, *rest)
     lim._solve_al = capturing
     for _ in range(substeps):
         sim.step_frame()

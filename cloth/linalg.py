@@ -62,8 +62,13 @@ class SparseCholesky:
     by it reached 1e-4 in 0-2 iterations on the Newton matrices of a hanging frame (their
     bending entries are small beside the constraints' and the mass)."""
 
-    def __init__(self, ptr, col, n, backend=None, core=None):
+    def __init__(self, ptr, col, n, backend=None, core=None, vertex_order=False):
         self.n = int(n)
+        # With ``vertex_order`` (CHOLMOD only) the fill-reducing ordering is of the vertices,
+        # each vertex's three rows kept together, so L is made of 3x3 blocks
+        # (``lower_factor``): the strain solve's kernel applies it block by block.
+        self.vertex_order = bool(vertex_order)
+        self._order = None           # (indices, indptr, source entry) of the reordered matrix
         if backend is None:
             backend = "cholmod" if HAVE_CHOLMOD else "superlu"
             if not HAVE_CHOLMOD and not _warned:
@@ -133,8 +138,11 @@ class SparseCholesky:
     def _factorize_matrix(self, A):
         if self.backend == "cholmod":
             try:
+                if self.vertex_order:
+                    A = self._vertex_ordered(A)
                 if self._factor is None:
-                    self._factor = analyze(A, mode="simplicial")
+                    self._factor = analyze(A, mode="simplicial", ordering_method="natural"
+                                           if self.vertex_order else "default")
                 self._factor.cholesky_inplace(A)
             except CholmodNotPositiveDefiniteError as err:
                 raise FactorizationError(f"Newton matrix not positive definite ({err})") from None
@@ -144,14 +152,41 @@ class SparseCholesky:
 
     def solve(self, b):
         if self.backend == "cholmod":
-            return self._factor(np.asarray(b, np.float64))
+            b = np.asarray(b, np.float64)
+            if self.vertex_order:
+                x = np.empty_like(b)
+                x[self._perm3] = self._factor(b[self._perm3])
+                return x
+            return self._factor(b)
         return self._lu.solve(np.asarray(b, np.float64))
+
+    def _vertex_ordered(self, A):
+        """P A P^T for a fill-reducing ordering of the vertices (AMD on the vertex graph of
+        A's pattern), rows 3 i .. 3 i + 2 of a vertex kept in order. The ordering and the
+        entry map are made at the first call (A's pattern is fixed per instance)."""
+        if self._order is None:
+            n = self.n
+            rows = np.repeat(np.arange(3 * n), np.diff(A.indptr)) // 3
+            graph = sp.csc_matrix((np.ones(len(rows)), (rows, A.indices // 3)), shape=(n, n))
+            graph = graph + sp.identity(n, format="csc")
+            vperm = analyze(graph.tocsc(), mode="simplicial", ordering_method="amd").P()
+            self._perm3 = (3 * vperm[:, None] + np.arange(3)[None]).ravel()
+            tagged = sp.csc_matrix((np.arange(1.0, A.nnz + 1.0), A.indices.copy(),
+                                    A.indptr.copy()), shape=A.shape)
+            moved = tagged[self._perm3][:, self._perm3].tocsc()
+            moved.sort_indices()
+            self._order = (moved.indices, moved.indptr, moved.data.astype(np.int64) - 1)
+        indices, indptr, src = self._order
+        return sp.csc_matrix((A.data[src], indices, indptr), shape=A.shape)
 
     def lower_factor(self):
         """(L, perm) of the last factorisation (CHOLMOD only): L lower triangular (scipy CSC)
-        with P A P^T = L L^T, perm[k] the row of A that is row k of P A P^T."""
+        with P A P^T = L L^T, perm[k] the row of A that is row k of P A P^T. With
+        ``vertex_order`` perm keeps each vertex's rows together (perm[3 k + c] = 3 v + c)."""
         if self.backend != "cholmod" or self._factor is None:
             raise RuntimeError("lower_factor needs a CHOLMOD factorisation")
+        if self.vertex_order:
+            return self._factor.L().tocsc(), self._perm3
         return self._factor.L().tocsc(), self._factor.P()
 
     @property

@@ -141,6 +141,22 @@ def test_gradients_match_finite_differences(method, rng):
         assert np.abs(grad - fd).max() / scale < 1e-6
 
 
+@pytest.mark.parametrize("method", list(FAMILIES))
+def test_constraints_come_in_bound_pairs(method, rng):
+    """Constraints 2p and 2p + 1 bound the same strain from the two sides: their gradients
+    are opposite and their values sum to sqrt(a) x minus the band's width. The solve stores
+    one gradient per pair (al.assemble_all, al.pair_grad) on this fact."""
+    bands = ((-0.02, 0.03), (-0.04, 0.05), (1.37, 1.46))
+    widths = {"svd": [0.05, 0.09], "warp-weft": [0.05, 0.09, 0.09],
+              "mapping": [0.05, 0.05, 0.09, 0.09]}[method]
+    for x, Dm_inv, area, grain in random_triangles(rng, 10):
+        g, grad = evaluate_one(method, x, Dm_inv, area, *bands, grain=grain)
+        assert np.abs(grad[1::2] + grad[0::2]).max() == 0.0
+        assert np.abs(grad[0::2]).max() > 0.0
+        np.testing.assert_allclose(g[0::2] + g[1::2], -np.sqrt(area) * np.array(widths),
+                                   rtol=1e-9, atol=1e-12)
+
+
 @pytest.mark.parametrize("iso", [C.MAPPING_ISO, 0.1])
 def test_mapping_closure_gradients_match_finite_differences(iso, rng):
     """The isotropy closure (c~ blended towards 1/sqrt 2) has an exact gradient; iso = 0.1 is

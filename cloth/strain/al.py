@@ -35,22 +35,28 @@ def eval_face(method: ti.template(), f, pos: T, face_verts: T, Dm_inv: T, grain:
 def assemble_all(method: ti.template(), nf, pos: T, face_verts: T, Dm_inv: T, grain: T,
                  rest_area: T, params: T, g: T, grad: T, cm: T, what: T, kappa: T,
                  twist: T):
-    """Values, gradients and curvature models of every constraint at ``pos``."""
+    """Values, gradients and curvature models of every constraint at ``pos``. The
+    constraints come in bound pairs (c even, c + 1) with opposite gradients and the same cm
+    and w^ (constraints.py): only the even member's are stored (``pair_grad``). Why: writing
+    the arrays, not computing them, was most of an assembly's cost (measured at 1.2k faces,
+    mapping: 0.35 ms, of which 0.15 ms with the stores left out), and an assembly runs at
+    every line-search trial."""
     for f in range(nf):
         out = eval_face(method, f, pos, face_verts, Dm_inv, grain, rest_area, params)
         for c in ti.static(range(out.g.n)):
             g[f, c] = out.g[c]
             kappa[f, c] = out.kappa[c]
-            grad_c = ti.Vector([0.0] * 9)
-            cm_c, what_c = ti.Vector([0.0] * 3), ti.Vector([0.0] * 3)
-            for m in ti.static(range(9)):
-                grad_c[m] = out.grad[c, m]
-            for m in ti.static(range(3)):
-                cm_c[m] = out.cm[c, m]
-                what_c[m] = out.what[c, m]
-            grad[f, c] = grad_c
-            cm[f, c] = cm_c
-            what[f, c] = what_c
+            if ti.static(c % 2 == 0):
+                grad_c = ti.Vector([0.0] * 9)
+                cm_c, what_c = ti.Vector([0.0] * 3), ti.Vector([0.0] * 3)
+                for m in ti.static(range(9)):
+                    grad_c[m] = out.grad[c, m]
+                for m in ti.static(range(3)):
+                    cm_c[m] = out.cm[c, m]
+                    what_c[m] = out.what[c, m]
+                grad[f, c] = grad_c
+                cm[f, c] = cm_c
+                what[f, c] = what_c
             if ti.static(method == 0):
                 tw_c = ti.Vector([0.0] * 9)
                 for m in ti.static(range(9)):
@@ -148,6 +154,16 @@ def metric_row(n, w_ptr: T, w_col: T, w_val: T, a: T, b: T):
 
 
 @ti.func
+def pair_grad(grad: T, f, c):
+    """The gradient of constraint c of face f: stored for the even member of each bound
+    pair, the odd member's is its negative (``assemble_all``)."""
+    gr = grad[f, c - c % 2]
+    if c % 2 == 1:
+        gr = -gr
+    return gr
+
+
+@ti.func
 def metric_times(n, w_ptr: T, w_col: T, w_val: T, p: T):
     """Row n of B p, B a block matrix in W's pattern with values ``w_val`` (W itself, or the
     Newton matrix H)."""
@@ -206,7 +222,7 @@ def residual(K, nv, nf, ns, mu, x: T, x_hat: T, w_ptr: T, w_col: T, w_val: T, w_
         for c in range(K):
             s = lam[f, c] + mu * g[f, c]
             if s > 0.0:
-                scatter(r, ids, grad[f, c], -s)
+                scatter(r, ids, pair_grad(grad, f, c), -s)
     for k in range(ns):
         force = lam_s[k] + mu * stitch_g(stitch, x, k)
         r[stitch[k][0]] -= force
@@ -299,7 +315,8 @@ def newton_matrix(K, nv, nf, ns, mu, margin, c_scale, use_twist, exact, x: T, w_
             s = lam[f, c] + mu * g[f, c]
             if s + near > 0.0:
                 any_near = True
-                gr, cmv, w = grad[f, c], cm[f, c], what[f, c]
+                # The pair's shared entries (the sign of grad drops out of grad grad^T).
+                gr, cmv, w = grad[f, c - c % 2], cm[f, c - c % 2], what[f, c - c % 2]
                 sc = ti.max(s, 0.0)
                 if exact:
                     sc = 0.0       # the exact curvature is added per face below
@@ -353,35 +370,29 @@ def newton_matrix(K, nv, nf, ns, mu, margin, c_scale, use_twist, exact, x: T, w_
 def precondition(use_factor, nv, P_inv: T, f_ptr: T, f_idx: T, f_val: T, f_perm: T, f_work: T,
                  r: T, z: T):
     """z = P^-1 r; returns r.z. P: H's 3x3 diagonal blocks (their inverses in P_inv), or with
-    ``use_factor`` a sparse Cholesky factor P H~ P^T = L L^T of a matrix like H
-    (factor_precond.py): two triangular solves. The packed arrays hold L twice, by columns
-    (f_ptr[0..n3], the diagonal first in each column) and by rows (f_ptr[n3 + 1..], the
-    diagonal last in each row, offsets into the second half of f_idx and f_val), so both
-    solves read L in the order they use it; f_perm[k] is the original index of permuted row
-    k; f_work holds two scalar vectors."""
+    ``use_factor`` a sparse Cholesky factor P H~ P^T = L L^T of a matrix like H, in 3x3
+    blocks over a vertex ordering (factor_precond.py): two block triangular solves. f_val
+    holds L's strictly lower blocks by block rows (f_ptr[0..nv]), the same blocks transposed
+    by block columns (f_ptr[nv + 1..2 nv + 1]), then the inverses of the diagonal blocks;
+    f_idx the other block index of each; f_perm[k] the vertex of block row k; f_work a vec3
+    vector."""
     if use_factor:
-        n3 = 3 * nv
-        for n in range(nv):
-            for c in ti.static(range(3)):
-                f_work[3 * n + c] = r[n][c]
-        for k in range(n3):
-            f_work[n3 + k] = f_work[f_perm[k]]
-        for i in range(n3):                      # L y = P r, by rows of L
-            acc = f_work[n3 + i]
-            last = f_ptr[n3 + 2 + i] - 1
-            for q in range(f_ptr[n3 + 1 + i], last):
-                acc -= f_val[q] * f_work[n3 + f_idx[q]]
-            f_work[n3 + i] = acc / f_val[last]
-        for jj in range(n3):                     # L^T w = y, by columns of L
-            j = n3 - 1 - jj
-            acc = f_work[n3 + j]
-            for q in range(f_ptr[j] + 1, f_ptr[j + 1]):
-                acc -= f_val[q] * f_work[n3 + f_idx[q]]
-            f_work[n3 + j] = acc / f_val[f_ptr[j]]
-        for k in range(n3):
-            f_work[f_perm[k]] = f_work[n3 + k]
-        for n in range(nv):
-            z[n] = ti.Vector([f_work[3 * n], f_work[3 * n + 1], f_work[3 * n + 2]])
+        for k in range(nv):
+            f_work[k] = r[f_perm[k]]
+        diag = f_ptr[2 * nv + 1]
+        for i in range(nv):                      # L y = P r, by block rows
+            acc = f_work[i]
+            for q in range(f_ptr[i], f_ptr[i + 1]):
+                acc -= f_val[q] @ f_work[f_idx[q]]
+            f_work[i] = f_val[diag + i] @ acc
+        for jj in range(nv):                     # L^T w = y, by block columns of L
+            j = nv - 1 - jj
+            acc = f_work[j]
+            for q in range(f_ptr[nv + 1 + j], f_ptr[nv + 2 + j]):
+                acc -= f_val[q] @ f_work[f_idx[q]]
+            f_work[j] = f_val[diag + j].transpose() @ acc
+        for k in range(nv):
+            z[f_perm[k]] = f_work[k]
     else:
         for n in range(nv):
             z[n] = P_inv[n] @ r[n]
@@ -707,15 +718,6 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
 
 
 @ti.kernel
-def set_friction(nv: int, h: float, on: int, x: A, v: A, contact_mu: A, fric: A):
-    """fric = (x_prev, mu_f) per vertex, x_prev = x_hat - h v (the substep's start, before
-    dynamics); mu_f = 0 (no friction) unless ``on``."""
-    for n in range(nv):
-        xp = x[n] - h * v[n]
-        fric[n] = ti.Vector([xp[0], xp[1], xp[2], contact_mu[n] if on else 0.0])
-
-
-@ti.kernel
 def max_violation(K: int, nf: int, rest_area: A, g: A) -> float:
     viol = 0.0
     ti.loop_config(serialize=True)
@@ -725,11 +727,24 @@ def max_violation(K: int, nf: int, rest_area: A, g: A) -> float:
 
 
 @ti.kernel
-def begin_solve(nv: int, x: A, x_hat: A, x_start: A, stats: A):
+def begin_solve(nv: int, h: float, friction: int, clear: int, x_in: A, v_in: A, x: A, v: A,
+                x_hat: A, x_start: A, contact: A, contact_mu: A, fric: A, stats: A):
+    """Set up a projection from the model's state (x_in, v_in): x = x_hat = x_start = x_in,
+    v = v_in; fric = (x_prev, mu_f) per vertex, x_prev = x_hat - h v (the substep's start,
+    before dynamics), mu_f = 0 (no friction) unless ``friction``; with ``clear`` no contact
+    half-spaces. One launch instead of five (each costs ~0.1 ms: a tenth of a resting
+    1.2k-face projection's host time)."""
     ti.loop_config(serialize=True)
     for n in range(nv):
-        x_hat[n] = x[n]
-        x_start[n] = x[n]
+        x[n] = x_in[n]
+        v[n] = v_in[n]
+        x_hat[n] = x_in[n]
+        x_start[n] = x_in[n]
+        xp = x_in[n] - h * v_in[n]
+        fric[n] = ti.Vector([xp[0], xp[1], xp[2], contact_mu[n] if friction else 0.0])
+        if clear:
+            for j in ti.static(range(CONTACT_SLOTS)):
+                contact[n, j] = ti.Vector([0.0, 0.0, 0.0, NO_CONTACT])
     for i in range(8):
         stats[i] = 0.0
 
@@ -741,9 +756,10 @@ def copy_vectors(n: int, src: A, dst: A):
 
 
 @ti.kernel
-def finish_solve(nv: int, h: float, cap: float, x: A, x_start: A, v: A):
+def finish_solve(nv: int, h: float, cap: float, x: A, x_start: A, v: A, x_out: A, v_out: A):
     """v += dx / h (METHOD 4): the projection's correction becomes a velocity change, of at
-    most ``cap`` (m/s) per vertex when cap > 0."""
+    most ``cap`` (m/s) per vertex when cap > 0; x and v are copied to x_out and v_out (the
+    model's state)."""
     ti.loop_config(serialize=True)
     for n in range(nv):
         if h > 0.0:
@@ -751,3 +767,5 @@ def finish_solve(nv: int, h: float, cap: float, x: A, x_start: A, v: A):
             if cap > 0.0 and dv.norm() > cap:
                 dv *= cap / dv.norm()
             v[n] += dv
+        x_out[n] = x[n]
+        v_out[n] = v[n]

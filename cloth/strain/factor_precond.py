@@ -21,9 +21,13 @@ kernel may use it; ``after_solve`` refactorises A when there is no factor yet or
 REFRESH_SOLVES solves old.
 """
 import numpy as np
+import scipy.sparse as sp
 import taichi as ti
 
 from .. import linalg
+from ..system_matrix import mat3
+
+vec3 = ti.types.vector(3, float)
 
 # Refactorise the metric every REFRESH_SOLVES solves (it changes as the cloth deforms). The
 # first factor is made after FIRST_AFTER solves on a mesh: remeshing every frame makes a new
@@ -34,26 +38,33 @@ FIRST_AFTER = 2
 
 class FactorPreconditioner:
     """The factor arrays the kernel reads (``al.precondition``): L of P A P^T = L L^T (A the
-    metric with pinned rows and columns made the identity, like the Newton matrix's) stored
-    twice in packed arrays, by columns and by rows, the permutation (``perm[k]``: the
-    original index of permuted row k) and two scalar work vectors. The arrays grow as
-    needed (an ndarray's size is not part of a kernel's signature: no recompilation)."""
+    metric with pinned rows and columns made the identity, like the Newton matrix's; P a
+    fill-reducing ordering of the vertices) in 3x3 blocks, stored twice so that both
+    triangular solves gather: by block rows (L's strictly lower blocks, for L y = b) and by
+    block columns (the same blocks transposed, for L^T w = y), then the inverses of the
+    diagonal blocks. ``perm[k]`` is the vertex of block row k; ``work`` is a vec3 vector.
+    Why blocks: one index per 3x3 block instead of per entry, and the inner product becomes a
+    3x3 matrix-vector product (``benchmarks`` note in solver.md, twelfth session). The arrays
+    grow as needed (an ndarray's size is not part of a kernel's signature: no
+    recompilation)."""
 
     def __init__(self, metric):
         self.metric = metric
         self.chol = linalg.SparseCholesky(metric.ptr_np, metric.col_np, metric.n,
-                                          backend="cholmod", core=metric.core_np)
-        self.n3 = n3 = 3 * metric.n
-        self.perm = ti.ndarray(ti.i32, n3)
-        self.ptr = ti.ndarray(ti.i32, 2 * (n3 + 1))
-        self.work = ti.ndarray(float, 2 * n3)
-        self.capacity = 0                       # entries of L per half of idx / val
+                                          backend="cholmod", core=metric.core_np,
+                                          vertex_order=True)
+        n = metric.n
+        self.perm = ti.ndarray(ti.i32, n)
+        self.ptr = ti.ndarray(ti.i32, 2 * (n + 1))
+        self.work = ti.ndarray(vec3, n)
+        self.capacity = 0                       # blocks in idx / val
         self.idx = ti.ndarray(ti.i32, 1)
-        self.val = ti.ndarray(float, 1)
+        self.val = ti.ndarray(mat3, 1)
         self.ready = False
         self.solves_since = 0
         self.solves = 0                         # on this pattern
         self.pinned = None                      # the pinned mask the factor was made with
+        self.blocks = 0                         # 3x3 blocks of L (the last factor)
 
     def usable(self, pinned):
         """Whether the kernel may use the factor: it exists and was made with these pins (a
@@ -65,26 +76,30 @@ class FactorPreconditioner:
 
     def refresh(self, values):
         """Factorise the lumped matrix of these block values (the pattern's order) and
-        upload L and the permutation."""
+        upload L's blocks and the vertex ordering."""
         self.chol.factorize(values)
-        by_cols, perm = self.chol.lower_factor()
-        by_cols.sort_indices()                  # the diagonal first in each column
-        by_rows = by_cols.tocsr()
-        by_rows.sort_indices()                  # the diagonal last in each row
-        nnz = by_cols.nnz
-        if nnz > self.capacity:
-            self.capacity = int(1.25 * nnz)
-            self.idx = ti.ndarray(ti.i32, 2 * self.capacity)
-            self.val = ti.ndarray(float, 2 * self.capacity)
-        cap = self.capacity
-        idx, val = np.zeros(2 * cap, np.int32), np.zeros(2 * cap)
-        idx[:nnz], val[:nnz] = by_cols.indices, by_cols.data
-        idx[cap:cap + nnz], val[cap:cap + nnz] = by_rows.indices, by_rows.data
-        self.idx.from_numpy(idx)
+        L, perm3 = self.chol.lower_factor()
+        n = self.metric.n
+        rows = _block_rows(L)
+        cols = _block_rows(L.T)                 # L^T's block rows: L's columns, transposed
+        diag_inv = np.linalg.inv(rows["diag"])
+        n_fwd, n_bwd = len(rows["idx"]), len(cols["idx"])
+        total = n_fwd + n_bwd + n
+        if total > self.capacity:
+            self.capacity = int(1.25 * total)
+            self.idx = ti.ndarray(ti.i32, self.capacity)
+            self.val = ti.ndarray(mat3, self.capacity)
+        val = np.zeros((self.capacity, 3, 3))
+        val[:n_fwd], val[n_fwd:n_fwd + n_bwd] = rows["val"], cols["val"]
+        val[n_fwd + n_bwd:total] = diag_inv
+        idx = np.zeros(self.capacity, np.int32)
+        idx[:n_fwd], idx[n_fwd:n_fwd + n_bwd] = rows["idx"], cols["idx"]
         self.val.from_numpy(val)
-        self.ptr.from_numpy(np.concatenate([by_cols.indptr, by_rows.indptr + cap])
+        self.idx.from_numpy(idx)
+        self.ptr.from_numpy(np.concatenate([rows["ptr"], cols["ptr"] + n_fwd])
                             .astype(np.int32))
-        self.perm.from_numpy(np.asarray(perm, np.int32))
+        self.perm.from_numpy((perm3[0::3] // 3).astype(np.int32))
+        self.blocks = n_fwd + n
         self.ready = True
 
     def after_solve(self, pinned):
@@ -113,9 +128,26 @@ class FactorPreconditioner:
         return values
 
 
+def _block_rows(M):
+    """A lower (or upper) triangular matrix with 3x3 blocks, by block rows: the strictly
+    off-diagonal blocks ("val", "idx": block column, "ptr": per block row) and the diagonal
+    blocks ("diag")."""
+    B = sp.csr_matrix(M).tobsr(blocksize=(3, 3))
+    B.sort_indices()
+    n = B.shape[0] // 3
+    block_row = np.repeat(np.arange(n), np.diff(B.indptr))
+    on_diag = B.indices == block_row
+    if on_diag.sum() != n:
+        raise linalg.FactorizationError("the factor lacks a diagonal block")
+    off = ~on_diag
+    ptr = np.concatenate([[0], np.cumsum(np.bincount(block_row[off], minlength=n))])
+    return dict(val=B.data[off], idx=B.indices[off], ptr=ptr, diag=B.data[on_diag])
+
+
 class FactorStub:
-    """One-element arrays for solve_al's factor arguments when it runs block Jacobi."""
+    """One-element arrays for solve_al's factor arguments when it runs block Jacobi (of the
+    factor's types, so that solve_al compiles once)."""
 
     def __init__(self):
         self.perm, self.ptr, self.idx = (ti.ndarray(ti.i32, 1) for _ in range(3))
-        self.val, self.work = ti.ndarray(float, 1), ti.ndarray(float, 1)
+        self.val, self.work = ti.ndarray(mat3, 1), ti.ndarray(vec3, 1)

@@ -509,14 +509,10 @@ class StrainLimiter:
         ws, m = self._ws, self.model
         nv, nf = m.n_verts, m.n_faces
         mid, K = METHOD_IDS[self.method], N_CONSTRAINTS[self.method]
-        if not contacts:
-            buffers.clear_contacts(nv, ws.contact)
-        al.copy_vectors(nv, m.state.x, ws.x)
-        al.copy_vectors(nv, m.state.v, ws.v)
         # Friction holds contact vertices against sliding over the substep (from x - h v).
-        al.set_friction(nv, float(h), int(contacts and h > 0 and self.friction), ws.x, ws.v,
-                       ws.contact_mu, ws.fric)
-        al.begin_solve(nv, ws.x, ws.x_hat, ws.x_start, ws.stats)
+        al.begin_solve(nv, float(h), int(contacts and h > 0 and self.friction),
+                       int(not contacts), m.state.x, m.state.v, ws.x, ws.v, ws.x_hat,
+                       ws.x_start, ws.contact, ws.contact_mu, ws.fric, ws.stats)
         self.last_reverted = False
         if self.solver == "al":
             saved = None
@@ -527,14 +523,14 @@ class StrainLimiter:
             use_system = self.coupling == "implicit" and h > 0 and self._system_ready
             if self.linear_solver == "cholesky" or _host_loop_only():
                 rounds, newton, converged = self._solve_direct(mid, K, use_system)
+                stats = ws.stats.to_numpy()
             else:
-                rounds, newton, converged = self._solve_al(mid, K,
-                                                           self._newton_metric(use_system),
-                                                           contacts)
+                # (_solve_al read the stats already: a read-back costs ~0.2 ms.)
+                rounds, newton, converged, stats = self._solve_al(
+                    mid, K, self._newton_metric(use_system), contacts)
             if saved is not None:
                 for a, val in zip((ws.lam, ws.lam_c, ws.lam_s, ws.lam_t), saved):
                     a.from_numpy(val)
-            stats = ws.stats.to_numpy()
             if not converged and stats[ST_VIOL] > max(stats[ST_START_VIOL], self.tol):
                 al.copy_vectors(nv, ws.x_start, ws.x)
                 stats[ST_VIOL] = stats[ST_START_VIOL]
@@ -555,9 +551,7 @@ class StrainLimiter:
         # every unconverged one raised the band error of 8-round svd from 3.6e-4 to 6.9e-2).
         kick = 0.5 * self.model.typical_edge() / h if (self.solver == "al" and not converged
                                                 and h > 0) else -1.0
-        al.finish_solve(nv, float(h), kick, ws.x, ws.x_start, ws.v)
-        al.copy_vectors(nv, ws.x, m.state.x)
-        al.copy_vectors(nv, ws.v, m.state.v)
+        al.finish_solve(nv, float(h), kick, ws.x, ws.x_start, ws.v, m.state.x, m.state.v)
         self.last_iterations = int(rounds)
         self.last_violation_max = float(max(stats[ST_VIOL], 0.0))
         self.last_converged = bool(converged)
@@ -604,7 +598,7 @@ class StrainLimiter:
         """The AL loop (METHOD 4), one kernel launch (al.solve_al): rounds of inexact
         minimisation of L_A by projected Newton with a backtracking line search, then the
         multiplier step of eq. 27 and mu *= mu_grow. Returns (rounds, Newton steps,
-        converged)."""
+        converged, the stats array)."""
         ws, m = self._ws, self.model
         mean_mass = self._mean_mass(metric)
         mu, mu_max = self.mu_scale * mean_mass, self.mu_max_scale * mean_mass
@@ -635,7 +629,7 @@ class StrainLimiter:
         self.last_factorizations = 0
         if isinstance(fp, FactorPreconditioner):
             self.last_factorizations = int(fp.after_solve(m.pinned))
-        return rounds, newton, bool(stats[ST_CONVERGED] > 0)
+        return rounds, newton, bool(stats[ST_CONVERGED] > 0), stats
 
     def _factor_preconditioner(self, metric):
         """The FactorPreconditioner of this metric's pattern when the PCG solve uses one
