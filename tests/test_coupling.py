@@ -241,7 +241,7 @@ def test_inner_loop_stops_on_the_residual_under_implicit_coupling():
         assert lim.last_converged and lim.last_violation_max < lim.tol
         out[rtol] = (sim.model.positions(), lim.last_newton, lim.last_iterations)
     (x_full, newton_full, rounds_full), (x_cut, newton_cut, rounds_cut) = out.values()
-    assert newton_full == lim.max_newton * rounds_full         # every round ran full
+    assert newton_full == lim.newton_budget(False) * rounds_full         # every round ran full
     assert newton_cut < newton_full
     edge = sim.model.typical_edge()
     # Measured: 0.6 % of an edge (10 -> 8 Newton steps); both lie ~4.5 % of an edge from the

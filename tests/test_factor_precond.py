@@ -63,6 +63,7 @@ def test_factor_and_block_jacobi_give_the_same_projection():
     for precondition in ("factor", "jacobi"):
         lim.precondition = precondition
         lim.inner_rtol, lim.cg_rtol, lim.max_cg, lim.factor_cg = 0.0, 1e-10, 400, 400
+        lim.max_newton = 5                          # the same solve for both
         lim._upload_params()
         metric = _redo_dynamics(sim, state)
         assert (lim._factor_preconditioner(metric) is None) == (precondition == "jacobi")
@@ -100,3 +101,23 @@ def test_factor_is_refreshed_every_few_solves_and_only_for_small_meshes(monkeypa
     assert lim._factor_preconditioner(lim.system_metric()) is not None
     lim.set_coupling("projection")
     assert lim._factor_preconditioner(lim._newton_metric(False)) is None
+
+
+def test_rounds_take_fewer_newton_steps_with_the_factor():
+    """max_newton None: FACTOR_NEWTON steps per round with the factor, MAX_NEWTON without;
+    an explicit max_newton holds for both. A solve with the factor stays within its budget
+    (with inner_rtol 0 every round runs it in full)."""
+    from cloth.strain.solver import FACTOR_NEWTON, MAX_NEWTON
+    sim = _hanging("mapping", "implicit", res=6)
+    lim = sim.strain
+    assert lim.max_newton is None
+    assert lim.newton_budget(True) == FACTOR_NEWTON < lim.newton_budget(False) == MAX_NEWTON
+    lim.inner_rtol = 0.0
+    lim._upload_params()
+    for _ in range(4):
+        sim.step_frame()
+    assert lim._factor.usable(sim.model.pinned)
+    sim.step_frame()
+    assert lim.last_newton == FACTOR_NEWTON * lim.last_iterations
+    lim.max_newton = 7
+    assert lim.newton_budget(True) == lim.newton_budget(False) == 7

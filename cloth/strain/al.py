@@ -164,6 +164,17 @@ def pair_grad(grad: T, f, c):
 
 
 @ti.func
+def assemble_values(method: ti.template(), nf, pos: T, face_verts: T, Dm_inv: T, grain: T,
+                    rest_area: T, params: T, g: T):
+    """The values only of every constraint at ``pos`` (a fifth of ``assemble_all``'s cost at
+    1.2k faces, mapping: the gradients are not computed)."""
+    for f in range(nf):
+        out = eval_face(method, f, pos, face_verts, Dm_inv, grain, rest_area, params)
+        for c in ti.static(range(out.g.n)):
+            g[f, c] = out.g[c]
+
+
+@ti.func
 def metric_times(n, w_ptr: T, w_col: T, w_val: T, p: T):
     """Row n of B p, B a block matrix in W's pattern with values ``w_val`` (W itself, or the
     Newton matrix H)."""
@@ -547,24 +558,26 @@ def update_multipliers(K, nv, nf, ns, mu, mu_max, x: T, rest_area: T, lam: T, g:
 
 
 @ti.func
-def choose_start(method: ti.template(), K, nv, nf, ns, mu, x: T, x_hat: T, x_trial: T,
-                 w_ptr: T, w_col: T, w_val: T, w_diag: T, face_verts: T, Dm_inv: T, grain: T,
-                 rest_area: T, params: T, lam: T, g: T, grad: T, cm: T, what: T, kappa: T,
-                 twist: T, contact: T, lam_c: T, stitch: T, lam_s: T, fric: T, lam_t: T,
-                 pinned: T):
-    """Start the Newton iteration at the step's start x_prev = x_hat - h v (kept in ``fric``)
-    instead of at x_hat when its merit is lower. In the implicit step's metric a cloth at rest
-    is a fixed point, so x_prev is then the solution itself (one round, one Newton step),
-    while x_hat lies a whole sag away (12-17 % strain past the band on the soft cloth) and
-    Newton has to travel back across the constraints' curvature. Pinned vertices stay at
-    x_hat (their targets). Leaves the constraints assembled at the chosen start."""
+def choose_start(method: ti.template(), from_prev, K, nv, nf, ns, mu, x: T, x_hat: T,
+                 x_trial: T, w_ptr: T, w_col: T, w_val: T, w_diag: T, face_verts: T,
+                 Dm_inv: T, grain: T, rest_area: T, params: T, lam: T, g: T, grad: T, cm: T,
+                 what: T, kappa: T, twist: T, contact: T, lam_c: T, stitch: T, lam_s: T,
+                 fric: T, lam_t: T, pinned: T):
+    """Assemble the constraints at the Newton iteration's start (the caller left only their
+    values at x = x_hat). With ``from_prev``, start at the step's start x_prev = x_hat - h v
+    (kept in ``fric``) instead of at x_hat when its merit is lower. In the implicit step's
+    metric a cloth at rest is a fixed point, so x_prev is then the solution itself (one
+    round, one Newton step), while x_hat lies a whole sag away (12-17 % strain past the band
+    on the soft cloth) and Newton has to travel back across the constraints' curvature.
+    Pinned vertices stay at x_hat (their targets)."""
     # One call site each for assemble_all and merit (a ti.func is inlined at every call, and
-    # solve_al's compile time grows with its size): pass 0 evaluates x_hat (the caller left the
-    # constraints assembled there), pass 1 x_prev, pass 2 re-assembles at x_hat when it wins.
+    # solve_al's compile time grows with its size): pass 0 evaluates x_hat's merit (from the
+    # values), pass 1 assembles and evaluates x_prev, pass 2 assembles x_hat when it wins
+    # (or without from_prev).
     L_hat = 0.0
     take = 0
     for attempt in range(3):
-        if attempt < 2 or take == 0:
+        if (from_prev and (attempt < 2 or take == 0)) or (not from_prev and attempt == 2):
             for n in range(nv):
                 x_trial[n] = x[n]
                 if attempt == 1 and pinned[n] == 0:
@@ -662,8 +675,14 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
                         x_trial[n] = x[n]
                         if a > 0.0:
                             x_trial[n] += a * d[n]
-                    assemble_all(method, nf, x_trial, face_verts, Dm_inv, grain, rest_area,
-                                 params, g, grad, cm, what, kappa, twist)
+                    if first == 1:
+                        # x_hat: its values decide whether there is anything to do and, with
+                        # from_prev, where to start; choose_start assembles the start.
+                        assemble_values(method, nf, x_trial, face_verts, Dm_inv, grain,
+                                        rest_area, params, g)
+                    else:
+                        assemble_all(method, nf, x_trial, face_verts, Dm_inv, grain,
+                                     rest_area, params, g, grad, cm, what, kappa, twist)
                     if a == 0.0:
                         break
                     L = merit(K, nv, nf, ns, mu, x_trial, x_hat, w_ptr, w_col, w_val, w_diag, lam, g, contact,
@@ -684,11 +703,10 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
                     if viol < tol:
                         converged = 2       # feasible as given: nothing to do
                         break
-                    if from_prev:
-                        choose_start(method, K, nv, nf, ns, mu, x, x_hat, x_trial, w_ptr,
-                                     w_col, w_val, w_diag, face_verts, Dm_inv, grain,
-                                     rest_area, params, lam, g, grad, cm, what, kappa, twist,
-                                     contact, lam_c, stitch, lam_s, fric, lam_t, pinned)
+                    choose_start(method, from_prev, K, nv, nf, ns, mu, x, x_hat, x_trial,
+                                 w_ptr, w_col, w_val, w_diag, face_verts, Dm_inv, grain,
+                                 rest_area, params, lam, g, grad, cm, what, kappa, twist,
+                                 contact, lam_c, stitch, lam_s, fric, lam_t, pinned)
                     continue
                 if adaptive:
                     # Trust the exact active set more after a full step, widen it after a

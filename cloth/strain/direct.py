@@ -56,7 +56,7 @@ def start(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: float,
                                       vertex_violation(nv, ns, x, contact, stitch,
                                                        params[P_CONTACT_SCALE]))
         if from_prev and stats[ST_START_VIOL] >= tol:
-            choose_start(method, K, nv, nf, ns, mu, x, x_hat, x_trial, w_ptr, w_col, w_val,
+            choose_start(method, 1, K, nv, nf, ns, mu, x, x_hat, x_trial, w_ptr, w_col, w_val,
                          w_diag, face_verts, Dm_inv, grain, rest_area, params, lam, g, grad,
                          cm, what, kappa, twist, contact, lam_c, stitch, lam_s, fric, lam_t,
                          pinned)
@@ -173,7 +173,7 @@ def solve(lim, mid, K, metric, chol, mu, mu_max, step_tol):
     viol = comp = 0.0
     n3 = 3 * nv
     while rounds < lim.max_iters and not converged:
-        for _ in range(lim.max_newton):
+        for _ in range(lim.newton_budget(False)):
             if lim.exact_curvature:
                 ndarrays.zero(ws.kappa)      # the model's curvature off: the exact one is added
                 ndarrays.zero(ws.twist)

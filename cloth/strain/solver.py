@@ -98,6 +98,13 @@ FACTOR_MAX_FACES = 2000
 # 2.5e-7 / 6.6e-8 / 1.1e-7 J; at 128 faces (mapping) 6 / 12 / 20 rested at 2.2e-6 / 3.8e-8 /
 # 1.6e-9 J at the same cost (2.5-2.7 ms a frame).
 FACTOR_CG, FACTOR_CG_MAX, FACTOR_CG_WORK = 6, 20, 6000
+# Newton steps per AL round (``max_newton`` None): with the factor a step finds most of the
+# exact one, and a round needs fewer. Measured on hanging at resolution 25 (mapping,
+# ensembles of 8 runs, KE over frames 121-150, two runs at a time, 2026-12-03): 4 steps
+# rested at a median of 1.3e-7 J (6.5e-8 to 2.3e-7, 8 of 8 under 3e-7) in 11.1 ms a frame,
+# 5 at 8.8e-8 J in 14.8 ms; at resolution 9 all three methods rest under 3e-8 J with either.
+# Block Jacobi keeps 5 (measured in the tenth session: 3 shimmered at 1.8e-6 J).
+MAX_NEWTON, FACTOR_NEWTON = 5, 4
 
 _host_loop_noted = False
 
@@ -157,7 +164,8 @@ class StrainLimiter:
     Cholesky path ``last_cg`` counts the CG iterations preconditioned by a reused factor, and
     ``last_factorizations`` the numeric factorisations).
 
-    AL settings: ``max_newton`` Newton steps per round, each a PCG solve of at most
+    AL settings: ``max_newton`` Newton steps per round (None: ``newton_budget``), each a
+    PCG solve of at most
     ``max_cg`` iterations (times sqrt(n_faces / 1000) above 1000 faces; None: per method,
     ``CG_BUDGET``) to the relative residual ``cg_rtol``; penalty ``mu_scale`` x the
     mean vertex mass, x ``mu_grow`` per round, capped at ``mu_max_scale`` x the mean mass.
@@ -183,7 +191,7 @@ class StrainLimiter:
     """
 
     def __init__(self, model, method="mapping", warp=(-0.01, 0.01), weft=(-0.05, 0.05),
-                 bias=None, solver="al", tol=1e-4, max_iters=None, max_newton=5,
+                 bias=None, solver="al", tol=1e-4, max_iters=None, max_newton=None,
                  max_cg=None, cg_rtol=0.1, mu_scale=None, mu_grow=4.0, mu_max_scale=1e6,
                  mapping_delta=MAPPING_DELTA, mapping_iso=MAPPING_ISO, jacobi_omega=1.0,
                  active_margin=1e-2, inner_rtol=None,
@@ -205,7 +213,8 @@ class StrainLimiter:
             raise StrainLimitError(f"tol must be > 0 (got {tol}); 1e-4 is 0.01 % strain")
         if max_iters is None:
             max_iters = AL_ROUNDS if solver == "al" else 2000
-        for name, val in (("max_iters", max_iters), ("max_newton", max_newton),
+        for name, val in (("max_iters", max_iters),
+                          ("max_newton", 1 if max_newton is None else max_newton),
                           ("max_cg", 1 if max_cg is None else max_cg)):
             if int(val) < 1:
                 raise StrainLimitError(f"{name} must be >= 1 (got {val})")
@@ -236,7 +245,8 @@ class StrainLimiter:
         self.factor_cg = None          # None: from the mesh size (FACTOR_CG_WORK)
         self.tol = float(tol)
         self.max_iters = int(max_iters)
-        self.max_newton, self.cg_rtol = int(max_newton), cg_rtol
+        self.max_newton = None if max_newton is None else int(max_newton)
+        self.cg_rtol = cg_rtol
         self.max_cg = None if max_cg is None else int(max_cg)
         self.mu_scale, self.mu_grow, self.mu_max_scale = mu_scale, mu_grow, mu_max_scale
         self.mapping_delta = float(mapping_delta)
@@ -573,6 +583,13 @@ class StrainLimiter:
         step_tol = 0.01 * self.tol * m.typical_edge()
         return direct.solve(self, mid, K, metric, chol, mu, mu_max, step_tol)
 
+    def newton_budget(self, use_factor):
+        """Newton steps per AL round: ``max_newton``, or when that is None FACTOR_NEWTON
+        with the factor preconditioner and MAX_NEWTON otherwise."""
+        if self.max_newton is not None:
+            return self.max_newton
+        return FACTOR_NEWTON if use_factor else MAX_NEWTON
+
     def cg_budget(self):
         """PCG iterations per Newton step: ``max_cg`` or, when that is None, the method's
         ``CG_BUDGET`` (coupling "implicit") or ``CG_BUDGET_PROJECTION``, per 1000 faces. CG
@@ -614,7 +631,7 @@ class StrainLimiter:
             fp = self._no_factor()
         al.solve_al(mid, self._kernel_curvature(), K, m.n_verts, m.n_faces, len(self._stitches), mu, self.mu_grow,
                    mu_max, self.max_iters,
-                   self.max_newton, max_cg, self.cg_rtol, self.tol, step_tol,
+                   self.newton_budget(use_factor), max_cg, self.cg_rtol, self.tol, step_tol,
                    int(self.adaptive_margin),
                    int(self.coupling == "implicit" and metric is self._system), ws.params, ws.x, ws.x_hat,
                    ws.x_trial, metric.ptr, metric.col, metric.val, metric.diag,
