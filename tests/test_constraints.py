@@ -157,6 +157,24 @@ def test_constraints_come_in_bound_pairs(method, rng):
                                    rtol=1e-9, atol=1e-12)
 
 
+def test_svd_gradients_meet_at_isotropy():
+    """At eta1 = eta2 the svd family's eta1 and eta2 gradients are both their mean (the
+    minimum-norm subgradient of max(eta1, eta2)): a uniform shrink lowers both; they blend
+    back to their own within SVD_ISO_GAP of the tie."""
+    uv = np.array([[0.0, 0.0], [0.1, 0.0], [0.0, 0.1]])
+    Dm_inv, area = triangle_arrays(uv, np.zeros((3, 3)))
+    bands = ((-0.01, 0.01), (-0.05, 0.05), (1.37, 1.46))
+    x = np.c_[1.04 * uv, np.zeros(3)]
+    _, grad = evaluate_one("svd", x, Dm_inv, area, *bands)
+    np.testing.assert_allclose(grad[1], grad[3], atol=1e-12)          # eta1, eta2 upper
+    shrink = -(x - x.mean(axis=0)).ravel()
+    assert grad[1] @ shrink < 0 and grad[3] @ shrink < 0
+    gap = 4 * C.SVD_ISO_GAP                                          # past the blend
+    x2 = np.c_[uv * [1.04 + gap, 1.04], np.zeros(3)]
+    _, grad2 = evaluate_one("svd", x2, Dm_inv, area, *bands)
+    assert np.abs(grad2[1] - grad2[3]).max() > 0.1 * np.abs(grad2[1]).max()
+
+
 @pytest.mark.parametrize("iso", [C.MAPPING_ISO, 0.1])
 def test_mapping_closure_gradients_match_finite_differences(iso, rng):
     """The isotropy closure (c~ blended towards 1/sqrt 2) has an exact gradient; iso = 0.1 is

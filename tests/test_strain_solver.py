@@ -177,6 +177,20 @@ def test_hard_cases_stay_finite(case):
         assert limiter.last_violation_max <= max(before, 1e-3), (method, case)
 
 
+@pytest.mark.parametrize("method", METHODS)
+def test_exactly_isotropic_stretch_is_projected_into_the_bands(method):
+    """A free sheet stretched 4 % in every direction (eta1 = eta2 exactly: the principal
+    frame is arbitrary) is projected into its bands. svd used to make no progress at all
+    (its eta1 gradient shrank one direction only, which left max(eta1, eta2) unchanged;
+    constraints.SVD_ISO_GAP)."""
+    model = stretched_sheet(n=6, warp=0.04, weft=0.04, noise=0.0, pins=False)
+    limiter = StrainLimiter(model, method=method)
+    assert limiter.constraint_values().max() > 0.02 * np.sqrt(model.rest_area).min()
+    limiter.project(0.0)                     # the start-up projection (h = 0)
+    assert limiter.last_converged, (limiter.last_iterations, limiter.last_violation_max)
+    assert limiter.constraint_values().max() < limiter.tol
+
+
 def test_infeasible_pins_end_bounded():
     """Two pins held 20 % further apart than the warp band allows: best effort, reported as
     not converged, no blow-up."""
