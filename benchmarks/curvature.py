@@ -31,7 +31,7 @@ import sys
 import numpy as np
 
 from benchmarks.harness import commit, configure, machine
-from cloth.strain.constraints import METHODS
+from cloth.strain.families import METHODS
 
 # The Newton matrix's constraint curvature: the model of constraints.py, or the exact one made
 # positive semi-definite as a 9x9 per face ("full") or in its two parts through C ("split"),

@@ -3,7 +3,7 @@ the methods and band settings, running a scene to rest, the per-run measures, an
 pair. Kept apart so that the two table modules import it, not each other."""
 import time
 
-from cloth.strain.constraints import METHODS  # noqa: F401 (the reproductions' method list)
+from cloth.strain.families import METHODS  # noqa: F401 (the reproductions' method list)
 BANDS = {
     "V1H5": {"warp": [-0.01, 0.01], "weft": [-0.05, 0.05]},   # vertical 1 %, horizontal 5 %
     "V5H1": {"warp": [-0.05, 0.05], "weft": [-0.01, 0.01]},   # swapped

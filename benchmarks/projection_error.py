@@ -17,7 +17,7 @@ import argparse
 import numpy as np
 
 from benchmarks.harness import commit, configure, machine
-from cloth.strain.constraints import METHODS
+from cloth.strain.families import METHODS
 
 EXACT = dict(max_newton=40, cg_rtol=1e-9, max_cg=2000, tol=1e-8, inner_rtol=0.0)
 SETTINGS = {

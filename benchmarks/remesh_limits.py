@@ -26,7 +26,7 @@ import numpy as np
 
 from benchmarks import harness, speed_vs_error
 
-from cloth.strain.constraints import METHODS
+from cloth.strain.families import METHODS
 
 
 def log(*args):

@@ -37,7 +37,7 @@ import numpy as np
 
 from benchmarks.harness import commit, machine
 
-from cloth.strain.constraints import METHODS
+from cloth.strain.families import METHODS
 STAGES = ("dynamics", "collision", "self_collision", "remesh") + tuple(
     f"strain_limit:{m}" for m in METHODS)
 # Vertices per side: 2 (n - 1)^2 triangles, from 512 to 100352.

@@ -55,7 +55,7 @@ import time
 import numpy as np
 
 from benchmarks.harness import commit, configure, machine
-from cloth.strain.constraints import METHODS
+from cloth.strain.families import METHODS
 
 FULL = dict(methods=list(METHODS), solvers=["al", "jacobi"],
             # Budgets per solver: an AL round (several Newton steps with PCG) does far more work

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from cloth.strain.constraints import METHODS
+from cloth.strain.families import METHODS
 from benchmarks.harness import commit, configure, machine
 from benchmarks.speed_vs_error import nudge_start, snapshot
 

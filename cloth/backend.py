@@ -105,31 +105,43 @@ def init(arch="cpu", precision=None, debug=False):
     _state.update(arch=arch, precision=precision)
 
 
-# The module-level Taichi types whose float type is fixed when their module is imported.
-PRECISION_TYPES = (("cloth.system_matrix", "mat3"), ("cloth.collision.obstacles", "mat3"),
-                   ("cloth.collision.obstacles", "vec3"), ("cloth.collision.shape", "params_t"))
+def _float_types(value):
+    """The float types inside a Taichi vector, matrix or struct type (else none)."""
+    from taichi.lang.matrix import MatrixType
+    from taichi.lang.struct import StructType
+    if isinstance(value, MatrixType):
+        return [value.dtype]
+    if isinstance(value, StructType):
+        return [d for m in value.members.values()
+                for d in (_float_types(m) if isinstance(m, (MatrixType, StructType)) else [m])]
+    return []
 
 
 def _check_module_types(precision):
-    """Refuse to start when cloth's module-level Taichi types were already created for the
-    other precision: ``ti.types.matrix(3, 3, float)`` takes the float type Taichi has when the
-    module is imported (f32 before ti.init), and kernel arguments and arrays of those types
-    would then silently run in it (measured: main.py, which imported the scenes first, ran
-    the strain projection's metric in f32 under f64; its frames drifted 3 mm from the
-    library's in 3 frames)."""
+    """Refuse to start when any of cloth's module-level Taichi types (``vec3 =
+    ti.types.vector(3, float)``, the constraint structs, ...) was already created for the other
+    precision: such a type takes the float type Taichi has when its module is imported (f32
+    before ti.init), and kernel arguments, arrays and locals of that type would then silently
+    run in it. Measured twice: main.py, which imported the scenes first, ran the strain
+    projection's metric in f32 under f64 (its frames drifted 3 mm from the library's in 3
+    frames); and the benchmarks that imported ``cloth.strain.constraints`` for its method list
+    evaluated every constraint in f32 structs (the svd rows of the speed-against-error sweep
+    read 1.96e-3 instead of 1.24e-3). Every loaded ``cloth`` module is scanned, so a new type
+    cannot slip past the check."""
     import sys
     want = ti.f64 if precision == "f64" else ti.f32
-    for module_name, type_name in PRECISION_TYPES:
-        module = sys.modules.get(module_name)
-        if module is None:
+    for module_name, module in list(sys.modules.items()):
+        if module is None or not (module_name == "cloth" or module_name.startswith("cloth.")):
             continue
-        dtype = getattr(module, type_name).dtype
-        if dtype != want:
-            have = "f64" if dtype == ti.f64 else "f32"
-            raise BackendError(f"cloth's Taichi types ({module_name}.{type_name}) were created "
-                               f"in {have} before backend.init(..., '{precision}'): call "
-                               "cloth.backend.init first, before importing the simulator, the "
-                               "scenes or the solvers")
+        for type_name, value in list(vars(module).items()):
+            for dtype in _float_types(value):
+                if dtype in (ti.f32, ti.f64) and dtype != want:
+                    have = "f64" if dtype == ti.f64 else "f32"
+                    raise BackendError(
+                        f"cloth's Taichi types ({module_name}.{type_name}) were created in "
+                        f"{have} before backend.init(..., '{precision}'): call "
+                        "cloth.backend.init first, before importing the simulator, the scenes "
+                        "or the solvers")
 
 
 def precision():

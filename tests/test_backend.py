@@ -40,3 +40,28 @@ def test_init_refuses_types_created_in_the_other_precision():
     r = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True,
                        timeout=300)
     assert "refused:" in r.stdout and "call cloth.backend.init first" in r.stdout, r.stderr
+
+
+def test_types_made_on_import_are_all_checked_and_the_benchmarks_import_none():
+    """Every module-level Taichi type of cloth is checked, structs too: importing the
+    constraint structs before ti.init is refused (the benchmarks did, and evaluated every
+    constraint in f32 under f64). And every benchmark module can be imported before it picks
+    its precision: none creates a Taichi type on import."""
+    import glob
+    import os
+    import subprocess
+    import sys
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    run = lambda code: subprocess.run([sys.executable, "-c", code], cwd=root,
+                                      capture_output=True, text=True, timeout=300)
+    init = ("from cloth import backend\n"
+            "try:\n"
+            "    backend.init('cpu', 'f64'); print('started')\n"
+            "except backend.BackendError as err:\n"
+            "    print('refused:', err)\n")
+    r = run("import cloth.strain.constraints\n" + init)
+    assert "refused:" in r.stdout and "Constraints" in r.stdout, r.stdout + r.stderr
+    names = sorted(os.path.basename(f)[:-3] for f in glob.glob(os.path.join(root, "benchmarks",
+                                                                            "*.py")))
+    r = run("".join(f"import benchmarks.{n}\n" for n in names if n != "__init__") + init)
+    assert "started" in r.stdout, r.stdout + r.stderr

@@ -33,10 +33,7 @@ Bands are passed as 2-vectors (min, max) of strains; the shear band of warp-weft
 import numpy as np
 import taichi as ti
 
-METHODS = ("svd", "warp-weft", "mapping")
-N_CONSTRAINTS = {"svd": 4, "warp-weft": 6, "mapping": 8}
-METHOD_IDS = {"svd": 0, "warp-weft": 1, "mapping": 2}
-K_MAX = 8
+from .families import K_MAX, METHOD_IDS, METHODS, N_CONSTRAINTS  # noqa: F401
 
 # Regularisation of 1/(eta1 - eta2) in the svd family's principal-frame curvature (a Newton
 # model term only: values and gradients do not depend on it). See svd_constraints.

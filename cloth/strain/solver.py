@@ -243,6 +243,7 @@ class StrainLimiter:
         self._factor_stub = None
         self.precondition = "factor"
         self.factor_cg = None          # None: from the mesh size (FACTOR_CG_WORK)
+        self.factor_max_faces = None   # None: FACTOR_MAX_FACES (a probe's override)
         self.tol = float(tol)
         self.max_iters = int(max_iters)
         self.max_newton = None if max_newton is None else int(max_newton)
@@ -656,7 +657,8 @@ class StrainLimiter:
         energy through the landing and it draped in 0 of 7 drops, against 0.4 % and 2 of 7
         with block Jacobi; docs/speed/drape_depth.md.)"""
         if not (self.precondition == "factor" and metric is self._system and
-                self.model.n_faces <= FACTOR_MAX_FACES and linalg.HAVE_CHOLMOD and
+                self.model.n_faces <= (FACTOR_MAX_FACES if self.factor_max_faces is None
+                                       else self.factor_max_faces) and linalg.HAVE_CHOLMOD and
                 backend.arch() == "cpu"):
             return None
         if self._factor is None or self._factor.metric is not metric:
