@@ -41,7 +41,8 @@ from cloth.strain.families import METHODS
 STAGES = ("dynamics", "collision", "self_collision", "remesh") + tuple(
     f"strain_limit:{m}" for m in METHODS)
 # Vertices per side: 2 (n - 1)^2 triangles, from 512 to 100352.
-FULL = [17, 33, 46, 65, 91, 129, 225]
+# 181: 64.8k triangles, the top of #13's 2k-64k range.
+FULL = [17, 33, 46, 65, 91, 129, 181, 225]
 QUICK = [17, 33, 65]
 
 
@@ -255,8 +256,10 @@ def write_outputs(base, rows, skipped, out, command, seconds, budget_s):
             elif s == "field_bytes":
                 pts.append((r["faces"], r["field_bytes"]))
         big = [p for p in pts if p[0] >= 8000]
+        issue = [p for p in pts if 2000 <= p[0] <= 70000]       # #13's range, 2k-64k
         fits[s] = {"k_all": fit_exponent(*zip(*pts)) if len(pts) > 1 else float("nan"),
                    "k_8k": fit_exponent(*zip(*big)) if len(big) > 1 else float("nan"),
+                   "k_2k_64k": fit_exponent(*zip(*issue)) if len(issue) > 1 else float("nan"),
                    "n_points": len(pts), "largest": int(max((p[0] for p in pts), default=0))}
     with open(os.path.join(out, "scaling.json"), "w") as fh:
         json.dump({"command": command, "machine": machine(), "commit": commit(),
@@ -293,15 +296,19 @@ def write_outputs(base, rows, skipped, out, command, seconds, budget_s):
                      f" | {r['peak_rss_mb']:.0f}"
                      f" | {r['field_bytes'] / 2**20:.1f} |")
     lines += ["", "Fitted exponent k of cost ~ N^k (least squares in log-log), over every "
-              "measured size and over sizes of 8k triangles and more:", "",
-              "| stage | k (all sizes) | k (>= 8k) | sizes | largest N |", "|---|---|---|---|---|"]
+              "measured size, over sizes of 8k triangles and more, and over 2k-64k (issue "
+              "#13's range):", "",
+              "| stage | k (all sizes) | k (>= 8k) | k (2k-64k) | sizes | largest N |",
+              "|---|---|---|---|---|---|"]
     for s in STAGES:
         f = fits[s]
-        lines.append(f"| {names[s]} | {f['k_all']:.2f} | {f['k_8k']:.2f} | {f['n_points']} | "
+        lines.append(f"| {names[s]} | {f['k_all']:.2f} | {f['k_8k']:.2f} | "
+                     f"{f.get('k_2k_64k', float('nan')):.2f} | {f['n_points']} | "
                      f"{f['largest']} |")
     for s, label in (("peak_rss", "peak RSS"), ("field_bytes", "Taichi field bytes")):
         f = fits[s]
-        lines.append(f"| {label} | {f['k_all']:.2f} | {f['k_8k']:.2f} | {f['n_points']} | "
+        lines.append(f"| {label} | {f['k_all']:.2f} | {f['k_8k']:.2f} | "
+                     f"{f.get('k_2k_64k', float('nan')):.2f} | {f['n_points']} | "
                      f"{f['largest']} |")
     if skipped:
         lines += ["", "Skipped (predicted time per frame above the --budget of "
