@@ -19,7 +19,7 @@ from typing import Optional
 
 from .config import ConfigError, NUMBER_OR_WORD, merge
 from .remesh import RemeshParams
-from .strain.constraints import METHODS
+from .strain.families import METHODS
 from .strain.defaults import AL_ROUNDS
 
 STRAIN_METHODS = METHODS + ("none",)

@@ -45,8 +45,8 @@ def test_init_refuses_types_created_in_the_other_precision():
 def test_types_made_on_import_are_all_checked_and_the_benchmarks_import_none():
     """Every module-level Taichi type of cloth is checked, structs too: importing the
     constraint structs before ti.init is refused (the benchmarks did, and evaluated every
-    constraint in f32 under f64). And every benchmark module can be imported before it picks
-    its precision: none creates a Taichi type on import."""
+    constraint in f32 under f64). And every benchmark module, the settings and the scenes can
+    be imported before a program picks its precision: none creates a Taichi type on import."""
     import glob
     import os
     import subprocess
@@ -63,5 +63,8 @@ def test_types_made_on_import_are_all_checked_and_the_benchmarks_import_none():
     assert "refused:" in r.stdout and "Constraints" in r.stdout, r.stdout + r.stderr
     names = sorted(os.path.basename(f)[:-3] for f in glob.glob(os.path.join(root, "benchmarks",
                                                                             "*.py")))
-    r = run("".join(f"import benchmarks.{n}\n" for n in names if n != "__init__") + init)
+    # The settings and the scenes too (benchmarks.solver read a default from cloth.settings
+    # before its children chose f64, and cloth.settings imported the constraints).
+    r = run("".join(f"import benchmarks.{n}\n" for n in names if n != "__init__")
+            + "import cloth.settings\nimport scenes\n" + init)
     assert "started" in r.stdout, r.stdout + r.stderr
