@@ -44,9 +44,12 @@ SVD_DELTA = 1e-4
 # frame is arbitrary, and eta1's own gradient shrinks the triangle along one direction only,
 # which leaves max(eta1, eta2) where it was; the line search then never found a decrease and a
 # uniformly pre-stretched sheet stayed 3 % over its band for 100 rounds (benchmarks.stability,
-# "exactly isotropic 4 % stretch, free sheet (svd)"). Values are untouched, and the gap is
-# far below the 5e-3 of the reference data and the 2e-2 of the finite-difference tests.
-SVD_ISO_GAP = 1e-3
+# "exactly isotropic 4 % stretch, free sheet (svd)"). Values are untouched. The gap, measured
+# on both cases: with 1e-3 the blend reached the many nearly isotropic triangles of a flat
+# sheet and changed svd's wrinkles (tests/test_table1.py's pattern broke: 13.8 against
+# 2 x 7.1); with 1e-6 the stability case's start-up projection stalled again at 0.030 (its
+# near-ties are not exact); 1e-4 passes both.
+SVD_ISO_GAP = 1e-4
 
 # Regularisation of 1/(eta1^2 - eta2^2) in the principal-direction derivative (METHOD 3.3).
 # 1/D -> D/(D^2 + delta^2): bounded by 1/(2 delta), zero at D = 0 (where V is arbitrary and the
