@@ -163,9 +163,12 @@ def test_wrinkle_measures_differ_between_methods(table):
     # 2.7-4.6 here (res 9, three initial bulges; hinge bending), 67-249 vs 22-52 at
     # resolution 25 (docs/table1, isotropic bending; the margin there is 1.3x, not 2x). So
     # svd's wrinkles change with the band setting as much as the others'.
+    # Margin 1.5: the svd rows moved when svd's gradients began to blend at near-ties
+    # (constraints.SVD_ISO_GAP), to 13.8 against 7.1 here (a ratio of 1.96; it was over 2
+    # before, and is 2.2 at resolution 25).
     stretchy = [curv["V1H5", "warp-weft"], curv["V1H5", "mapping"], curv["V5H1", "svd"]]
     held = [curv["V5H1", "warp-weft"], curv["V5H1", "mapping"], curv["V1H5", "svd"]]
-    assert min(stretchy) > 2 * max(held)
+    assert min(stretchy) > 1.5 * max(held)
     # The paper's "richer wrinkles" for mapping: in V1H5 its curvature energy exceeds
     # warp-weft's here. Measured ratios 1.12-1.57 (res 9, bulges 2-5 mm), 1.1 at res 11 (hinge
     # bending). At resolution 25 it does not hold (0.43: 106 vs 249 with isotropic bending,

@@ -44,12 +44,13 @@ SVD_DELTA = 1e-4
 # frame is arbitrary, and eta1's own gradient shrinks the triangle along one direction only,
 # which leaves max(eta1, eta2) where it was; the line search then never found a decrease and a
 # uniformly pre-stretched sheet stayed 3 % over its band for 100 rounds (benchmarks.stability,
-# "exactly isotropic 4 % stretch, free sheet (svd)"). Values are untouched. The gap, measured
-# on both cases: with 1e-3 the blend reached the many nearly isotropic triangles of a flat
-# sheet and changed svd's wrinkles (tests/test_table1.py's pattern broke: 13.8 against
-# 2 x 7.1); with 1e-6 the stability case's start-up projection stalled again at 0.030 (its
-# near-ties are not exact); 1e-4 passes both.
-SVD_ISO_GAP = 1e-4
+# "exactly isotropic 4 % stretch, free sheet (svd)"). Values are untouched. The gap, measured:
+# with 1e-6 the stability case's start-up projection stalled again at 0.030 (its ties are
+# near, not exact); with 1e-4 the resting svd sheet of tests/test_coupling.py gained energy
+# (mean KE 2.0e-6 J over frames 120-150, rising): the blended gradient is not the gradient of
+# the value, and a narrow blend switches on and off sharply. 1e-3 rests (1.5e-8 J at
+# resolution 9) and passes the stability case.
+SVD_ISO_GAP = 1e-3
 
 # Regularisation of 1/(eta1^2 - eta2^2) in the principal-direction derivative (METHOD 3.3).
 # 1/D -> D/(D^2 + delta^2): bounded by 1/(2 delta), zero at D = 0 (where V is arbitrary and the
