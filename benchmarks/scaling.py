@@ -303,12 +303,12 @@ def write_outputs(base, rows, skipped, out, command, seconds, budget_s):
     for s in STAGES:
         f = fits[s]
         lines.append(f"| {names[s]} | {f['k_all']:.2f} | {f['k_8k']:.2f} | "
-                     f"{f.get('k_2k_64k', float('nan')):.2f} | {f['n_points']} | "
+                     f"{f['k_2k_64k']:.2f} | {f['n_points']} | "
                      f"{f['largest']} |")
     for s, label in (("peak_rss", "peak RSS"), ("field_bytes", "Taichi field bytes")):
         f = fits[s]
         lines.append(f"| {label} | {f['k_all']:.2f} | {f['k_8k']:.2f} | "
-                     f"{f.get('k_2k_64k', float('nan')):.2f} | {f['n_points']} | "
+                     f"{f['k_2k_64k']:.2f} | {f['n_points']} | "
                      f"{f['largest']} |")
     if skipped:
         lines += ["", "Skipped (predicted time per frame above the --budget of "

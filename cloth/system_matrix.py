@@ -19,6 +19,7 @@ import numpy as np
 import taichi as ti
 
 mat3 = ti.types.matrix(3, 3, float)
+vec3 = ti.types.vector(3, float)
 
 
 class BlockMatrix:

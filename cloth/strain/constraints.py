@@ -222,30 +222,21 @@ def svd_constraints(x0, x1, x2, Dm_inv, sqa, warp, weft, delta):
     F = deformation_gradient(x0, x1, x2, Dm_inv)
     eta1, eta2, V, U, _D = stretch_svd(F)
     Mr = shape_rows(Dm_inv)
-    grads = ti.Matrix.zero(float, 2, 9)
-    for j in ti.static(range(2)):
-        gj = spread(Mr @ ti.Vector([V[0, j], V[1, j]]), ti.Vector([U[0, j], U[1, j], U[2, j]]))
-        for m in ti.static(range(9)):
-            grads[j, m] = gj[m]
-    # Near isotropy, each gradient moves towards the other (SVD_ISO_GAP): the mean at a tie.
-    mix = 0.5 * ti.max(0.0, 1.0 - (eta1 - eta2) / SVD_ISO_GAP)
-    for j in ti.static(range(2)):
-        eta = eta1 if j == 0 else eta2
-        band = warp if j == 0 else weft
-        vj = ti.Vector([V[0, j], V[1, j]])
-        uj = ti.Vector([U[0, j], U[1, j], U[2, j]])
-        cm = Mr @ vj
-        grad = ti.Vector([(1.0 - mix) * grads[j, m] + mix * grads[1 - j, m]
-                          for m in ti.static(range(9))])
-        set_band(out, 2 * j, 2 * j + 1, sqa, eta, band, grad, cm, uj,
-                 1.0 / ti.max(eta, 1e-2))
-    gap = eta1 - eta2
-    r = gap / (gap * gap + delta * delta)
     v1 = ti.Vector([V[0, 0], V[1, 0]])
     v2 = ti.Vector([V[0, 1], V[1, 1]])
     u1 = ti.Vector([U[0, 0], U[1, 0], U[2, 0]])
     u2 = ti.Vector([U[0, 1], U[1, 1], U[2, 1]])
-    tw = ti.sqrt(0.5 * sqa * r) * (spread(Mr @ v2, u1) + spread(Mr @ v1, u2))
+    cm1, cm2 = Mr @ v1, Mr @ v2
+    g1, g2 = spread(cm1, u1), spread(cm2, u2)
+    # Near isotropy, each gradient moves towards the other (SVD_ISO_GAP): the mean at a tie.
+    mix = 0.5 * ti.max(0.0, 1.0 - (eta1 - eta2) / SVD_ISO_GAP)
+    set_band(out, 0, 1, sqa, eta1, warp, (1.0 - mix) * g1 + mix * g2, cm1, u1,
+             1.0 / ti.max(eta1, 1e-2))
+    set_band(out, 2, 3, sqa, eta2, weft, (1.0 - mix) * g2 + mix * g1, cm2, u2,
+             1.0 / ti.max(eta2, 1e-2))
+    gap = eta1 - eta2
+    r = gap / (gap * gap + delta * delta)
+    tw = ti.sqrt(0.5 * sqa * r) * (spread(cm2, u1) + spread(cm1, u2))
     for m in ti.static(range(9)):
         out.twist[1, m] = tw[m]        # eta_1 upper
         out.twist[2, m] = tw[m]        # eta_2 lower

@@ -27,9 +27,7 @@ import scipy.sparse as sp
 import taichi as ti
 
 from .. import linalg
-from ..system_matrix import mat3
-
-vec3 = ti.types.vector(3, float)
+from ..system_matrix import mat3, vec3
 
 # Refactorise the metric every REFRESH_SOLVES solves (it changes as the cloth deforms). The
 # first factor is made after FIRST_AFTER solves on a mesh: remeshing every frame makes a new

@@ -99,11 +99,12 @@ FACTOR_MAX_FACES = 2000
 # 1.6e-9 J at the same cost (2.5-2.7 ms a frame).
 FACTOR_CG, FACTOR_CG_MAX, FACTOR_CG_WORK = 6, 20, 6000
 # Newton steps per AL round (``max_newton`` None): with the factor a step finds most of the
-# exact one, and a round needs fewer. Measured on hanging at resolution 25 (mapping,
-# ensembles of 8 runs, KE over frames 121-150, two runs at a time, 2026-12-03): 4 steps
-# rested at a median of 1.3e-7 J (6.5e-8 to 2.3e-7, 8 of 8 under 3e-7) in 11.1 ms a frame,
-# 5 at 8.8e-8 J in 14.8 ms; at resolution 9 all three methods rest under 3e-8 J with either.
-# Block Jacobi keeps 5 (measured in the tenth session: 3 shimmered at 1.8e-6 J).
+# exact one, and a round needs fewer. Chosen on hanging at resolution 25 (mapping, ensembles
+# of 8 runs, KE over frames 121-150, two runs at a time, 2026-12-03, with the constraints
+# still in f32 structs): 4 steps rested at a median of 1.3e-7 J (8 of 8 under 3e-7) in 11.1
+# ms a frame, 5 at 8.8e-8 J in 14.8 ms. Re-measured in f64 (57b5767): 4 steps rest at a
+# median of 5.0e-8 J (8 of 8 under), 13.5-13.7 ms a frame alone; resolution 9 at 1.4-3.8e-8
+# J for all three methods. Block Jacobi keeps 5 (tenth session: 3 shimmered at 1.8e-6 J).
 MAX_NEWTON, FACTOR_NEWTON = 5, 4
 
 _host_loop_noted = False
