@@ -77,13 +77,15 @@ COMMON_DEFAULTS = {
         # Newton steps of the AL: "cholesky" (sparse direct, CHOLMOD) or "pcg" (PCG in one
         # kernel).
         "linear_solver": "pcg",
-        # The PCG's preconditioner under coupling "implicit": "factor" (a sparse Cholesky factor
-        # of the implicit step's matrix, remade every 10 substeps; used up to 2000 faces with
-        # CHOLMOD on the CPU and without contacts, block Jacobi elsewhere) or "jacobi" (block
-        # Jacobi, the earlier one). The factor reaches the cloth's soft global modes, which block Jacobi does not:
+        # The PCG's preconditioner under coupling "implicit" (on the CPU, without contacts;
+        # block Jacobi elsewhere): "auto" (a sparse Cholesky factor of the implicit step's
+        # matrix up to 2000 faces, its aggregation multigrid above, both remade every 10
+        # substeps), "factor" or "multigrid" at every size, or "jacobi" (block Jacobi, the
+        # earlier one). Both reach the cloth's soft global modes, which block Jacobi does not:
         # hanging at resolution 25 rested at a median of 6.6e-8 J against 6.9e-7 J
-        # (docs/speed/rest_ensemble.md).
-        "precondition": "factor",
+        # (docs/speed/rest_ensemble.md), and the multigrid's PCG finds the same share of a
+        # Newton step per iteration at 4k and 64k faces (cloth/strain/multigrid.py).
+        "precondition": "auto",
         # The constraints' curvature in the Newton matrix: "model" (the curvature of ||F e||
         # with e frozen; it misses the mapping family's rotating frame) or "exact" (mapping:
         # through C = F^T F, made positive semi-definite; svd and warp-weft keep the model,
@@ -169,9 +171,11 @@ SCHEMA = {
                         "step's metric)", choices=("projection", "implicit")),
         "linear_solver": Key("", "the AL's Newton steps: block-Jacobi PCG or sparse Cholesky",
                              choices=("pcg", "cholesky")),
-        "precondition": Key("", "the PCG's preconditioner under implicit coupling: a sparse "
-                            "Cholesky factor of the implicit step's matrix (up to 2000 faces, "
-                            "CPU, no contacts) or block Jacobi", choices=("factor", "jacobi")),
+        "precondition": Key("", "the PCG's preconditioner under implicit coupling (CPU, no "
+                            "contacts): auto (a sparse Cholesky factor of the implicit step's "
+                            "matrix up to 2000 faces, its aggregation multigrid above), either "
+                            "one at every size, or block Jacobi",
+                            choices=("auto", "factor", "multigrid", "jacobi")),
         "curvature": Key("", "the constraints' curvature in the AL's Newton matrix: exact "
                          "(mapping: through C = F^T F) or the earlier model (||F e|| with e "
                          "frozen)",

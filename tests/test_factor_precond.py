@@ -7,8 +7,10 @@ import pytest
 import taichi as ti
 
 from cloth import linalg
+from cloth.strain import factor_precond
 from cloth.strain import al
-from cloth.strain.buffers import A
+from cloth.strain.buffers import PC_FACTOR, PC_JACOBI, PC_MULTIGRID, A
+from cloth.strain.multigrid import MultigridPreconditioner, MultigridStub
 from tests.test_coupling import _hanging, _redo_dynamics, _saved_state
 
 pytestmark = pytest.mark.skipif(not linalg.HAVE_CHOLMOD,
@@ -16,12 +18,13 @@ pytestmark = pytest.mark.skipif(not linalg.HAVE_CHOLMOD,
 
 
 @ti.kernel
-def _apply(use_factor: int, nv: int, P_inv: A, f_ptr: A, f_idx: A, f_val: A, f_perm: A,
-           f_work: A, r: A, z: A) -> float:
+def _apply(pc_mode: int, nv: int, P_inv: A, f_ptr: A, f_idx: A, f_val: A, f_perm: A,
+           f_work: A, mg_int: A, mg_real: A, mg_block: A, r: A, z: A) -> float:
     rz = 0.0
     ti.loop_config(serialize=True)
     for _ in range(1):
-        rz = al.precondition(use_factor, nv, P_inv, f_ptr, f_idx, f_val, f_perm, f_work, r, z)
+        rz = al.precondition(pc_mode, nv, P_inv, f_ptr, f_idx, f_val, f_perm, f_work, mg_int,
+                             mg_real, mg_block, r, z)
     return rz
 
 
@@ -32,16 +35,18 @@ def test_kernel_applies_the_inverse_of_the_factored_matrix():
     sim.step_frame()
     sim.step_frame()
     lim = sim.strain
-    fp = lim._factor
+    fp = lim._pc
     assert fp is not None and fp.ready and lim.last_factorizations == 1
-    values = fp.pinned_metric(sim.model.pinned)
+    values = factor_precond.pinned_values(fp.metric, sim.model.pinned)
     fp.refresh(values)
     factored = fp.chol._to_factor(fp.chol.matrix(values))
     nv, ws = sim.model.n_verts, lim._ws
     rng = np.random.default_rng(3)
     r = rng.standard_normal((ws.r.shape[0], 3))
     ws.r.from_numpy(r)
-    rz = _apply(1, nv, ws.P_inv, fp.ptr, fp.idx, fp.val, fp.perm, fp.work, ws.r, ws.z)
+    mg = MultigridStub()
+    rz = _apply(PC_FACTOR, nv, ws.P_inv, fp.ptr, fp.idx, fp.val, fp.perm, fp.work, mg.ints,
+                mg.reals, mg.blocks, ws.r, ws.z)
     z = ws.z.to_numpy()[:nv].ravel()
     want = np.linalg.solve(factored.toarray(), r[:nv].ravel())
     assert np.abs(z - want).max() < 1e-9 * np.abs(want).max()
@@ -66,7 +71,7 @@ def test_factor_and_block_jacobi_give_the_same_projection():
         lim.max_newton = 5                          # the same solve for both
         lim._upload_params()
         metric = _redo_dynamics(sim, state)
-        assert (lim._factor_preconditioner(metric) is None) == (precondition == "jacobi")
+        assert (lim._pcg_preconditioner(metric) is None) == (precondition == "jacobi")
         lim.project(sim.h)
         assert lim.last_converged and lim.last_violation_max < lim.tol
         out[precondition] = sim.model.positions()
@@ -77,8 +82,9 @@ def test_factor_and_block_jacobi_give_the_same_projection():
 def test_factor_is_refreshed_every_few_solves_and_only_for_small_meshes(monkeypatch):
     """The first FIRST_AFTER solves on a mesh run block Jacobi, and the factor is made after
     them; it is remade every REFRESH_SOLVES solves, after a pin changes and on a mesh
-    change; above FACTOR_MAX_FACES faces and on the split projection no factor is made."""
-    from cloth.strain import factor_precond, solver
+    change; above FACTOR_MAX_FACES faces the multigrid is made instead, and on the split
+    projection neither."""
+    from cloth.strain import solver
     sim = _hanging("mapping", "implicit", res=6)
     lim = sim.strain
     made = []
@@ -90,17 +96,18 @@ def test_factor_is_refreshed_every_few_solves_and_only_for_small_meshes(monkeypa
     assert made[first + period] == made[first + 2 * period] == 1 and sum(made) == 3
     free = int(np.flatnonzero(~sim.model.pinned)[0])
     sim.model.set_vertex_pin(free, True)             # e.g. held by the mouse
-    assert not lim._factor.usable(sim.model.pinned)
+    assert not lim._pc.usable(sim.model.pinned)
     sim.step_frame()                                 # block Jacobi, then a new factor
-    assert lim.last_factorizations == 1 and lim._factor.usable(sim.model.pinned)
+    assert lim.last_factorizations == 1 and lim._pc.usable(sim.model.pinned)
     lim.on_mesh_changed()
-    assert lim._factor is None
+    assert lim._pc is None
     monkeypatch.setattr(solver, "FACTOR_MAX_FACES", sim.model.n_faces - 1)
-    assert lim._factor_preconditioner(lim.system_metric()) is None
+    assert isinstance(lim._pcg_preconditioner(lim.system_metric()), MultigridPreconditioner)
     monkeypatch.setattr(solver, "FACTOR_MAX_FACES", sim.model.n_faces)
-    assert lim._factor_preconditioner(lim.system_metric()) is not None
+    assert isinstance(lim._pcg_preconditioner(lim.system_metric()),
+                      factor_precond.FactorPreconditioner)
     lim.set_coupling("projection")
-    assert lim._factor_preconditioner(lim._newton_metric(False)) is None
+    assert lim._pcg_preconditioner(lim._newton_metric(False)) is None
 
 
 def test_rounds_take_fewer_newton_steps_with_the_factor():
@@ -111,13 +118,14 @@ def test_rounds_take_fewer_newton_steps_with_the_factor():
     sim = _hanging("mapping", "implicit", res=6)
     lim = sim.strain
     assert lim.max_newton is None
-    assert lim.newton_budget(True) == FACTOR_NEWTON < lim.newton_budget(False) == MAX_NEWTON
+    assert lim.newton_budget(PC_FACTOR) == lim.newton_budget(PC_MULTIGRID) == FACTOR_NEWTON
+    assert FACTOR_NEWTON < lim.newton_budget(PC_JACOBI) == MAX_NEWTON
     lim.inner_rtol = 0.0
     lim._upload_params()
     for _ in range(4):
         sim.step_frame()
-    assert lim._factor.usable(sim.model.pinned)
+    assert lim._pc.usable(sim.model.pinned)
     sim.step_frame()
     assert lim.last_newton == FACTOR_NEWTON * lim.last_iterations
     lim.max_newton = 7
-    assert lim.newton_budget(True) == lim.newton_budget(False) == 7
+    assert lim.newton_budget(PC_FACTOR) == lim.newton_budget(PC_JACOBI) == 7

@@ -9,8 +9,9 @@ import taichi as ti
 
 from .buffers import (CONTACT_SLOTS, NO_CONTACT, P_C_STEP, P_CONTACT_SCALE, P_CURVATURE,
                       P_DELTA, P_INNER_RTOL, P_ISO, P_MARGIN,
-                      P_SHEAR, P_SVD_DELTA, P_WARP, P_WEFT, ST_CG, ST_COMP, ST_CONVERGED,
+                      P_SHEAR, P_SVD_DELTA, PC_FACTOR, PC_MULTIGRID, P_WARP, P_WEFT, ST_CG, ST_COMP, ST_CONVERGED,
                       ST_ITERS, ST_NEWTON, ST_START_VIOL, ST_VIOL, A, T)
+from . import multigrid
 from .c_curvature import c_curvature_block, face_c_curvature
 from .constraints import face_constraints
 
@@ -378,16 +379,17 @@ def newton_matrix(K, nv, nf, ns, mu, margin, c_scale, use_twist, exact, x: T, w_
 
 
 @ti.func
-def precondition(use_factor, nv, P_inv: T, f_ptr: T, f_idx: T, f_val: T, f_perm: T, f_work: T,
-                 r: T, z: T):
-    """z = P^-1 r; returns r.z. P: H's 3x3 diagonal blocks (their inverses in P_inv), or with
-    ``use_factor`` a sparse Cholesky factor P H~ P^T = L L^T of a matrix like H, in 3x3
+def precondition(pc_mode, nv, P_inv: T, f_ptr: T, f_idx: T, f_val: T, f_perm: T, f_work: T,
+                 mg_int: T, mg_real: T, mg_block: T, r: T, z: T):
+    """z = P^-1 r; returns r.z. P by ``pc_mode``: PC_JACOBI, H's 3x3 diagonal blocks (their
+    inverses in P_inv); PC_MULTIGRID, the aggregation multigrid of multigrid.py (arrays
+    mg_int, mg_real, mg_block); PC_FACTOR, a sparse Cholesky factor P H~ P^T = L L^T of a matrix like H, in 3x3
     blocks over a vertex ordering (factor_precond.py): two block triangular solves. f_val
     holds L's strictly lower blocks by block rows (f_ptr[0..nv]), the same blocks transposed
     by block columns (f_ptr[nv + 1..2 nv + 1]), then the inverses of the diagonal blocks;
     f_idx the other block index of each; f_perm[k] the vertex of block row k; f_work a vec3
     vector."""
-    if use_factor:
+    if pc_mode == PC_FACTOR:
         for k in range(nv):
             f_work[k] = r[f_perm[k]]
         diag = f_ptr[2 * nv + 1]
@@ -404,6 +406,8 @@ def precondition(use_factor, nv, P_inv: T, f_ptr: T, f_idx: T, f_val: T, f_perm:
             f_work[j] = f_val[diag + j].transpose() @ acc
         for k in range(nv):
             z[f_perm[k]] = f_work[k]
+    elif pc_mode == PC_MULTIGRID:
+        multigrid.apply(nv, mg_int, mg_real, mg_block, r, z)
     else:
         for n in range(nv):
             z[n] = P_inv[n] @ r[n]
@@ -420,7 +424,8 @@ def newton_direction(method: ti.template(), exact: ti.template(), K, nv, nf, ns,
                      lam: T, g: T, grad: T, cm: T, what: T, kappa: T, twist: T, contact: T,
                      lam_c: T, fric: T, lam_t: T, c_scale, curv: T, face_slot: T,
                      stitch_slot: T, H: T, b: T, d: T, r: T, z: T, p: T, Ap: T, P_inv: T,
-                     use_factor, f_ptr: T, f_idx: T, f_val: T, f_perm: T, f_work: T):
+                     pc_mode, f_ptr: T, f_idx: T, f_val: T, f_perm: T, f_work: T,
+                     mg_int: T, mg_real: T, mg_block: T):
     """pcg_direction's matrix and PCG solve, with r = -grad L_A already in r."""
     if ti.static(exact):
         fill_c_curvature(method, K, nf, mu, x, face_verts, Dm_inv, grain, rest_area, params,
@@ -434,7 +439,8 @@ def newton_direction(method: ti.template(), exact: ti.template(), K, nv, nf, ns,
         b[n] = r[n]
         d[n] = ti.Vector([0.0, 0.0, 0.0])
         rr += r[n].dot(r[n])
-    rz = precondition(use_factor, nv, P_inv, f_ptr, f_idx, f_val, f_perm, f_work, r, z)
+    rz = precondition(pc_mode, nv, P_inv, f_ptr, f_idx, f_val, f_perm, f_work, mg_int,
+                      mg_real, mg_block, r, z)
     for n in range(nv):
         p[n] = z[n]
     stop = rtol * rtol * rr
@@ -452,7 +458,8 @@ def newton_direction(method: ti.template(), exact: ti.template(), K, nv, nf, ns,
             d[n] += alpha * p[n]
             r[n] -= alpha * Ap[n]
             rr += r[n].dot(r[n])
-        rz_new = precondition(use_factor, nv, P_inv, f_ptr, f_idx, f_val, f_perm, f_work, r, z)
+        rz_new = precondition(pc_mode, nv, P_inv, f_ptr, f_idx, f_val, f_perm, f_work,
+                              mg_int, mg_real, mg_block, r, z)
         it += 1
         beta = rz_new / rz
         rz = rz_new
@@ -469,8 +476,9 @@ def pcg_direction(method: ti.template(), exact: ti.template(), K, nv, nf, ns, mu
                   grain: T, rest_area: T, params: T, lam: T, g: T, grad: T,
                   cm: T, what: T, kappa: T, twist: T, contact: T, lam_c: T, stitch: T,
                   lam_s: T, fric: T, lam_t: T, c_scale, curv: T, face_slot: T, stitch_slot: T,
-                  H: T, b: T, d: T, r: T, z: T, p: T, Ap: T, P_inv: T, use_factor, f_ptr: T,
-                  f_idx: T, f_val: T, f_perm: T, f_work: T, skip_rr):
+                  H: T, b: T, d: T, r: T, z: T, p: T, Ap: T, P_inv: T, pc_mode, f_ptr: T,
+                  f_idx: T, f_val: T, f_perm: T, f_work: T, mg_int: T, mg_real: T,
+                  mg_block: T, skip_rr):
     """Projected-Newton direction: solve H d = -grad L_A (H from ``newton_matrix``) by PCG
     with H's 3x3 diagonal blocks as preconditioner (block Jacobi), from d = 0 to
     |r| <= rtol |grad L_A| (an inexact Newton step: measured on the hanging scene, rtol = 0.1
@@ -487,8 +495,8 @@ def pcg_direction(method: ti.template(), exact: ti.template(), K, nv, nf, ns, mu
                                      face_verts, Dm_inv, grain, rest_area, params, lam, g,
                                      grad, cm, what, kappa, twist, contact, lam_c, fric, lam_t,
                                      c_scale, curv, face_slot, stitch_slot, H, b, d, r, z, p,
-                                     Ap, P_inv, use_factor, f_ptr, f_idx, f_val, f_perm,
-                                     f_work)
+                                     Ap, P_inv, pc_mode, f_ptr, f_idx, f_val, f_perm,
+                                     f_work, mg_int, mg_real, mg_block)
     else:
         for n in range(nv):
             d[n] = ti.Vector([0.0, 0.0, 0.0])
@@ -607,7 +615,8 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
              rest_area: A, lam: A, g: A, grad: A, cm: A, what: A, kappa: A,
              twist: A, contact: A, lam_c: A, stitch: A, lam_s: A, fric: A, lam_t: A, curv: A,
              face_slot: A, stitch_slot: A, H: A, b: A, d: A, r: A, z: A, p: A, Ap: A,
-             P_inv: A, use_factor: int, f_ptr: A, f_idx: A, f_val: A, f_perm: A, f_work: A,
+             P_inv: A, pc_mode: int, f_ptr: A, f_idx: A, f_val: A, f_perm: A, f_work: A,
+             mg_int: A, mg_real: A, mg_block: A,
              stats: A):
     """The whole AL projection (METHOD 4) in one launch (measured: with one launch per
     phase, Python's argument handling cost as much as the solve): rounds of inexact
@@ -652,8 +661,9 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
                                                  what, kappa, twist, contact, lam_c, stitch,
                                                  lam_s, fric, lam_t, c_scale, curv,
                                                  face_slot, stitch_slot, H, b, d, r, z, p, Ap,
-                                                 P_inv, use_factor, f_ptr, f_idx, f_val,
-                                                 f_perm, f_work, skip)
+                                                 P_inv, pc_mode, f_ptr, f_idx, f_val,
+                                                 f_perm, f_work, mg_int, mg_real,
+                                                 mg_block, skip)
                     if inner == 0:
                         rr_first = rr
                     cg_total += cg_it

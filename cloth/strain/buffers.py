@@ -27,6 +27,10 @@ from .constraints import K_MAX
 
 # Indices into the ``stats`` array (read back once per solve).
 ST_ITERS, ST_VIOL, ST_CONVERGED, ST_CG, ST_NEWTON, ST_COMP, ST_START_VIOL = range(7)
+# The PCG's preconditioner (``al.precondition``): H's 3x3 diagonal blocks, a sparse Cholesky
+# factor of the implicit step's matrix (factor_precond.py), its aggregation multigrid
+# (multigrid.py).
+PC_JACOBI, PC_FACTOR, PC_MULTIGRID = 0, 1, 2
 # Indices into the ``params`` array.
 P_WARP, P_WEFT, P_SHEAR, P_MARGIN, P_DELTA, P_SVD_DELTA, P_CONTACT_SCALE = 0, 2, 4, 6, 7, 8, 9
 P_ISO = 10

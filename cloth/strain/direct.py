@@ -31,7 +31,8 @@ from .. import ndarrays
 from . import exact_curvature
 from .al import (assemble_all, choose_start, fill_c_curvature, merit, newton_matrix,
                  residual, update_multipliers, vertex_violation, violation_of)
-from .buffers import (P_CONTACT_SCALE, P_CURVATURE, P_MARGIN, P_SVD_DELTA, ST_CG, ST_COMP,
+from .buffers import (P_CONTACT_SCALE, P_CURVATURE, P_MARGIN, P_SVD_DELTA, PC_JACOBI, ST_CG,
+                      ST_COMP,
                       ST_CONVERGED, ST_ITERS, ST_NEWTON, ST_START_VIOL, ST_VIOL, A)
 
 # LOOM_DEBUG_DIRECT=1 prints every Newton step (residual, step, line-search alpha).
@@ -173,7 +174,7 @@ def solve(lim, mid, K, metric, chol, mu, mu_max, step_tol):
     viol = comp = 0.0
     n3 = 3 * nv
     while rounds < lim.max_iters and not converged:
-        for _ in range(lim.newton_budget(False)):
+        for _ in range(lim.newton_budget(PC_JACOBI)):
             if lim.exact_curvature:
                 ndarrays.zero(ws.kappa)      # the model's curvature off: the exact one is added
                 ndarrays.zero(ws.twist)

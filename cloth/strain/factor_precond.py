@@ -1,5 +1,5 @@
 """A sparse Cholesky factor of the implicit step's matrix A (the projection's metric) as the
-PCG preconditioner of the one-kernel strain solve (``al.solve_al``, argument ``use_factor``).
+PCG preconditioner of the one-kernel strain solve (``al.solve_al``, mode PC_FACTOR).
 
 Why: at rest most of an exact Newton step's energy lies in the cloth's soft global modes
 (swinging, bending), which block-Jacobi CG barely reaches: on resting substeps at resolution
@@ -28,6 +28,7 @@ import taichi as ti
 
 from .. import linalg
 from ..system_matrix import mat3, vec3
+from .buffers import PC_FACTOR
 
 # Refactorise the metric every REFRESH_SOLVES solves (it changes as the cloth deforms). The
 # first factor is made after FIRST_AFTER solves on a mesh: remeshing every frame makes a new
@@ -45,6 +46,7 @@ class FactorPreconditioner:
     diagonal blocks. ``perm[k]`` is the vertex of block row k; ``work`` is a vec3 vector.
     The arrays grow as needed (an ndarray's size is not part of a kernel's signature: no
     recompilation)."""
+    mode = PC_FACTOR
 
     def __init__(self, metric):
         self.metric = metric
@@ -109,21 +111,20 @@ class FactorPreconditioner:
         if self.solves < FIRST_AFTER or (self.ready and self.solves_since <
                                           REFRESH_SOLVES):
             return False
-        self.refresh(self.pinned_metric(pinned))
+        self.refresh(pinned_values(self.metric, pinned))
         self.pinned = np.array(pinned[: self.metric.n], bool)
         self.solves_since = 0
         return True
 
-    def pinned_metric(self, pinned):
-        """The metric's block values with the rows and columns of pinned vertices made the
-        identity (as in the Newton matrix: a pinned vertex's step is zero)."""
-        m = self.metric
-        values = m.val.to_numpy()[: m.nnz].copy()
-        rows = np.repeat(np.arange(m.n), np.diff(m.ptr_np))
-        fixed = pinned[rows] | pinned[m.col_np]
-        values[fixed] = 0.0
-        values[fixed & (rows == m.col_np)] = np.eye(3)
-        return values
+def pinned_values(metric, pinned):
+    """The metric's block values with the rows and columns of pinned vertices made the
+    identity (as in the Newton matrix: a pinned vertex's step is zero)."""
+    values = metric.val.to_numpy()[: metric.nnz].copy()
+    rows = np.repeat(np.arange(metric.n), np.diff(metric.ptr_np))
+    fixed = pinned[rows] | pinned[metric.col_np]
+    values[fixed] = 0.0
+    values[fixed & (rows == metric.col_np)] = np.eye(3)
+    return values
 
 
 def _block_rows(M):
@@ -143,8 +144,8 @@ def _block_rows(M):
 
 
 class FactorStub:
-    """One-element arrays for solve_al's factor arguments when it runs block Jacobi (of the
-    factor's types, so that solve_al compiles once)."""
+    """One-element arrays for solve_al's factor arguments when it does not use the factor
+    (of the factor's types, so that solve_al compiles once)."""
 
     def __init__(self):
         self.perm, self.ptr, self.idx = (ti.ndarray(ti.i32, 1) for _ in range(3))

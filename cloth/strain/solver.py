@@ -28,8 +28,9 @@ from .constraints import (MAPPING_DELTA, MAPPING_ISO, METHOD_IDS, METHODS, N_CON
                           SVD_DELTA)
 from . import al, buffers, pbd
 from .factor_precond import FactorPreconditioner, FactorStub
+from .multigrid import HAVE_PYAMG, MAX_COARSE, MultigridPreconditioner, MultigridStub
 from .c_curvature import C_STEP_F32, C_STEP_F64
-from .buffers import (ST_CG, ST_CONVERGED, ST_ITERS, ST_NEWTON, ST_START_VIOL, ST_VIOL,
+from .buffers import (PC_FACTOR, PC_JACOBI, PC_MULTIGRID, ST_CG, ST_CONVERGED, ST_ITERS, ST_NEWTON, ST_START_VIOL, ST_VIOL,
                       Workspace)
 
 METHOD_NAMES = METHODS + ("none",)
@@ -84,11 +85,18 @@ CG_BUDGET = {"mapping": 15, "svd": 25, "warp-weft": 25}
 # (0): it is the paper's method and the benchmarks' baseline (with 0.3 its rounds at
 # resolution 46 went from 22 to 34).
 INNER_RTOL = {"implicit": 0.3, "projection": 0.0}
-# The PCG solve's preconditioner under coupling "implicit" (``precondition``): "factor" (a
-# sparse Cholesky factor of the implicit step's matrix, factor_precond.py) up to
-# FACTOR_MAX_FACES faces, block Jacobi above (the factor's triangular solves run serially and
-# grow faster than the mesh) and in solves with contacts.
+# The PCG solve's preconditioner under coupling "implicit" (``precondition`` "auto"): a
+# sparse Cholesky factor of the implicit step's matrix (factor_precond.py) up to
+# FACTOR_MAX_FACES faces, its aggregation multigrid (multigrid.py) above (the factor's serial
+# triangular solves and its factorisation grow faster than the mesh: at 64.8k faces one
+# application cost ~20 ms and a factorisation ~2.6 s), block Jacobi in solves with contacts.
 FACTOR_MAX_FACES = 2000
+# PCG iterations per Newton step with the multigrid preconditioner (it finds a fixed share of
+# the step per iteration at every size, multigrid.py). Hanging, mapping, frames 2-6 from the
+# start, median ms per frame with 3 / 4 / 6 iterations (one run each, 2026-12-03): 4050
+# faces 52.6 / 50.5 / 48.5, 32.8k 677 / 788 / 665, 64.8k 1530 / 1512 / 1648 (block Jacobi:
+# ~60, ~1100, ~3900). 8 took 1723 ms at 64.8k.
+MULTIGRID_CG = 4
 # PCG iterations per Newton step with the factor: FACTOR_CG_WORK / faces, between FACTOR_CG
 # and FACTOR_CG_MAX (an iteration's triangular solves cost ~ the faces, so small meshes can
 # afford more). The factor finds most of the step in a few iterations (factor_precond.py);
@@ -240,9 +248,10 @@ class StrainLimiter:
         self._chol = None          # SparseCholesky of this mesh's block pattern
         self._system = None        # the implicit step's matrix (coupling "implicit")
         self._system_ready = False
-        self._factor = None        # FactorPreconditioner of the implicit metric's pattern
-        self._factor_stub = None
-        self.precondition = "factor"
+        self._pc = None            # Factor- or MultigridPreconditioner of the implicit metric
+        self._stubs = None         # placeholder arrays for the preconditioners not in use
+        self.precondition = "auto"
+        self.multigrid_cg = None       # None: MULTIGRID_CG
         self.factor_cg = None          # None: from the mesh size (FACTOR_CG_WORK)
         self.factor_max_faces = None   # None: FACTOR_MAX_FACES (a probe's override)
         self.tol = float(tol)
@@ -393,7 +402,7 @@ class StrainLimiter:
         self._full_mass = None
         self._chol = None
         self._system = None
-        self._factor = None
+        self._pc = None
         self._system_ready = False
         self._mesh_key = self._current_mesh_key()
 
@@ -585,12 +594,24 @@ class StrainLimiter:
         step_tol = 0.01 * self.tol * m.typical_edge()
         return direct.solve(self, mid, K, metric, chol, mu, mu_max, step_tol)
 
-    def newton_budget(self, use_factor):
+    def newton_budget(self, pc_mode):
         """Newton steps per AL round: ``max_newton``, or when that is None FACTOR_NEWTON
-        with the factor preconditioner and MAX_NEWTON otherwise."""
+        with the factor or multigrid preconditioner and MAX_NEWTON with block Jacobi."""
         if self.max_newton is not None:
             return self.max_newton
-        return FACTOR_NEWTON if use_factor else MAX_NEWTON
+        return MAX_NEWTON if pc_mode == PC_JACOBI else FACTOR_NEWTON
+
+    def pcg_budget(self, pc_mode):
+        """PCG iterations per Newton step for this preconditioner: the factor's
+        (``factor_cg``, else FACTOR_CG_WORK / faces clipped to [FACTOR_CG, FACTOR_CG_MAX]),
+        the multigrid's (``multigrid_cg``, else MULTIGRID_CG), or block Jacobi's
+        ``cg_budget``."""
+        if pc_mode == PC_FACTOR:
+            return self.factor_cg if self.factor_cg is not None else int(np.clip(
+                round(FACTOR_CG_WORK / max(self.model.n_faces, 1)), FACTOR_CG, FACTOR_CG_MAX))
+        if pc_mode == PC_MULTIGRID:
+            return self.multigrid_cg if self.multigrid_cg is not None else MULTIGRID_CG
+        return self.cg_budget()
 
     def cg_budget(self):
         """PCG iterations per Newton step: ``max_cg`` or, when that is None, the method's
@@ -623,17 +644,15 @@ class StrainLimiter:
         mu, mu_max = self.mu_scale * mean_mass, self.mu_max_scale * mean_mass
         # An inner loop stops once its steps are far below the tolerance (in metres).
         step_tol = 0.01 * self.tol * m.typical_edge()
-        max_cg = self.cg_budget()
-        fp = None if contacts else self._factor_preconditioner(metric)
-        use_factor = int(fp is not None and fp.usable(m.pinned[: m.n_verts]))
-        if use_factor:
-            max_cg = self.factor_cg if self.factor_cg is not None else int(np.clip(
-                round(FACTOR_CG_WORK / max(m.n_faces, 1)), FACTOR_CG, FACTOR_CG_MAX))
-        if fp is None:
-            fp = self._no_factor()
+        pc = None if contacts else self._pcg_preconditioner(metric)
+        pc_mode = pc.mode if pc is not None and pc.usable(m.pinned[: m.n_verts]) else PC_JACOBI
+        if self._stubs is None:
+            self._stubs = {PC_FACTOR: FactorStub(), PC_MULTIGRID: MultigridStub()}
+        fp = pc if pc_mode == PC_FACTOR else self._stubs[PC_FACTOR]
+        mg = pc if pc_mode == PC_MULTIGRID else self._stubs[PC_MULTIGRID]
         al.solve_al(mid, self._kernel_curvature(), K, m.n_verts, m.n_faces, len(self._stitches), mu, self.mu_grow,
                    mu_max, self.max_iters,
-                   self.newton_budget(use_factor), max_cg, self.cg_rtol, self.tol, step_tol,
+                   self.newton_budget(pc_mode), self.pcg_budget(pc_mode), self.cg_rtol, self.tol, step_tol,
                    int(self.adaptive_margin),
                    int(self.coupling == "implicit" and metric is self._system), ws.params, ws.x, ws.x_hat,
                    ws.x_trial, metric.ptr, metric.col, metric.val, metric.diag,
@@ -642,35 +661,40 @@ class StrainLimiter:
                    ws.grad, ws.cm, ws.what, ws.kappa, ws.twist, ws.contact, ws.lam_c,
                    ws.stitch, ws.lam_s, ws.fric, ws.lam_t, ws.curv, metric.face_slot,
                    metric.stitch_slot, ws.H, ws.b, ws.d, ws.r, ws.z, ws.p, ws.Ap, ws.P_inv,
-                   use_factor, fp.ptr, fp.idx, fp.val, fp.perm, fp.work, ws.stats)
+                   pc_mode, fp.ptr, fp.idx, fp.val, fp.perm, fp.work, mg.ints, mg.reals,
+                   mg.blocks, ws.stats)
         stats = ws.stats.to_numpy()
         rounds, newton = int(stats[ST_ITERS]), int(stats[ST_NEWTON])
         self.last_factorizations = 0
-        if isinstance(fp, FactorPreconditioner):
-            self.last_factorizations = int(fp.after_solve(m.pinned))
+        if pc is not None:
+            self.last_factorizations = int(pc.after_solve(m.pinned))
         return rounds, newton, bool(stats[ST_CONVERGED] > 0), stats
 
-    def _factor_preconditioner(self, metric):
-        """The FactorPreconditioner of this metric's pattern when the PCG solve uses one
-        (``factor_precond.py``): coupling "implicit", at most FACTOR_MAX_FACES faces, CHOLMOD
-        installed and a CPU backend (the triangular solves are serial); else None. (Solves
-        with contacts use block Jacobi: on drape the factor kept none of the sheet's kinetic
-        energy through the landing and it draped in 0 of 7 drops, against 0.4 % and 2 of 7
-        with block Jacobi; docs/speed/drape_depth.md.)"""
-        if not (self.precondition == "factor" and metric is self._system and
-                self.model.n_faces <= (FACTOR_MAX_FACES if self.factor_max_faces is None
-                                       else self.factor_max_faces) and linalg.HAVE_CHOLMOD and
+    def _pcg_preconditioner(self, metric):
+        """The preconditioner object of this metric's pattern when the PCG solve uses one
+        (coupling "implicit" and a CPU backend: both run serially in the solve's kernel);
+        else None. ``precondition``: "auto" takes the factor (factor_precond.py) up to
+        FACTOR_MAX_FACES faces (``factor_max_faces``) and the multigrid (multigrid.py)
+        above, "factor" / "multigrid" one of them at every size, "jacobi" neither. The
+        factor needs CHOLMOD (else the multigrid is taken), the multigrid pyamg and more than
+        MAX_COARSE unknowns. (Solves with contacts use block Jacobi: on drape the factor kept
+        none of the sheet's kinetic energy through the landing and it draped in 0 of 7
+        drops, against 0.4 % and 2 of 7 with block Jacobi; docs/speed/drape_depth.md.)"""
+        if not (self.precondition != "jacobi" and metric is self._system and
                 backend.arch() == "cpu"):
             return None
-        if self._factor is None or self._factor.metric is not metric:
-            self._factor = FactorPreconditioner(metric)
-        return self._factor
-
-    def _no_factor(self):
-        """Placeholder arrays for solve_al's factor arguments when it uses block Jacobi."""
-        if self._factor_stub is None:
-            self._factor_stub = FactorStub()
-        return self._factor_stub
+        kind = self.precondition
+        if kind == "auto":
+            limit = FACTOR_MAX_FACES if self.factor_max_faces is None else self.factor_max_faces
+            kind = "factor" if self.model.n_faces <= limit else "multigrid"
+        if kind == "factor" and not linalg.HAVE_CHOLMOD:
+            kind = "multigrid"
+        if kind == "multigrid" and not (HAVE_PYAMG and 3 * self.model.n_verts > MAX_COARSE):
+            return None
+        cls = FactorPreconditioner if kind == "factor" else MultigridPreconditioner
+        if not isinstance(self._pc, cls) or self._pc.metric is not metric:
+            self._pc = cls(metric)
+        return self._pc
 
     def constraint_values(self):
         """(n_faces, k) constraint values g / sqrt(a) (strain units, <= 0 satisfied) of the
