@@ -1,6 +1,8 @@
 """How much of a resting substep's Newton step does PCG find, per preconditioner (issue #13)?
 
     python -m benchmarks.newton_precond --out docs/speed     # ~1 min
+    python -m benchmarks.newton_precond --settle 2 --substeps 2 --resolution 46 91 129 \
+        --no-factor --out docs/speed/multigrid                # falling, up to 32k faces
 
 Captures the strain solve's Newton system H d = -grad L_A of consecutive substeps of the hanging
 cloth near rest (mapping, coupling implicit), at the start of each solve (round 0: the warm
@@ -11,7 +13,10 @@ with:
                with its rigid motions (3 translations, 3 rotations), applied as
                coarse - smooth - coarse;
   stale factor the exact factorisation of the *previous* substep's matrix (the same penalty,
-               or the other one): what reusing a factorisation across substeps gives.
+               or the other one): what reusing a factorisation across substeps gives;
+  multigrid    the aggregation multigrid of the implicit step's matrix A that the kernel
+               uses above 2000 faces (cloth/strain/multigrid.py; ``apply_reference``, the
+               kernel's cycle in numpy), built at this substep.
 The measure is the error of the iterate in the H-norm, |d_k - d*|_H / |d*|_H, after k
 iterations (d* the exact step). Why the H-norm and not the residual: at rest most of the
 exact step's energy lies in the cloth's soft global modes (swinging, bending), whose residual
@@ -20,6 +25,7 @@ motion unresolved; that motion is what the resting cloth's velocity is made of.
 """
 import argparse
 import os
+import sys
 import time
 
 import numpy as np
@@ -31,13 +37,15 @@ RESIDUAL_AT = 16          # the kernel path's PCG budget at this size (mapping, 
 
 
 def capture(resolution, settle_frames, substeps):
-    """[(x_prev, free, {"mu": (H, r), "4mu": (H, r)})] for ``substeps`` consecutive solves
-    after ``settle_frames`` frames: the Newton system at the solve's start (the previous
-    positions, as the implicit coupling starts there at rest)."""
+    """[(x_prev, free, {"mu": (H, r), "4mu": (H, r)}, A)] for ``substeps`` consecutive
+    solves after ``settle_frames`` frames: the Newton system at the solve's start (the
+    previous positions, as the implicit coupling starts there at rest), and the implicit
+    step's matrix with pinned rows and columns made the identity (BSR)."""
     from benchmarks.harness import configure
     from benchmarks.newton_model import newton_system_at
     from cloth.simulator import Simulator
     from cloth.strain.constraints import METHOD_IDS, N_CONSTRAINTS
+    from cloth.strain.factor_precond import pinned_values
     _, cfg, setup = configure("hanging", {"cloth": {"resolution": resolution},
                                           "strain": {"method": "mapping",
                                                      "coupling": "implicit"}})
@@ -62,7 +70,9 @@ def capture(resolution, settle_frames, substeps):
             out[tag] = ((0.5 * (H + H.T)).tocsc(), r)
         ws.x.from_numpy(x_hat)          # as the solve expects them
         ws.lam.from_numpy(lam)
-        systems.append((x0[:nv], free, out))
+        values = pinned_values(metric, ~free)
+        A = sp.bsr_matrix((values, metric.col_np, metric.ptr_np), shape=(3 * nv, 3 * nv))
+        systems.append((x0[:nv], free, out, A))
         return solve(mid, K, metric, *rest)
     lim._solve_al = capturing
     for _ in range(substeps):
@@ -137,19 +147,24 @@ def h_norm_errors(H, r, precondition, iterations=ITERATIONS):
     return out, residual
 
 
-def measure(resolution=25, settle_frames=130, substeps=4, aggregates=(4, 8)):
+def measure(resolution=25, settle_frames=130, substeps=4, aggregates=(4, 8), factor=True):
+    from cloth.strain import multigrid
     systems = capture(resolution, settle_frames, substeps)
     rows = []
     for i in range(1, len(systems)):
-        x, free, now = systems[i]
+        x, free, now, A = systems[i]
         before = systems[i - 1][2]
+        hierarchy = multigrid.build(A, ~free)
         for tag, (H, r) in now.items():
             cases = [("jacobi", block_jacobi(H))]
             cases += [(f"two-level, {k}x{k} aggregates", two_level(H, rigid_aggregates(x, free,
                                                                                     k)))
                       for k in aggregates]
-            cases += [(f"stale factor ({old} of the substep before)",
-                       spl.splu(before[old][0]).solve) for old in ("mu", "4mu")]
+            if factor:
+                cases += [(f"stale factor ({old} of the substep before)",
+                           spl.splu(before[old][0]).solve) for old in ("mu", "4mu")]
+            cases += [("multigrid of A (multigrid.py)",
+                       lambda v, h=hierarchy: multigrid.apply_reference(h, v))]
             for name, prec in cases:
                 errors, residual = h_norm_errors(H, r, prec)
                 rows.append(dict(substep=i, penalty=tag, preconditioner=name, errors=errors,
@@ -157,24 +172,30 @@ def measure(resolution=25, settle_frames=130, substeps=4, aggregates=(4, 8)):
     return rows
 
 
-def write(rows, out, how, resolution):
+def write(rows, out, how, settle):
     names = list(dict.fromkeys(r["preconditioner"] for r in rows))
-    heads = ["penalty", "preconditioner"] + [f"after {k}" for k in ITERATIONS] + \
+    heads = ["faces", "penalty", "preconditioner"] + [f"after {k}" for k in ITERATIONS] + \
         [f"|r_k| / |r| after {RESIDUAL_AT}"]
-    md = ["# PCG on a resting substep's Newton system: the H-norm error per preconditioner",
-          "", f"{how}, {time.strftime('%Y-%m-%d')}. hanging, mapping, resolution {resolution}, "
-          "coupling implicit, near rest (see the module docstring). Each cell: the median over "
+    where = ("near rest" if settle >= 100 else
+             f"falling (captured after {settle} frames from the start)")
+    md = ["# PCG on a substep's Newton system: the H-norm error per preconditioner",
+          "", f"{how}, {time.strftime('%Y-%m-%d')}. hanging, mapping, coupling implicit, "
+          f"{where}; see the module docstring. Each cell: the median over "
           "the captured substeps of |d_k - d*|_H / |d*|_H after k iterations (1 = nothing "
           "of the exact step found), and of the relative residual (the kernel path stops at "
           "0.1).", "",
           "| " + " | ".join(heads) + " |", "|" + "---|" * len(heads)]
-    for tag in ("mu", "4mu"):
-        for name in names:
-            mine = [r for r in rows if r["penalty"] == tag and r["preconditioner"] == name]
-            errs = np.median([r["errors"] for r in mine], axis=0)
-            res = np.median([r["residual"] for r in mine])
-            md.append(f"| {tag} | {name} | " + " | ".join(f"{e:.3f}" for e in errs) +
-                      f" | {res:.2g} |")
+    for faces in dict.fromkeys(r["faces"] for r in rows):
+        for tag in ("mu", "4mu"):
+            for name in names:
+                mine = [r for r in rows if r["penalty"] == tag and r["preconditioner"] == name
+                        and r["faces"] == faces]
+                if not mine:
+                    continue
+                errs = np.median([r["errors"] for r in mine], axis=0)
+                res = np.median([r["residual"] for r in mine])
+                md.append(f"| {faces} | {tag} | {name} | " +
+                          " | ".join(f"{e:.3f}" for e in errs) + f" | {res:.2g} |")
     with open(os.path.join(out, "newton_precond.md"), "w") as fh:
         fh.write("\n".join(md) + "\n")
     print("\n".join(md))
@@ -183,17 +204,23 @@ def write(rows, out, how, resolution):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default="docs/speed")
-    ap.add_argument("--resolution", type=int, default=25)
+    ap.add_argument("--resolution", type=int, nargs="+", default=[25])
     ap.add_argument("--settle", type=int, default=130, help="frames before the capture")
     ap.add_argument("--substeps", type=int, default=4)
+    ap.add_argument("--no-factor", action="store_true",
+                    help="skip the stale factors (a sparse LU of H: slow from ~16k faces)")
     args = ap.parse_args()
     from cloth import backend
     backend.init("cpu", "f64")
     t0 = time.time()
-    rows = measure(args.resolution, args.settle, args.substeps)
+    rows = []
+    for res in args.resolution:
+        faces = 2 * (res - 1) ** 2
+        rows += [dict(r, faces=faces) for r in measure(res, args.settle, args.substeps,
+                                                       factor=not args.no_factor)]
     os.makedirs(args.out, exist_ok=True)
-    write(rows, args.out, f"`python -m benchmarks.newton_precond` ({time.time() - t0:.0f} s)",
-          args.resolution)
+    cmd = " ".join(["python -m benchmarks.newton_precond"] + sys.argv[1:])
+    write(rows, args.out, f"`{cmd}` ({time.time() - t0:.0f} s)", args.settle)
 
 
 if __name__ == "__main__":

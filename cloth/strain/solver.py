@@ -91,12 +91,14 @@ INNER_RTOL = {"implicit": 0.3, "projection": 0.0}
 # triangular solves and its factorisation grow faster than the mesh: at 64.8k faces one
 # application cost ~20 ms and a factorisation ~2.6 s), block Jacobi in solves with contacts.
 FACTOR_MAX_FACES = 2000
-# PCG iterations per Newton step with the multigrid preconditioner (it finds a fixed share of
-# the step per iteration at every size, multigrid.py). Hanging, mapping, frames 2-6 from the
-# start, median ms per frame with 3 / 4 / 6 iterations (one run each, 2026-12-03): 4050
-# faces 52.6 / 50.5 / 48.5, 32.8k 677 / 788 / 665, 64.8k 1530 / 1512 / 1648 (block Jacobi:
-# ~60, ~1100, ~3900). 8 took 1723 ms at 64.8k.
-MULTIGRID_CG = 4
+# PCG iterations per Newton step with the multigrid preconditioner, per method (it finds a
+# fixed share of the step per iteration at every size, multigrid.py). Hanging, frames 2-6
+# from the start, median ms per frame (one run each, 2026-12-03): mapping with 3 / 4 / 6
+# iterations at 4050 faces 52.6 / 50.5 / 48.5, at 32.8k 677 / 788 / 665, at 64.8k 1530 /
+# 1512 / 1648 (8: 1723; block Jacobi ~60, ~1100, ~3900). warp-weft needs more: at 64.8k 4
+# took 2417 ms (6.5 rounds, up to 11), 8 took 1631 ms (4.5 rounds); at 16.2k 389 / 345 ms
+# (block Jacobi 461). svd with 4 took 1370 ms at 64.8k (4 rounds; block Jacobi 3800).
+MULTIGRID_CG = {"mapping": 4, "svd": 4, "warp-weft": 8}
 # PCG iterations per Newton step with the factor: FACTOR_CG_WORK / faces, between FACTOR_CG
 # and FACTOR_CG_MAX (an iteration's triangular solves cost ~ the faces, so small meshes can
 # afford more). The factor finds most of the step in a few iterations (factor_precond.py);
@@ -604,13 +606,14 @@ class StrainLimiter:
     def pcg_budget(self, pc_mode):
         """PCG iterations per Newton step for this preconditioner: the factor's
         (``factor_cg``, else FACTOR_CG_WORK / faces clipped to [FACTOR_CG, FACTOR_CG_MAX]),
-        the multigrid's (``multigrid_cg``, else MULTIGRID_CG), or block Jacobi's
+        the multigrid's (``multigrid_cg``, else the method's MULTIGRID_CG), or block Jacobi's
         ``cg_budget``."""
         if pc_mode == PC_FACTOR:
             return self.factor_cg if self.factor_cg is not None else int(np.clip(
                 round(FACTOR_CG_WORK / max(self.model.n_faces, 1)), FACTOR_CG, FACTOR_CG_MAX))
         if pc_mode == PC_MULTIGRID:
-            return self.multigrid_cg if self.multigrid_cg is not None else MULTIGRID_CG
+            return self.multigrid_cg if self.multigrid_cg is not None else \
+                MULTIGRID_CG.get(self.method, 4)
         return self.cg_budget()
 
     def cg_budget(self):
