@@ -18,7 +18,9 @@ Each size runs in its own child process (so its peak memory is its own):
                         size_max 1.8 x the grid spacing so the count stays near N.
 Every run starts from the scene's start; frame 1 is untimed (it compiles the kernels), then
 the median over the next --frames frames (frames 2 to 4 by default: the start of the sheet's
-fall, the same simulated time at every size). Memory: ``ru_maxrss`` (peak resident set) of
+fall, the same simulated time at every size; --strain-frames sets the strain-limit stages'
+count apart: their 3-frame medians varied by up to 1.6x between runs, and above 2000 faces
+frame 2 still runs block Jacobi while the multigrid is built). Memory: ``ru_maxrss`` (peak resident set) of
 the child, which below ~8k triangles is mostly Python, Taichi and kernel compilation (a child
 on an 8-triangle sheet is measured for comparison), and the bytes of every Taichi field and
 ndarray the simulator holds (model, dynamics, strain work arrays, collider). A stage whose predicted time per frame at the next size (extrapolated
@@ -83,7 +85,7 @@ def timed_frames(sim, stage_names, frames, extra=None):
     return {n: float(np.median(v)) for n, v in rows.items()}
 
 
-def child(res, methods, frames):
+def child(res, methods, frames, strain_frames=None):
     """Measure one size; returns a dict (printed as JSON by the child process). Each strain
     method and the collision run get their own Simulator from the scene's start (the kernels
     compile once per process, so only the first frame of each kind is slow)."""
@@ -119,12 +121,14 @@ def child(res, methods, frames):
         cfg, setup = config(m)
         sim = Simulator(setup, cfg)
         sim.step_frame()                                  # frame 1, untimed (compiles if cold)
-        r = timed_frames(sim, ["strain_limit"], frames,
+        r = timed_frames(sim, ["strain_limit"], strain_frames or frames,
                          {"rounds": lambda s: s.strain.last_iterations,
+                          "newton": lambda s: s.strain.last_newton,
+                          "cg": lambda s: s.strain.last_cg,
                           "converged": lambda s: float(s.strain.last_converged)})
         out["ms"][f"strain_limit:{m}"] = r["strain_limit"]
-        out["info"][f"rounds:{m}"] = r["rounds"]
-        out["info"][f"converged:{m}"] = r["converged"]
+        for key in ("rounds", "newton", "cg", "converged"):
+            out["info"][f"{key}:{m}"] = r[key]
     # Collision: a still sphere just touching the sheet's middle from behind, the ground, and
     # self-collision.
     cfg, setup = config()
@@ -165,9 +169,11 @@ def child(res, methods, frames):
 
 
 # ---- parent: the sweep over sizes --------------------------------------------------------------
-def run_child(res, methods, frames, timeout):
+def run_child(res, methods, frames, timeout, strain_frames=None):
     cmd = [sys.executable, "-m", "benchmarks.scaling", "--child", str(res), "--frames",
            str(frames), "--methods", *methods]
+    if strain_frames:
+        cmd += ["--strain-frames", str(strain_frames)]
     t0 = time.perf_counter()
     try:
         proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout,
@@ -208,7 +214,7 @@ def fit_exponent(ns, ms):
     return float(np.polyfit(np.log(ns[ok]), np.log(ms[ok]), 1)[0])
 
 
-def sweep(resolutions, frames, budget_s, timeout, log=print):
+def sweep(resolutions, frames, budget_s, timeout, log=print, strain_frames=None):
     base = run_child(3, list(METHODS), 2, timeout)
     log(f"baseline (8 triangles): peak RSS {base.get('peak_rss_mb', float('nan')):.0f} MB")
     rows, skipped = [], []
@@ -228,7 +234,7 @@ def sweep(resolutions, frames, budget_s, timeout, log=print):
                 skipped.append((f"strain_limit:{m}", n, p))
             else:
                 methods.append(m)
-        r = run_child(res, methods, frames, timeout)
+        r = run_child(res, methods, frames, timeout, strain_frames)
         if "error" in r:
             log(f"{n} triangles: {r['error']}")
             rows.append(r)
@@ -320,12 +326,13 @@ def write_outputs(base, rows, skipped, out, command, seconds, budget_s):
     for r in rows:
         if "error" in r:
             lines.append(f"- resolution {r['resolution']}: {r['error']}")
-    strain_rounds = [(r["faces"], {m: r["info"].get(f"rounds:{m}") for m in METHODS})
-                     for r in good]
-    lines += ["", "AL rounds per substep (median) by size: " + "; ".join(
-        f"{n}: " + ", ".join(f"{m} {v:.0f}" for m, v in d.items() if v is not None)
-        for n, d in strain_rounds if any(v is not None for v in d.values())) + ".",
-        "", "Plot: `scaling.png`."]
+    for key, what in (("rounds", "AL rounds"), ("newton", "Newton steps"),
+                      ("cg", "PCG iterations")):
+        per = [(r["faces"], {m: r["info"].get(f"{key}:{m}") for m in METHODS}) for r in good]
+        lines += ["", f"{what} per substep (median) by size: " + "; ".join(
+            f"{n}: " + ", ".join(f"{m} {v:.0f}" for m, v in d.items() if v is not None)
+            for n, d in per if any(v is not None for v in d.values())) + "."]
+    lines += ["", "Plot: `scaling.png`."]
     with open(os.path.join(out, "scaling.md"), "w") as fh:
         fh.write("\n".join(lines) + "\n")
     plot(good, base, fits, out, names)
@@ -378,6 +385,9 @@ def main(argv=None):
     ap.add_argument("--out", default=os.path.join("results", "scaling"))
     ap.add_argument("--quick", action="store_true", help="~500 to ~8k triangles")
     ap.add_argument("--frames", type=int, default=None, help="timed frames per stage")
+    ap.add_argument("--strain-frames", type=int, default=None,
+                    help="timed frames of the strain-limit stages (default: --frames); "
+                    "their medians over 3 frames varied by up to 1.6x between runs")
     ap.add_argument("--budget", type=float, default=40.0,
                     help="skip a stage predicted slower than this many seconds per frame")
     ap.add_argument("--timeout", type=float, default=1800.0, help="seconds per size")
@@ -392,13 +402,14 @@ def main(argv=None):
                       d["command"], d["seconds"], d.get("budget", args.budget))
         return 0
     if args.child:
-        print(json.dumps(child(args.child, args.methods, args.frames or 3)))
+        print(json.dumps(child(args.child, args.methods, args.frames or 3,
+                               args.strain_frames)))
         return 0
     argv = sys.argv[1:] if argv is None else argv
     frames = args.frames or (2 if args.quick else 3)
     t0 = time.perf_counter()
     base, rows, skipped = sweep(QUICK if args.quick else FULL, frames, args.budget,
-                                args.timeout)
+                                args.timeout, strain_frames=args.strain_frames)
     seconds = time.perf_counter() - t0
     write_outputs(base, rows, skipped, args.out, "python -m benchmarks.scaling " + " ".join(argv),
                   seconds, args.budget)
