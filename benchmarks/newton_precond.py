@@ -36,7 +36,7 @@ ITERATIONS = (2, 4, 8, 16, 32)
 RESIDUAL_AT = 16          # the kernel path's PCG budget at this size (mapping, ~1.2k faces)
 
 
-def capture(resolution, settle_frames, substeps):
+def capture(resolution, settle_frames, substeps, at="prev"):
     """[(x_prev, free, {"mu": (H, r), "4mu": (H, r)}, A)] for ``substeps`` consecutive
     solves after ``settle_frames`` frames: the Newton system at the solve's start (the
     previous positions, as the implicit coupling starts there at rest), and the implicit
@@ -61,7 +61,8 @@ def capture(resolution, settle_frames, substeps):
         x_hat, lam = ws.x.to_numpy(), ws.lam.to_numpy()
         free = ws.pinned.to_numpy()[:nv] == 0
         x0 = x_hat.copy()
-        x0[:nv][free] = ws.fric.to_numpy()[:nv, :3][free]        # x_prev
+        if at == "prev":
+            x0[:nv][free] = ws.fric.to_numpy()[:nv, :3][free]    # x_prev
         mu = lim.mu_scale * lim._mean_mass(metric)
         out = {}
         for tag, scale in (("mu", 1.0), ("4mu", 4.0)):
@@ -147,9 +148,10 @@ def h_norm_errors(H, r, precondition, iterations=ITERATIONS):
     return out, residual
 
 
-def measure(resolution=25, settle_frames=130, substeps=4, aggregates=(4, 8), factor=True):
+def measure(resolution=25, settle_frames=130, substeps=4, aggregates=(4, 8), factor=True,
+            at="prev"):
     from cloth.strain import multigrid
-    systems = capture(resolution, settle_frames, substeps)
+    systems = capture(resolution, settle_frames, substeps, at)
     rows = []
     for i in range(1, len(systems)):
         x, free, now, A = systems[i]
@@ -172,12 +174,14 @@ def measure(resolution=25, settle_frames=130, substeps=4, aggregates=(4, 8), fac
     return rows
 
 
-def write(rows, out, how, settle):
+def write(rows, out, how, settle, at="prev"):
     names = list(dict.fromkeys(r["preconditioner"] for r in rows))
     heads = ["faces", "penalty", "preconditioner"] + [f"after {k}" for k in ITERATIONS] + \
         [f"|r_k| / |r| after {RESIDUAL_AT}"]
     where = ("near rest" if settle >= 100 else
              f"falling (captured after {settle} frames from the start)")
+    where += (", linearised at the previous positions" if at == "prev" else
+              ", linearised at x_hat (the unconstrained step's end)")
     md = ["# PCG on a substep's Newton system: the H-norm error per preconditioner",
           "", f"{how}, {time.strftime('%Y-%m-%d')}. hanging, mapping, coupling implicit, "
           f"{where}; see the module docstring. Each cell: the median over "
@@ -196,7 +200,8 @@ def write(rows, out, how, settle):
                 res = np.median([r["residual"] for r in mine])
                 md.append(f"| {faces} | {tag} | {name} | " +
                           " | ".join(f"{e:.3f}" for e in errs) + f" | {res:.2g} |")
-    with open(os.path.join(out, "newton_precond.md"), "w") as fh:
+    name = "newton_precond.md" if at == "prev" else "newton_precond_at_hat.md"
+    with open(os.path.join(out, name), "w") as fh:
         fh.write("\n".join(md) + "\n")
     print("\n".join(md))
 
@@ -209,6 +214,10 @@ def main():
     ap.add_argument("--substeps", type=int, default=4)
     ap.add_argument("--no-factor", action="store_true",
                     help="skip the stale factors (a sparse LU of H: slow from ~16k faces)")
+    ap.add_argument("--at", choices=("prev", "hat"), default="prev",
+                    help="linearise at the previous positions (where the solve starts at "
+                    "rest) or at x_hat (the unconstrained step's end; the solve starts at "
+                    "the one of the two with the lower merit)")
     args = ap.parse_args()
     from cloth import backend
     backend.init("cpu", "f64")
@@ -217,10 +226,11 @@ def main():
     for res in args.resolution:
         faces = 2 * (res - 1) ** 2
         rows += [dict(r, faces=faces) for r in measure(res, args.settle, args.substeps,
-                                                       factor=not args.no_factor)]
+                                                       factor=not args.no_factor,
+                                                       at=args.at)]
     os.makedirs(args.out, exist_ok=True)
     cmd = " ".join(["python -m benchmarks.newton_precond"] + sys.argv[1:])
-    write(rows, args.out, f"`{cmd}` ({time.time() - t0:.0f} s)", args.settle)
+    write(rows, args.out, f"`{cmd}` ({time.time() - t0:.0f} s)", args.settle, args.at)
 
 
 if __name__ == "__main__":

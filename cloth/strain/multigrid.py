@@ -5,11 +5,16 @@ Why: block-Jacobi PCG needs iterations that grow with the cloth's diameter in tr
 (corrections travel one ring of neighbours per iteration), so its budget grows as
 sqrt(faces) and a round costs ~N^1.5; the factor of A (factor_precond.py) reaches the soft
 global modes in a few iterations but its serial triangular solves and its factorisation grow
-faster than the mesh. A multigrid cycle costs about one block-Jacobi sweep plus a few percent.
-Measured on captured Newton systems of the falling hanging sheet (frame 3, mapping, penalty 4
-mu; |d_8 - d*|_H / |d*|_H after 8 PCG iterations, 1 = nothing found): block Jacobi 0.78 /
-0.87 / 0.89 / 0.85 at 4k / 16k / 32k / 64k faces, the exact factor of A 0.41 / 0.44 / - / -,
-this preconditioner 0.32 / 0.37 / 0.37 / 0.36: N-independent (scratch script, 2026-12-03).
+faster than the mesh. An application of this one costs less than a product with H.
+Measured on captured Newton systems of the falling hanging sheet (frames 3-4, mapping,
+linearised at x_hat; |d_8 - d*|_H / |d*|_H after 8 PCG iterations, 1 = nothing found):
+block Jacobi 0.82 / 0.88 / 0.90 at 4k / 16k / 32.8k faces, this preconditioner 0.29 / 0.36 /
+0.38 (``python -m benchmarks.newton_precond --at hat ...``,
+docs/speed/multigrid/newton_precond_at_hat.md; a scratch run gave 0.36 at 64.8k, and the
+exact factor of A 0.41 / 0.44 at 4k / 16k). Linearised at the previous positions instead,
+neither finds much of the step (0.85-0.98 left after 16, block Jacobi 0.96-0.99) and a
+two-level space of rigid motions on 8 x 8 patches does best (0.34-0.86;
+docs/speed/multigrid/newton_precond.md): a lead not followed.
 
 What: the hierarchy is made on the host by pyamg (``smoothed_aggregation_solver`` with
 smooth=None: vertices grouped into aggregates of ~10-20 by the strength of their coupling,
@@ -22,10 +27,11 @@ until the coarsest has at most MAX_COARSE unknowns (inverted densely). The kerne
 with D A's 3x3 diagonal blocks (zero for pinned vertices, whose step is zero) and V a
 V-cycle on the coarse levels (one damped Jacobi sweep before and after each coarse
 correction, the coarsest solved exactly). The fine level is *additive*: no product with A
-at full size, so an application costs about what block Jacobi's does; on the captured systems
+at full size, so an application costs less than a product with H (2.1 against 2.8 ms at 64.8k
+faces, 0.8 ms at 16k); on the captured systems
 it found as much of the step as a multiplicative V-cycle with a Jacobi sweep on A before and
-after (0.32 against 0.34 at 4k faces, 0.37 against 0.38 at 32k), which costs two products
-with A more. Smoothing with H's diagonal instead of A's found less (0.39-0.46 after 8): the
+after (0.32 against 0.34 at 4k faces, 0.37 against 0.38 at 32k; scratch runs), which costs
+two products with A more. Smoothing with H's diagonal instead of A's found less (0.39-0.46 after 8): the
 coarse levels approximate A, and the two must agree. Every part is symmetric, so the
 preconditioner is symmetric positive definite, as PCG needs.
 
