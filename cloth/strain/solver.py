@@ -30,8 +30,8 @@ from . import al, buffers, pbd
 from .factor_precond import FactorPreconditioner, FactorStub
 from .multigrid import HAVE_PYAMG, MAX_COARSE, MultigridPreconditioner, MultigridStub
 from .c_curvature import C_STEP_F32, C_STEP_F64
-from .buffers import (PC_FACTOR, PC_JACOBI, PC_MULTIGRID, ST_CG, ST_CONVERGED, ST_ITERS, ST_NEWTON, ST_START_VIOL, ST_VIOL,
-                      Workspace)
+from .buffers import (PC_FACTOR, PC_JACOBI, PC_MULTIGRID, ST_CG, ST_CONVERGED, ST_ITERS,
+                      ST_NEWTON, ST_START_VIOL, ST_VIOL, Workspace)
 
 METHOD_NAMES = METHODS + ("none",)
 SOLVERS = ("al", "jacobi", "gauss-seidel")
@@ -173,7 +173,8 @@ class StrainLimiter:
     After each ``project`` call: ``last_iterations``, ``last_violation_max`` (strain units),
     ``last_converged``, ``last_ms``, and for the AL ``last_newton`` / ``last_cg`` totals (on the
     Cholesky path ``last_cg`` counts the CG iterations preconditioned by a reused factor, and
-    ``last_factorizations`` the numeric factorisations).
+    ``last_factorizations`` the numeric factorisations; on the PCG path it counts the
+    preconditioner's refreshes: a factorisation or a multigrid hierarchy).
 
     AL settings: ``max_newton`` Newton steps per round (None: ``newton_budget``), each a
     PCG solve of at most
@@ -253,7 +254,7 @@ class StrainLimiter:
         self._pc = None            # Factor- or MultigridPreconditioner of the implicit metric
         self._stubs = None         # placeholder arrays for the preconditioners not in use
         self.precondition = "auto"
-        self.multigrid_cg = None       # None: MULTIGRID_CG
+        self.multigrid_cg = None       # None: the method's MULTIGRID_CG
         self.factor_cg = None          # None: from the mesh size (FACTOR_CG_WORK)
         self.factor_max_faces = None   # None: FACTOR_MAX_FACES (a probe's override)
         self.tol = float(tol)
