@@ -111,3 +111,21 @@ def test_multigrid_and_block_jacobi_give_the_same_projection():
         out[precondition] = sim.model.positions()
     edge = sim.model.typical_edge()
     assert np.abs(out["multigrid"] - out["jacobi"]).max() < 20 * lim.tol * edge
+
+
+def test_without_pyamg_the_solve_falls_back_to_block_jacobi_and_says_so_once(monkeypatch,
+                                                                             capsys):
+    """If pyamg cannot be imported, a mesh above FACTOR_MAX_FACES gets no preconditioner
+    object (block Jacobi), and one line on stderr names the fix."""
+    from cloth.strain import solver
+    sim = _hanging("mapping", "implicit", res=6)
+    lim = sim.strain
+    monkeypatch.setattr(solver, "HAVE_PYAMG", False)
+    monkeypatch.setattr(solver, "_no_pyamg_noted", False)
+    monkeypatch.setattr(solver, "FACTOR_MAX_FACES", sim.model.n_faces - 1)
+    assert lim._pcg_preconditioner(lim.system_metric()) is None
+    assert lim._pcg_preconditioner(lim.system_metric()) is None
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "pyamg" in err[0] and "make test" in err[0]
+    sim.step_frame()
+    assert lim.last_converged

@@ -17,6 +17,7 @@ Why one module of ~550 lines: ``StrainLimiter`` is the host side of every path (
 bands, mesh changes, metrics, the choice of kernel); the kernels themselves live in
 ``al.py``, ``direct.py`` and ``pbd.py``.
 """
+import sys
 import time
 
 import numpy as np
@@ -118,6 +119,17 @@ FACTOR_CG, FACTOR_CG_MAX, FACTOR_CG_WORK = 6, 20, 6000
 MAX_NEWTON, FACTOR_NEWTON = 5, 4
 
 _host_loop_noted = False
+_no_pyamg_noted = False
+
+
+def _note_no_pyamg():
+    """Say once, in one line, that the multigrid preconditioner is unavailable and why."""
+    global _no_pyamg_noted
+    if not _no_pyamg_noted:
+        _no_pyamg_noted = True
+        print("loom: pyamg is not installed, so strain solves above 2000 faces use block "
+              "Jacobi (slower on large meshes); `make test` installs it (requirements.txt)",
+              file=sys.stderr)
 
 
 def _host_loop_only():
@@ -693,7 +705,10 @@ class StrainLimiter:
             kind = "factor" if self.model.n_faces <= limit else "multigrid"
         if kind == "factor" and not linalg.HAVE_CHOLMOD:
             kind = "multigrid"
-        if kind == "multigrid" and not (HAVE_PYAMG and 3 * self.model.n_verts > MAX_COARSE):
+        if kind == "multigrid" and not HAVE_PYAMG:
+            _note_no_pyamg()
+            return None
+        if kind == "multigrid" and not 3 * self.model.n_verts > MAX_COARSE:
             return None
         cls = FactorPreconditioner if kind == "factor" else MultigridPreconditioner
         if not isinstance(self._pc, cls) or self._pc.metric is not metric:
