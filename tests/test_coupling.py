@@ -161,6 +161,24 @@ def _redo_dynamics(sim, state):
     return metric
 
 
+def _tight_projection(sim, state, precondition):
+    """The substep after ``state`` projected tightly with this PCG preconditioner (the same
+    Newton and PCG budgets whatever it is, so that solves can be compared). Returns (the
+    preconditioner object the solve had, whether it was usable, the positions)."""
+    lim = sim.strain
+    lim.precondition = precondition
+    lim.inner_rtol, lim.cg_rtol, lim.max_cg = 0.0, 1e-10, 400
+    lim.factor_cg = lim.multigrid_cg = 400
+    lim.max_newton = 5
+    lim._upload_params()
+    metric = _redo_dynamics(sim, state)
+    pc = lim._pcg_preconditioner(metric)
+    usable = pc is not None and pc.usable(sim.model.pinned[: sim.model.n_verts])
+    lim.project(sim.h)
+    assert lim.last_converged and lim.last_violation_max < lim.tol
+    return pc, usable, sim.model.positions()
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("linear_solver", ["pcg", "cholesky"])
 def test_direct_and_pcg_newton_give_the_same_projection(linear_solver):

@@ -11,7 +11,7 @@ from cloth.strain import factor_precond
 from cloth.strain import al
 from cloth.strain.buffers import PC_FACTOR, PC_JACOBI, PC_MULTIGRID, A
 from cloth.strain.multigrid import MultigridPreconditioner, MultigridStub
-from tests.test_coupling import _hanging, _redo_dynamics, _saved_state
+from tests.test_coupling import _hanging, _saved_state, _tight_projection
 
 pytestmark = pytest.mark.skipif(not linalg.HAVE_CHOLMOD,
                                 reason="the factor preconditioner needs CHOLMOD")
@@ -66,15 +66,8 @@ def test_factor_and_block_jacobi_give_the_same_projection():
     state = _saved_state(sim)
     out = {}
     for precondition in ("factor", "jacobi"):
-        lim.precondition = precondition
-        lim.inner_rtol, lim.cg_rtol, lim.max_cg, lim.factor_cg = 0.0, 1e-10, 400, 400
-        lim.max_newton = 5                          # the same solve for both
-        lim._upload_params()
-        metric = _redo_dynamics(sim, state)
-        assert (lim._pcg_preconditioner(metric) is None) == (precondition == "jacobi")
-        lim.project(sim.h)
-        assert lim.last_converged and lim.last_violation_max < lim.tol
-        out[precondition] = sim.model.positions()
+        pc, _, out[precondition] = _tight_projection(sim, state, precondition)
+        assert (pc is None) == (precondition == "jacobi")
     edge = sim.model.typical_edge()
     assert np.abs(out["factor"] - out["jacobi"]).max() < 20 * lim.tol * edge
 

@@ -11,7 +11,7 @@ from cloth import linalg
 from cloth.strain import multigrid
 from cloth.strain.buffers import PC_MULTIGRID, A
 from cloth.strain.factor_precond import pinned_values
-from tests.test_coupling import _hanging, _redo_dynamics, _saved_state
+from tests.test_coupling import _hanging, _saved_state, _tight_projection
 
 
 @ti.kernel
@@ -98,17 +98,8 @@ def test_multigrid_and_block_jacobi_give_the_same_projection():
     state = _saved_state(sim)
     out = {}
     for precondition in ("multigrid", "jacobi"):
-        lim.precondition = precondition
-        lim.inner_rtol, lim.cg_rtol, lim.max_cg, lim.multigrid_cg = 0.0, 1e-10, 400, 400
-        lim.max_newton = 5                          # the same solve for both
-        lim._upload_params()
-        metric = _redo_dynamics(sim, state)
-        pc = lim._pcg_preconditioner(metric)
-        assert (pc is not None and pc.mode == PC_MULTIGRID and
-                pc.usable(sim.model.pinned[: sim.model.n_verts])) == (precondition != "jacobi")
-        lim.project(sim.h)
-        assert lim.last_converged and lim.last_violation_max < lim.tol
-        out[precondition] = sim.model.positions()
+        pc, usable, out[precondition] = _tight_projection(sim, state, precondition)
+        assert (usable and pc.mode == PC_MULTIGRID) == (precondition != "jacobi")
     edge = sim.model.typical_edge()
     assert np.abs(out["multigrid"] - out["jacobi"]).max() < 20 * lim.tol * edge
 

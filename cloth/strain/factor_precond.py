@@ -37,7 +37,44 @@ REFRESH_SOLVES = 10
 FIRST_AFTER = 2
 
 
-class FactorPreconditioner:
+class RefreshedPreconditioner:
+    """The life cycle the factor and the multigrid (multigrid.py) share: made from the metric
+    with pinned rows and columns the identity (``pinned_values``) after FIRST_AFTER solves on
+    a pattern, remade every REFRESH_SOLVES solves and whenever the pins change. A subclass
+    sets ``mode`` (the kernel's PC_* switch) and implements ``refresh(values, pinned)``."""
+
+    def __init__(self, metric):
+        self.metric = metric
+        self.ready = False
+        self.solves_since = 0
+        self.solves = 0                         # on this pattern
+        self.pinned = None                      # the pinned mask it was made with
+
+    def usable(self, pinned):
+        """Whether the kernel may use it: it exists and was made with these pins (a vertex
+        pinned since, e.g. held by the mouse, would get a nonzero step from it; the next
+        ``after_solve`` remakes it)."""
+        if self.ready and not np.array_equal(self.pinned, pinned):
+            self.ready = False
+        return self.ready
+
+    def after_solve(self, pinned):
+        """Remake it when there is none yet or it is REFRESH_SOLVES solves old, but not
+        before FIRST_AFTER solves on this pattern. Returns whether it did."""
+        self.solves_since += 1
+        self.solves += 1
+        if self.solves < FIRST_AFTER or (self.ready and self.solves_since <
+                                          REFRESH_SOLVES):
+            return False
+        pinned = np.array(pinned[: self.metric.n], bool)
+        self.refresh(pinned_values(self.metric, pinned), pinned)
+        self.pinned = pinned
+        self.solves_since = 0
+        self.ready = True
+        return True
+
+
+class FactorPreconditioner(RefreshedPreconditioner):
     """The factor arrays the kernel reads (``al.precondition``): L of P A P^T = L L^T (A the
     metric with pinned rows and columns made the identity, like the Newton matrix's; P a
     fill-reducing ordering of the vertices) in 3x3 blocks, stored twice so that both
@@ -49,7 +86,7 @@ class FactorPreconditioner:
     mode = PC_FACTOR
 
     def __init__(self, metric):
-        self.metric = metric
+        super().__init__(metric)
         self.chol = linalg.SparseCholesky(metric.ptr_np, metric.col_np, metric.n,
                                           backend="cholmod", core=metric.core_np,
                                           vertex_order=True)
@@ -60,23 +97,12 @@ class FactorPreconditioner:
         self.capacity = 0                       # blocks in idx / val
         self.idx = ti.ndarray(ti.i32, 1)
         self.val = ti.ndarray(mat3, 1)
-        self.ready = False
-        self.solves_since = 0
-        self.solves = 0                         # on this pattern
-        self.pinned = None                      # the pinned mask the factor was made with
         self.blocks = 0                         # 3x3 blocks of L (the last factor)
 
-    def usable(self, pinned):
-        """Whether the kernel may use the factor: it exists and was made with these pins (a
-        vertex pinned since, e.g. held by the mouse, would get a nonzero step from it; the
-        next ``after_solve`` remakes it)."""
-        if self.ready and not np.array_equal(self.pinned, pinned):
-            self.ready = False
-        return self.ready
-
-    def refresh(self, values):
-        """Factorise the lumped matrix of these block values (the pattern's order) and
-        upload L's blocks and the vertex ordering."""
+    def refresh(self, values, pinned=None):
+        """Factorise the lumped matrix of these block values (the pattern's order, pinned
+        rows and columns already the identity) and upload L's blocks and the vertex
+        ordering."""
         self.chol.factorize(values)
         L, perm3 = self.chol.lower_factor()
         n = self.metric.n
@@ -102,19 +128,6 @@ class FactorPreconditioner:
         self.blocks = n_fwd + n
         self.ready = True
 
-    def after_solve(self, pinned):
-        """Refactorise the metric when there is no factor yet or the factor is REFRESH_SOLVES
-        solves old, but not before FIRST_AFTER solves on this pattern. Returns whether it
-        did."""
-        self.solves_since += 1
-        self.solves += 1
-        if self.solves < FIRST_AFTER or (self.ready and self.solves_since <
-                                          REFRESH_SOLVES):
-            return False
-        self.refresh(pinned_values(self.metric, pinned))
-        self.pinned = np.array(pinned[: self.metric.n], bool)
-        self.solves_since = 0
-        return True
 
 def pinned_values(metric, pinned):
     """The metric's block values with the rows and columns of pinned vertices made the

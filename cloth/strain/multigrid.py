@@ -44,7 +44,7 @@ import taichi as ti
 
 from ..system_matrix import mat3
 from .buffers import PC_MULTIGRID, T
-from .factor_precond import FIRST_AFTER, REFRESH_SOLVES, pinned_values
+from .factor_precond import RefreshedPreconditioner
 
 try:
     import pyamg
@@ -70,42 +70,21 @@ STRIDE = 8
 N_, A_PTR, A_COL, A_VAL, P_PTR, P_COL, P_VAL, VEC = range(STRIDE)
 
 
-class MultigridPreconditioner:
+class MultigridPreconditioner(RefreshedPreconditioner):
     """The multigrid arrays the kernel reads (``apply``): ``ints`` (the level table, then
     the CSR index arrays), ``reals`` (OMEGA, the CSR values, the coarsest inverse, the work
     vectors) and ``blocks`` (the inverses of A's 3x3 diagonal blocks, zero for pinned
     vertices). The arrays grow as needed (an ndarray's size is not part of a kernel's
-    signature: no recompilation). Same life cycle as ``FactorPreconditioner``."""
+    signature: no recompilation). The life cycle is ``RefreshedPreconditioner``'s."""
     mode = PC_MULTIGRID
 
     def __init__(self, metric):
-        self.metric = metric
+        super().__init__(metric)
         self.ints = ti.ndarray(ti.i32, 1)
         self.reals = ti.ndarray(float, 1)
         self.blocks = ti.ndarray(mat3, max(metric.n, 1))
-        self.ready = False
-        self.solves_since = 0
-        self.solves = 0
-        self.pinned = None
         self.levels = []                     # unknowns per level (the last hierarchy)
         self.host = None                     # the numpy arrays of the last upload
-
-    def usable(self, pinned):
-        """Whether the kernel may use the hierarchy: it exists and was made with these pins."""
-        if self.ready and not np.array_equal(self.pinned, pinned):
-            self.ready = False
-        return self.ready
-
-    def after_solve(self, pinned):
-        """Rebuild the hierarchy when there is none yet or it is REFRESH_SOLVES solves old,
-        but not before FIRST_AFTER solves on this pattern. Returns whether it did."""
-        self.solves_since += 1
-        self.solves += 1
-        if self.solves < FIRST_AFTER or (self.ready and self.solves_since < REFRESH_SOLVES):
-            return False
-        pinned = np.asarray(pinned[: self.metric.n], bool)
-        self.refresh(pinned_values(self.metric, pinned), pinned)
-        return True
 
     def refresh(self, values, pinned):
         """Build the hierarchy of the block matrix with these values (the metric's pattern,
@@ -124,8 +103,6 @@ class MultigridPreconditioner:
         _upload(self.ints, ints)
         _upload(self.reals, reals)
         _upload(self.blocks, self.host["blocks"])
-        self.pinned = pinned.copy()
-        self.solves_since = 0
         self.ready = True
 
 
