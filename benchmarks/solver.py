@@ -67,7 +67,7 @@ def child(res, method, coupling, linear_solver, curvature, frames, ke_from, over
         setattr(sim.strain, key, value)
     sim.strain._upload_params()
     ke, ms, rounds, newton, conv, viol = [], [], [], [], [], []
-    cg, factorizations, frame_ms = [], [], []
+    cg, factorizations, frame_ms, trials = [], [], [], []
     for _ in range(frames):
         sim.step_frame()
         m = sim.model
@@ -79,6 +79,7 @@ def child(res, method, coupling, linear_solver, curvature, frames, ke_from, over
         conv.append(bool(sim.strain.last_converged))
         viol.append(sim.strain.last_violation_max)
         cg.append(sim.strain.last_cg)
+        trials.append(sim.strain.last_trials)
         factorizations.append(sim.strain.last_factorizations)
     ms, rounds = np.array(ms[1:]), np.array(rounds[1:])
     return dict(commit=_commit(), res=res, faces=sim.model.n_faces, method=method,
@@ -91,6 +92,7 @@ def child(res, method, coupling, linear_solver, curvature, frames, ke_from, over
                 newton_median=float(np.median(newton[1:])),
                 converged=float(np.mean(conv[1:])), viol_max=float(max(viol[1:])),
                 cg_median=float(np.median(cg[1:])),
+                trials_median=float(np.median(trials[1:])),
                 frame_ms_median=float(np.median(frame_ms[1:])),
                 factorizations_mean=float(np.mean(factorizations[1:])),
                 overrides=overrides or {},

@@ -32,13 +32,40 @@ def _residual_at(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: f
                  x_hat: A, w_ptr: A, w_col: A, w_val: A, w_diag: A, face_verts: A,
                  Dm_inv: A, grain: A, rest_area: A, params: A, lam: A, g: A, grad: A, cm: A,
                  what: A, kappa: A, twist: A, contact: A, lam_c: A, stitch: A, lam_s: A,
-                 fric: A, lam_t: A, pinned: A, r: A):
+                 fric: A, lam_t: A, pinned: A, r: A, Wdx: A):
     ti.loop_config(serialize=True)
     for _ in range(1):
         al.assemble_all(method, nf, pos, face_verts, Dm_inv, grain, rest_area, params, g,
                         grad, cm, what, kappa, twist)
-        al.residual(K, nv, nf, ns, mu, pos, x_hat, w_ptr, w_col, w_val, w_diag, pinned,
-                    face_verts, lam, g, grad, contact, lam_c, stitch, lam_s, fric, lam_t, r)
+        al.metric_gradient(nv, w_ptr, w_col, w_val, pos, x_hat, Wdx)
+        al.residual(K, nv, nf, ns, mu, pos, Wdx, pinned, face_verts, lam, g, grad, contact,
+                    lam_c, stitch, lam_s, fric, lam_t, r)
+
+
+@ti.kernel
+def _line_merits(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: float,
+                 a: float, pos: A, x_hat: A, d: A, moved: A, Wdx: A, Wd: A, w_ptr: A,
+                 w_col: A, w_val: A, w_diag: A, face_verts: A, Dm_inv: A, grain: A,
+                 rest_area: A, params: A, lam: A, g: A, grad: A, cm: A, what: A, kappa: A,
+                 twist: A, contact: A, lam_c: A, stitch: A, lam_s: A, fric: A,
+                 lam_t: A) -> ti.types.vector(2, float):
+    """The merit at pos + a d two ways: directly, and as solve_al's line search forms it
+    (the quadratic from ``metric_along`` at pos, plus the constraint terms)."""
+    out = ti.Vector([0.0, 0.0])
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        al.metric_gradient(nv, w_ptr, w_col, w_val, pos, x_hat, Wdx)
+        quad = al.metric_along(nv, w_ptr, w_col, w_val, pos, x_hat, d, Wdx, Wd)
+        for n in range(nv):
+            moved[n] = pos[n] + a * d[n]
+        al.assemble_all(method, nf, moved, face_verts, Dm_inv, grain, rest_area, params, g,
+                        grad, cm, what, kappa, twist)
+        out[0] = al.merit(K, nv, nf, ns, mu, moved, x_hat, w_ptr, w_col, w_val, w_diag, lam,
+                          g, contact, lam_c, stitch, lam_s, fric, lam_t)
+        out[1] = al.quad_at(quad, a) + al.merit_constraints(K, nv, nf, ns, mu, moved, lam, g,
+                                                            contact, lam_c, stitch, lam_s,
+                                                            fric, lam_t)
+    return out
 
 
 @pytest.mark.parametrize("method", ["mapping", "svd", "warp-weft"])
@@ -73,7 +100,7 @@ def test_residual_is_minus_the_merit_gradient(method):
 
     pos.from_numpy(x0)
     _residual_at(mid, K, nv, nf, 0, mu, pos, ws.x_hat, W.ptr, W.col, W.val, W.diag,
-                 *arrays(), ws.pinned, ws.r)
+                 *arrays(), ws.pinned, ws.r, ws.Wdx)
     r = ws.r.to_numpy()[:nv]
     for trial in range(3):
         d = np.zeros_like(x0)
@@ -82,6 +109,13 @@ def test_residual_is_minus_the_merit_gradient(method):
         fd = (merit_at(x0 + eps * d) - merit_at(x0 - eps * d)) / (2 * eps)
         analytic = -np.sum(r * d[:nv])
         assert abs(fd - analytic) <= 1e-5 * max(abs(analytic), 1e-12), (trial, fd, analytic)
+    # The line search's merit (quadratic term from W d once, solve_al) is the merit.
+    ws.d.from_numpy(d)
+    for a in (1.0, 0.37):
+        pos.from_numpy(x0)
+        direct, along = _line_merits(mid, K, nv, nf, 0, mu, a, pos, ws.x_hat, ws.d, ws.z,
+                                     ws.Wdx, ws.Ap, W.ptr, W.col, W.val, W.diag, *arrays())
+        assert abs(direct - along) <= 1e-12 * abs(direct), (a, direct, along)
 
 
 @pytest.mark.parametrize("method", ["mapping", "svd", "warp-weft"])

@@ -9,8 +9,8 @@ import taichi as ti
 
 from .buffers import (CONTACT_SLOTS, NO_CONTACT, P_C_STEP, P_CONTACT_SCALE, P_CURVATURE,
                       P_DELTA, P_INNER_RTOL, P_ISO, P_MARGIN,
-                      P_SHEAR, P_SVD_DELTA, PC_FACTOR, PC_MULTIGRID, P_WARP, P_WEFT, ST_CG, ST_COMP, ST_CONVERGED,
-                      ST_ITERS, ST_NEWTON, ST_START_VIOL, ST_VIOL, A, T)
+                      P_SHEAR, P_SVD_DELTA, PC_FACTOR, PC_JACOBI, PC_MULTIGRID, P_WARP, P_WEFT, ST_CG, ST_COMP, ST_CONVERGED,
+                      ST_ITERS, ST_NEWTON, ST_START_VIOL, ST_TRIALS, ST_VIOL, A, T)
 from . import multigrid
 from .c_curvature import c_curvature_block, face_c_curvature
 from .constraints import face_constraints
@@ -188,13 +188,23 @@ def metric_times(n, w_ptr: T, w_col: T, w_val: T, p: T):
 @ti.func
 def merit(K, nv, nf, ns, mu, pos: T, x_hat: T, w_ptr: T, w_col: T, w_val: T, w_diag: T, lam: T, g: T, contact: T,
           lam_c: T, stitch: T, lam_s: T, fric: T, lam_t: T):
-    """L_A = 1/2 sum m |x - x_hat|^2 + sum (mu/2) max(0, g + lam/mu)^2 - lam^2/(2 mu), the
-    slack variables of eq. 25 eliminated, with g as last assembled (at ``pos``), over the
-    strain and contact constraints; plus lam_s.c + (mu/2)|c|^2 for the seams' equalities."""
+    """L_A = 1/2 (x - x_hat)^T W (x - x_hat) + sum (mu/2) max(0, g + lam/mu)^2 - lam^2/(2 mu),
+    the slack variables of eq. 25 eliminated, with g as last assembled (at ``pos``), over the
+    strain and contact constraints; plus lam_s.c + (mu/2)|c|^2 for the seams' equalities and
+    the friction term (``merit_constraints``)."""
+    quad = 0.0
+    for n in range(nv):
+        quad += 0.5 * (pos[n] - x_hat[n]).dot(metric_row(n, w_ptr, w_col, w_val, pos, x_hat))
+    return quad + merit_constraints(K, nv, nf, ns, mu, pos, lam, g, contact, lam_c, stitch,
+                                    lam_s, fric, lam_t)
+
+
+@ti.func
+def merit_constraints(K, nv, nf, ns, mu, pos: T, lam: T, g: T, contact: T, lam_c: T,
+                      stitch: T, lam_s: T, fric: T, lam_t: T):
+    """The constraint terms of ``merit`` (all but the metric's quadratic), at ``pos``."""
     total = 0.0
     for n in range(nv):
-        total += 0.5 * (pos[n] - x_hat[n]).dot(
-            metric_row(n, w_ptr, w_col, w_val, pos, x_hat))
         for j in ti.static(range(CONTACT_SLOTS)):
             t = ti.max(0.0, contact_g(contact, pos, n, j) + lam_c[n, j] / mu)
             total += 0.5 * mu * t * t - 0.5 * lam_c[n, j] * lam_c[n, j] / mu
@@ -219,12 +229,40 @@ def merit(K, nv, nf, ns, mu, pos: T, x_hat: T, w_ptr: T, w_col: T, w_val: T, w_d
 
 
 @ti.func
-def residual(K, nv, nf, ns, mu, x: T, x_hat: T, w_ptr: T, w_col: T, w_val: T, w_diag: T, pinned: T, face_verts: T,
-             lam: T, g: T, grad: T, contact: T, lam_c: T, stitch: T, lam_s: T, fric: T,
-             lam_t: T, r: T):
-    """r = -grad L_A = -W (x - x_hat) - sum max(0, lam + mu g) grad g; zero at pins."""
+def metric_gradient(nv, w_ptr: T, w_col: T, w_val: T, x: T, x_hat: T, Wdx: T):
+    """Wdx = W (x - x_hat), the gradient of the merit's quadratic term (``residual`` reads
+    it; solve_al's line search keeps it up to date along its steps)."""
     for n in range(nv):
-        r[n] = -metric_row(n, w_ptr, w_col, w_val, x, x_hat)
+        Wdx[n] = metric_row(n, w_ptr, w_col, w_val, x, x_hat)
+
+
+@ti.func
+def metric_along(nv, w_ptr: T, w_col: T, w_val: T, x: T, x_hat: T, d: T, Wdx: T, Wd: T):
+    """Wd = W d, and the coefficients (e.We, d.We, d.Wd) of the merit's quadratic term along
+    x + a d (e = x - x_hat, We = W e from Wdx): 1/2 (e + a d)^T W (e + a d) = 1/2 e.We +
+    a d.We + a^2/2 d.Wd for symmetric W (``quad_at``)."""
+    eWe, dWe, dWd = 0.0, 0.0, 0.0
+    for n in range(nv):
+        Wd[n] = metric_times(n, w_ptr, w_col, w_val, d)
+        eWe += (x[n] - x_hat[n]).dot(Wdx[n])
+        dWe += d[n].dot(Wdx[n])
+        dWd += d[n].dot(Wd[n])
+    return ti.Vector([eWe, dWe, dWd])
+
+
+@ti.func
+def quad_at(quad, a):
+    """The merit's quadratic term at x + a d from ``metric_along``'s coefficients."""
+    return 0.5 * quad[0] + a * quad[1] + 0.5 * a * a * quad[2]
+
+
+@ti.func
+def residual(K, nv, nf, ns, mu, x: T, Wdx: T, pinned: T, face_verts: T, lam: T, g: T,
+             grad: T, contact: T, lam_c: T, stitch: T, lam_s: T, fric: T, lam_t: T, r: T):
+    """r = -grad L_A = -W (x - x_hat) - sum max(0, lam + mu g) grad g; zero at pins. W (x -
+    x_hat) is read from Wdx (``metric_gradient``)."""
+    for n in range(nv):
+        r[n] = -Wdx[n]
         for j in ti.static(range(CONTACT_SLOTS)):
             s = lam_c[n, j] + mu * contact_g(contact, x, n, j)
             if s > 0.0:
@@ -299,25 +337,18 @@ def newton_matrix(K, nv, nf, ns, mu, margin, c_scale, use_twist, exact, x: T, w_
     block-sparse product; measured at 4k faces (mapping, 8 constraints a face) the product
     costs 0.14 ms against 0.33-0.36 ms for the face-by-face operator, and the ~1 ms of
     assembly is repaid by the ~20 iterations of a Newton step."""
-    for k in range(w_ptr[nv]):
-        H[k] = w_val[k]
     I = ti.Matrix.identity(float, 3)
-    for n in range(nv):
-        for j in ti.static(range(CONTACT_SLOTS)):
-            if lam_c[n, j] + mu * (contact_g(contact, x, n, j) + margin * c_scale) > 0.0:
-                cn = contact_normal(contact, n, j)
-                H[w_diag[n]] += mu * cn.outer_product(cn)
-        # Friction: mu P sticking; on the rim, the curvature of radius |y| (mu radius / |y|
-        # times P off the sliding direction).
-        P, y, radius = friction_state(n, mu, x, contact, lam_c, fric, lam_t)
-        if radius > 0.0:
-            ny = y.norm()
-            if ny <= radius:
-                H[w_diag[n]] += mu * P
-            else:
-                yh = y / ny
-                H[w_diag[n]] += (mu * radius / ny) * (P - yh.outer_product(yh))
+    copied = 0          # rows 0..copied-1 of H hold W's values (below)
     for f in range(nf):
+        # H = W row by row, each row just before the first face that adds to it: the rows are
+        # then in cache when the face's blocks land (measured at 64.8k faces, where H is 40
+        # MB: 22 against 30 ms for the whole matrix, the same values).
+        ids = face_verts[f]
+        last = ti.max(ids[0], ti.max(ids[1], ids[2]))
+        while copied <= last:
+            for k in range(w_ptr[copied], w_ptr[copied + 1]):
+                H[k] = w_val[k]
+            copied += 1
         near = mu * margin * ti.sqrt(rest_area[f])
         # The face's constraint terms, summed first; symmetric, so only the blocks (a, b) with
         # a <= b are formed (Hf's lower block triangle stays unused).
@@ -366,6 +397,25 @@ def newton_matrix(K, nv, nf, ns, mu, margin, c_scale, use_twist, exact, x: T, w_
             for a in ti.static(range(3)):
                 for b in ti.static(range(3)):
                     H[face_slot[f, 3 * a + b]] += c_curvature_block(curv, f, a, b)
+    while copied < nv:
+        for k in range(w_ptr[copied], w_ptr[copied + 1]):
+            H[k] = w_val[k]
+        copied += 1
+    for n in range(nv):
+        for j in ti.static(range(CONTACT_SLOTS)):
+            if lam_c[n, j] + mu * (contact_g(contact, x, n, j) + margin * c_scale) > 0.0:
+                cn = contact_normal(contact, n, j)
+                H[w_diag[n]] += mu * cn.outer_product(cn)
+        # Friction: mu P sticking; on the rim, the curvature of radius |y| (mu radius / |y|
+        # times P off the sliding direction).
+        P, y, radius = friction_state(n, mu, x, contact, lam_c, fric, lam_t)
+        if radius > 0.0:
+            ny = y.norm()
+            if ny <= radius:
+                H[w_diag[n]] += mu * P
+            else:
+                yh = y / ny
+                H[w_diag[n]] += (mu * radius / ny) * (P - yh.outer_product(yh))
     for k in range(ns):
         H[stitch_slot[k, 0]] += mu * I
         H[stitch_slot[k, 1]] += -mu * I
@@ -435,7 +485,8 @@ def newton_direction(method: ti.template(), exact: ti.template(), K, nv, nf, ns,
                   contact, lam_c, fric, lam_t, curv, face_slot, stitch_slot, H)
     rz, rr = 0.0, 0.0
     for n in range(nv):
-        P_inv[n] = H[w_diag[n]].inverse()       # pinned rows: the identity
+        if pc_mode == PC_JACOBI:
+            P_inv[n] = H[w_diag[n]].inverse()       # pinned rows: the identity
         b[n] = r[n]
         d[n] = ti.Vector([0.0, 0.0, 0.0])
         rr += r[n].dot(r[n])
@@ -471,7 +522,7 @@ def newton_direction(method: ti.template(), exact: ti.template(), K, nv, nf, ns,
 @ti.func
 def pcg_direction(method: ti.template(), exact: ti.template(), K, nv, nf, ns, mu, max_cg, rtol,
                   margin, use_twist,
-                  x: T, x_hat: T,
+                  x: T, Wdx: T,
                   w_ptr: T, w_col: T, w_val: T, w_diag: T, pinned: T, face_verts: T, Dm_inv: T,
                   grain: T, rest_area: T, params: T, lam: T, g: T, grad: T,
                   cm: T, what: T, kappa: T, twist: T, contact: T, lam_c: T, stitch: T,
@@ -485,8 +536,8 @@ def pcg_direction(method: ti.template(), exact: ti.template(), K, nv, nf, ns, mu
     needs as many Newton steps as 1e-3 with about half the CG iterations). Leaves
     b = -grad L_A; returns (slope grad L_A . d, CG iterations, |grad L_A|^2). With
     |grad L_A|^2 <= skip_rr no step is computed (d = 0, slope 0)."""
-    residual(K, nv, nf, ns, mu, x, x_hat, w_ptr, w_col, w_val, w_diag, pinned, face_verts, lam, g, grad,
-             contact, lam_c, stitch, lam_s, fric, lam_t, r)
+    residual(K, nv, nf, ns, mu, x, Wdx, pinned, face_verts, lam, g, grad, contact, lam_c, stitch,
+             lam_s, fric, lam_t, r)
     rr0 = dot(r, r, nv)
     slope, it = 0.0, 0
     if rr0 > skip_rr:
@@ -616,7 +667,7 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
              twist: A, contact: A, lam_c: A, stitch: A, lam_s: A, fric: A, lam_t: A, curv: A,
              face_slot: A, stitch_slot: A, H: A, b: A, d: A, r: A, z: A, p: A, Ap: A,
              P_inv: A, pc_mode: int, f_ptr: A, f_idx: A, f_val: A, f_perm: A, f_work: A,
-             mg_int: A, mg_real: A, mg_block: A,
+             mg_int: A, mg_real: A, mg_block: A, Wdx: A,
              stats: A):
     """The whole AL projection (METHOD 4) in one launch (measured: with one launch per
     phase, Python's argument handling cost as much as the solve): rounds of inexact
@@ -626,18 +677,16 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
     mu_max), until the largest violation and the largest |delta lambda| / mu
     (complementarity) are below tol (strain units). Stops early, with every multiplier kept,
     if x (= x_hat) is already feasible. Fills stats (rounds, violation, converged, CG,
-    Newton steps, complementarity)."""
+    Newton steps, complementarity, line-search trials)."""
     ti.loop_config(serialize=True)
     for _ in range(1):
         use_twist = params[P_SVD_DELTA] > 0.0 and K == 4 and params[P_CURVATURE] == 0.0
         margin = params[P_MARGIN]
         c_scale = params[P_CONTACT_SCALE]
         mu = mu0
-        rounds, newton, cg_total = 0, 0, 0
+        rounds, newton, cg_total, trials = 0, 0, 0, 0
         viol, comp = 0.0, 0.0
         converged = 0
-        # Line-search trials; the last one (alpha = 0) re-assembles at x when none passes, so
-        # the constraints are always assembled at x after it (one inlined assembly only).
         for n in range(nv):
             x_trial[n] = x[n]
         first = 1
@@ -654,28 +703,38 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
                     skip = -1.0
                     if inner > 0:
                         skip = params[P_INNER_RTOL] ** 2 * rr_first
-                    slope, cg_it, rr = pcg_direction(method, exact, K, nv, nf, ns, mu, max_cg, rtol,
-                                                 margin, use_twist, x, x_hat, w_ptr, w_col,
-                                                 w_val, w_diag, pinned, face_verts, Dm_inv,
-                                                 grain, rest_area, params, lam, g, grad, cm,
-                                                 what, kappa, twist, contact, lam_c, stitch,
-                                                 lam_s, fric, lam_t, c_scale, curv,
-                                                 face_slot, stitch_slot, H, b, d, r, z, p, Ap,
-                                                 P_inv, pc_mode, f_ptr, f_idx, f_val,
-                                                 f_perm, f_work, mg_int, mg_real,
-                                                 mg_block, skip)
+                    slope, cg_it, rr = pcg_direction(method, exact, K, nv, nf, ns, mu, max_cg,
+                                                     rtol, margin, use_twist, x, Wdx, w_ptr,
+                                                     w_col, w_val, w_diag, pinned, face_verts,
+                                                     Dm_inv, grain, rest_area, params, lam, g,
+                                                     grad, cm, what, kappa, twist, contact,
+                                                     lam_c, stitch, lam_s, fric, lam_t,
+                                                     c_scale, curv, face_slot, stitch_slot, H,
+                                                     b, d, r, z, p, Ap, P_inv, pc_mode, f_ptr,
+                                                     f_idx, f_val, f_perm, f_work, mg_int,
+                                                     mg_real, mg_block, skip)
                     if inner == 0:
                         rr_first = rr
                     cg_total += cg_it
                     newton += 1
                     inner += 1
+                if first == 0 and not slope < 0.0:
+                    break
+                # The merit's quadratic term along x + a d from W d, computed once (into Ap,
+                # free after the PCG): a trial costs no product with W (17 blocks a vertex
+                # with bending: 40 MB at 64.8k faces). Wdx follows x along accepted steps.
+                quad = ti.Vector([0.0, 0.0, 0.0])
+                if first == 0:
+                    quad = metric_along(nv, w_ptr, w_col, w_val, x, x_hat, d, Wdx, Ap)
                     if L_known == 1:
                         L0 = L_x
                     else:
-                        L0 = merit(K, nv, nf, ns, mu, x, x_hat, w_ptr, w_col, w_val, w_diag,
-                                   lam, g, contact, lam_c, stitch, lam_s, fric, lam_t)
-                if first == 0 and not slope < 0.0:
-                    break
+                        L0 = quad_at(quad, 0.0) + merit_constraints(K, nv, nf, ns, mu, x, lam, g,
+                                                           contact, lam_c, stitch, lam_s,
+                                                           fric, lam_t)
+                # Trials assemble the constraint values only; the gradients and curvature are
+                # assembled once, at the point reached (measured at 64.8k faces: 5 against 20
+                # ms an assembly, and up to 2-3 trials a Newton step there).
                 alpha, step, tries = 1.0, 0.0, 0
                 while tries < 13:
                     a = alpha
@@ -685,22 +744,23 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
                         x_trial[n] = x[n]
                         if a > 0.0:
                             x_trial[n] += a * d[n]
-                    if first == 1:
-                        # x_hat: its values decide whether there is anything to do and, with
-                        # from_prev, where to start; choose_start assembles the start.
-                        assemble_values(method, nf, x_trial, face_verts, Dm_inv, grain,
-                                        rest_area, params, g)
-                    else:
-                        assemble_all(method, nf, x_trial, face_verts, Dm_inv, grain,
-                                     rest_area, params, g, grad, cm, what, kappa, twist)
+                    if a == 0.0 and first == 0:
+                        break               # no step passed: x stays
+                    # (first == 1: x_hat's values decide whether there is anything to do and,
+                    # with from_prev, where to start; choose_start assembles the start.)
+                    assemble_values(method, nf, x_trial, face_verts, Dm_inv, grain, rest_area,
+                                    params, g)
                     if a == 0.0:
                         break
-                    L = merit(K, nv, nf, ns, mu, x_trial, x_hat, w_ptr, w_col, w_val, w_diag, lam, g, contact,
-                              lam_c, stitch, lam_s, fric, lam_t)
+                    trials += 1
+                    L = quad_at(quad, a) + merit_constraints(
+                        K, nv, nf, ns, mu, x_trial, lam, g, contact, lam_c, stitch, lam_s,
+                        fric, lam_t)
                     if L <= L0 + 1e-4 * a * slope:
                         for n in range(nv):
                             step = ti.max(step, (x_trial[n] - x[n]).norm())
                             x[n] = x_trial[n]
+                            Wdx[n] += a * Ap[n]
                         L_x, L_known = L, 1
                         break
                     alpha *= 0.5
@@ -717,7 +777,12 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
                                  w_ptr, w_col, w_val, w_diag, face_verts, Dm_inv, grain,
                                  rest_area, params, lam, g, grad, cm, what, kappa, twist,
                                  contact, lam_c, stitch, lam_s, fric, lam_t, pinned)
+                    metric_gradient(nv, w_ptr, w_col, w_val, x, x_hat, Wdx)
                     continue
+                # Gradients and curvature at x (the step's end, or x again after a failed
+                # search, whose trials overwrote the values).
+                assemble_all(method, nf, x, face_verts, Dm_inv, grain, rest_area, params, g,
+                             grad, cm, what, kappa, twist)
                 if adaptive:
                     # Trust the exact active set more after a full step, widen it after a
                     # short one (``adaptive_margin``).
@@ -743,6 +808,7 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
         stats[ST_CG] = cg_total
         stats[ST_NEWTON] = newton
         stats[ST_COMP] = comp
+        stats[ST_TRIALS] = trials
 
 
 @ti.kernel

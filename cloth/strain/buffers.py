@@ -26,7 +26,7 @@ from .constraints import K_MAX
 
 
 # Indices into the ``stats`` array (read back once per solve).
-ST_ITERS, ST_VIOL, ST_CONVERGED, ST_CG, ST_NEWTON, ST_COMP, ST_START_VIOL = range(7)
+ST_ITERS, ST_VIOL, ST_CONVERGED, ST_CG, ST_NEWTON, ST_COMP, ST_START_VIOL, ST_TRIALS = range(8)
 # The PCG's preconditioner (``al.precondition``): H's 3x3 diagonal blocks, a sparse Cholesky
 # factor of the implicit step's matrix (factor_precond.py), its aggregation multigrid
 # (multigrid.py).
@@ -83,9 +83,9 @@ class Workspace:
         self.twist = ti.ndarray(vec9, (F, K))     # extra rank-1 curvature (svd only)
         self.curv = ti.ndarray(vec9, (F, 3))      # exact curvature per face (c_curvature.py)
         # Per-vertex vectors: positions (x), unconstrained x_hat, start of the call, line-search
-        # trial, Newton direction and PCG vectors; Jacobi accumulators.
+        # trial, Newton direction and PCG vectors, W (x - x_hat); Jacobi accumulators.
         names = ("x", "v", "x_hat", "x_start", "x_trial", "b", "d", "r", "z", "p", "Ap",
-                 "acc", "force")
+                 "Wdx", "acc", "force")
         for name in names:
             setattr(self, name, ti.ndarray(vec3, V))
         self.P_inv = ti.ndarray(ti.types.matrix(3, 3, float), V)
@@ -93,8 +93,14 @@ class Workspace:
         self.params = ti.ndarray(float, N_PARAMS)  # bands (warp, weft, shear), margin, deltas
         self.stats = ti.ndarray(float, 8)
         self.info = ti.ndarray(float, 8)          # the direct solver's per-kernel results
-        self.H = None                             # its Newton matrix values (per pattern)
+        self.H = None                             # the Newton matrix's values (per pattern)
         self.set_stitch_capacity(1)
+
+    def newton_matrix(self, nnz):
+        """The Newton matrix's values (both Newton paths), sized for nnz blocks."""
+        if self.H is None or self.H.shape[0] < nnz:
+            self.H = ti.ndarray(ti.types.matrix(3, 3, float), nnz)
+        return self.H
 
     def set_stitch_capacity(self, n):
         """Seams: vertex pairs (a, b) held together, x_a = x_b, and their multipliers

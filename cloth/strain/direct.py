@@ -29,8 +29,8 @@ import taichi as ti
 
 from .. import ndarrays
 from . import exact_curvature
-from .al import (assemble_all, choose_start, fill_c_curvature, merit, newton_matrix,
-                 residual, update_multipliers, vertex_violation, violation_of)
+from .al import (assemble_all, choose_start, fill_c_curvature, merit, metric_gradient,
+                 newton_matrix, residual, update_multipliers, vertex_violation, violation_of)
 from .buffers import (P_CONTACT_SCALE, P_CURVATURE, P_MARGIN, P_SVD_DELTA, PC_JACOBI, ST_CG,
                       ST_COMP,
                       ST_CONVERGED, ST_ITERS, ST_NEWTON, ST_START_VIOL, ST_VIOL, A)
@@ -68,14 +68,16 @@ def newton_system(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: 
                   x_hat: A, w_ptr: A, w_col: A, w_val: A, w_diag: A, pinned: A, face_verts: A,
                   Dm_inv: A, grain: A, rest_area: A, params: A, lam: A, g: A, grad: A, cm: A,
                   what: A, kappa: A, twist: A, contact: A, lam_c: A, stitch: A, lam_s: A,
-                  fric: A, lam_t: A, curv: A, face_slot: A, stitch_slot: A, H: A, r: A):
-    """r = -grad L_A and the projected-Newton matrix H (``al.newton_matrix``: the matrix the
+                  fric: A, lam_t: A, curv: A, face_slot: A, stitch_slot: A, H: A, r: A,
+                  Wdx: A):
+    """r = -grad L_A (Wdx: work vector) and the projected-Newton matrix H (``al.newton_matrix``: the matrix the
     PCG path's Newton steps solve with, in W's block pattern)."""
     ti.loop_config(serialize=True)
     for _ in range(1):
         exact = params[P_CURVATURE] > 0.0
-        residual(K, nv, nf, ns, mu, x, x_hat, w_ptr, w_col, w_val, w_diag, pinned,
-                 face_verts, lam, g, grad, contact, lam_c, stitch, lam_s, fric, lam_t, r)
+        metric_gradient(nv, w_ptr, w_col, w_val, x, x_hat, Wdx)
+        residual(K, nv, nf, ns, mu, x, Wdx, pinned, face_verts, lam, g, grad, contact, lam_c,
+                 stitch, lam_s, fric, lam_t, r)
         fill_c_curvature(method, K, nf, mu, x, face_verts, Dm_inv, grain, rest_area, params,
                          lam, g, curv)
         newton_matrix(K, nv, nf, ns, mu, params[P_MARGIN], params[P_CONTACT_SCALE],
@@ -147,7 +149,8 @@ def fill_newton_system(lim, mid, K, mu, metric):
                   metric.ptr, metric.col, metric.val, metric.diag, ws.pinned, ws.face_verts,
                   ws.Dm_inv, ws.grain, ws.rest_area, ws.params, ws.lam, ws.g, ws.grad, ws.cm,
                   ws.what, ws.kappa, ws.twist, ws.contact, ws.lam_c, ws.stitch, ws.lam_s,
-                  ws.fric, ws.lam_t, ws.curv, metric.face_slot, metric.stitch_slot, ws.H, ws.r)
+                  ws.fric, ws.lam_t, ws.curv, metric.face_slot, metric.stitch_slot,
+                  ws.newton_matrix(metric.nnz), ws.r, ws.Wdx)
 
 
 def solve(lim, mid, K, metric, chol, mu, mu_max, step_tol):

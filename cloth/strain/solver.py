@@ -32,7 +32,7 @@ from .factor_precond import FactorPreconditioner, FactorStub
 from .multigrid import HAVE_PYAMG, MAX_COARSE, MultigridPreconditioner, MultigridStub
 from .c_curvature import C_STEP_F32, C_STEP_F64
 from .buffers import (PC_FACTOR, PC_JACOBI, PC_MULTIGRID, ST_CG, ST_CONVERGED, ST_ITERS,
-                      ST_NEWTON, ST_START_VIOL, ST_VIOL, Workspace)
+                      ST_NEWTON, ST_START_VIOL, ST_TRIALS, ST_VIOL, Workspace)
 
 METHOD_NAMES = METHODS + ("none",)
 SOLVERS = ("al", "jacobi", "gauss-seidel")
@@ -183,7 +183,7 @@ class StrainLimiter:
     (or projection sweeps for the baselines).
 
     After each ``project`` call: ``last_iterations``, ``last_violation_max`` (strain units),
-    ``last_converged``, ``last_ms``, and for the AL ``last_newton`` / ``last_cg`` totals (on the
+    ``last_converged``, ``last_ms``, and for the AL ``last_newton`` / ``last_cg`` / ``last_trials`` (line-search trials) totals (on the
     Cholesky path ``last_cg`` counts the CG iterations preconditioned by a reused factor, and
     ``last_factorizations`` the numeric factorisations; on the PCG path it counts the
     preconditioner's refreshes: a factorisation or a multigrid hierarchy).
@@ -308,7 +308,7 @@ class StrainLimiter:
         self.set_method(method)
         self.last_iterations, self.last_violation_max = 0, 0.0
         self.last_converged, self.last_ms = True, 0.0
-        self.last_newton = self.last_cg = self.last_factorizations = 0
+        self.last_newton = self.last_cg = self.last_factorizations = self.last_trials = 0
         self.last_reverted, self.reverted_count = False, 0
 
     # ---- settings ------------------------------------------------------------------------
@@ -439,7 +439,7 @@ class StrainLimiter:
     def _newton_metric(self, use_system):
         """The projection's metric in the full block pattern (every face and seam pair), which
         both Newton paths write their matrix into (``al.newton_matrix``): the implicit step's
-        matrix, or M spread over that pattern; with ws.H sized for it."""
+        matrix, or M spread over that pattern."""
         if use_system:
             metric = self._system
         else:
@@ -449,8 +449,6 @@ class StrainLimiter:
                 system_matrix.fill_diagonal(self.model.n_verts, self._full_mass.diag,
                                             self._full_mass.val, self.model.mass)
             metric = self._full_mass
-        if self._ws.H is None or self._ws.H.shape[0] < metric.nnz:
-            self._ws.H = ti.ndarray(system_matrix.mat3, metric.nnz)
         return metric
 
     def _direct_metric(self, use_system):
@@ -592,6 +590,7 @@ class StrainLimiter:
         self.last_violation_max = float(max(stats[ST_VIOL], 0.0))
         self.last_converged = bool(converged)
         self.last_newton, self.last_cg = int(newton), int(stats[ST_CG])
+        self.last_trials = int(stats[ST_TRIALS]) if self.solver == "al" else 0
         self.last_ms = 1e3 * (time.perf_counter() - t0)
 
     def _assemble(self, mid, pos):
@@ -676,9 +675,9 @@ class StrainLimiter:
                    ws.g,
                    ws.grad, ws.cm, ws.what, ws.kappa, ws.twist, ws.contact, ws.lam_c,
                    ws.stitch, ws.lam_s, ws.fric, ws.lam_t, ws.curv, metric.face_slot,
-                   metric.stitch_slot, ws.H, ws.b, ws.d, ws.r, ws.z, ws.p, ws.Ap, ws.P_inv,
+                   metric.stitch_slot, ws.newton_matrix(metric.nnz), ws.b, ws.d, ws.r, ws.z, ws.p, ws.Ap, ws.P_inv,
                    pc_mode, fp.ptr, fp.idx, fp.val, fp.perm, fp.work, mg.ints, mg.reals,
-                   mg.blocks, ws.stats)
+                   mg.blocks, ws.Wdx, ws.stats)
         stats = ws.stats.to_numpy()
         rounds, newton = int(stats[ST_ITERS]), int(stats[ST_NEWTON])
         self.last_factorizations = 0
