@@ -1,0 +1,166 @@
+"""Where a Newton step of the one-kernel strain solve spends its time, piece by piece, per mesh
+size (issue #13: what keeps the cost above N^1).
+
+    python -m benchmarks.solve_pieces --resolutions 33 181 [--method mapping] [--frames 6]
+
+Runs ``hanging`` for F frames, captures the arguments of the last ``al.solve_al`` launch, and
+times each piece of the solve on that state in a kernel of its own, serially like the solve
+(``reps`` repetitions in one launch, minus an empty launch). The pieces, and how often a
+Newton step runs each (solve_al):
+  assemble values   the constraint values at a line-search trial (``assemble_values``; once
+                    per trial);
+  assemble all      values, gradients and curvature data at the point reached (once);
+  merit terms       the merit's constraint terms (``merit_constraints``; once per trial);
+  W product         a product with the metric W (``metric_along``'s W d; once);
+  residual          -grad L_A from W (x - x_hat) (once);
+  Newton matrix     H written out in W's block pattern (once);
+  H product         one PCG iteration's product with H (max_cg times);
+  precondition      one application of the preconditioner the solve used (max_cg + 1 times).
+Prints a Markdown table: ms per piece and ns per face. Timings on a shared 2-core machine
+carry tens of percent of noise; compare sizes within one run.
+"""
+import argparse
+import inspect
+import time
+
+PIECES = ("assemble values", "assemble all", "merit terms", "W product", "residual",
+          "Newton matrix", "H product", "precondition")
+
+
+def capture(resolution, method, frames):
+    """(simulator, {argument name: value}) of the last solve_al launch after ``frames``
+    frames of hanging."""
+    import scenes
+    from cloth.simulator import Simulator
+    from cloth.strain import al
+    from scenes.common import resolve
+    module = scenes.get("hanging")
+    cfg = resolve(module.DEFAULTS, [{"cloth": {"resolution": resolution},
+                                     "strain": {"method": method}}])
+    sim = Simulator(module.build(cfg), cfg)
+    names = list(inspect.signature(al.solve_al).parameters)
+    last = {}
+    original = al.solve_al
+
+    def recording(*args):
+        last["args"] = dict(zip(names, args))
+        original(*args)
+    al.solve_al = recording
+    try:
+        for _ in range(frames):
+            sim.step_frame()
+    finally:
+        al.solve_al = original
+    return sim, last["args"]
+
+
+def time_pieces(a):
+    """ms per piece (PIECES order) on the captured arguments ``a``."""
+    import taichi as ti
+    piece = piece_kernel()
+    order = ("method", "K", "nv", "nf", "ns", "mu0", "params", "x", "x_hat", "x_trial",
+             "w_ptr", "w_col", "w_val", "w_diag", "pinned", "face_verts", "Dm_inv", "grain",
+             "rest_area", "lam", "g", "grad", "cm", "what", "kappa", "twist", "contact",
+             "lam_c", "stitch", "lam_s", "fric", "lam_t", "curv", "face_slot",
+             "stitch_slot", "H", "d", "r", "z", "p", "Ap", "P_inv", "pc_mode", "f_ptr",
+             "f_idx", "f_val", "f_perm", "f_work", "mg_int", "mg_real", "mg_block", "Wdx")
+    args = [a[k] for k in order]
+    out = []
+    reps = max(3, int(50 * 2000 / a["nf"]))
+    for which in range(len(PIECES)):
+        piece(which, 1, *args)          # compile, warm the caches
+        ti.sync()
+        t = time.perf_counter()
+        piece(which, reps, *args)
+        ti.sync()
+        full = time.perf_counter() - t
+        t = time.perf_counter()
+        piece(which, 0, *args)
+        ti.sync()
+        empty = time.perf_counter() - t
+        out.append(1e3 * max(full - empty, 0.0) / reps)
+    return out
+
+
+def piece_kernel():
+    """The timing kernel: one piece of ``al.solve_al``, ``reps`` times, on the solve's own
+    arrays. Made on call (after ``backend.init``: the strain modules create Taichi types at
+    import, and the benchmarks must import none)."""
+    import taichi as ti
+
+    from cloth.strain import al
+    from cloth.strain.al import A
+    from cloth.strain.buffers import P_CONTACT_SCALE, P_CURVATURE, P_MARGIN, P_SVD_DELTA
+
+    @ti.kernel
+    def piece(which: int, reps: int, method: ti.template(), K: int, nv: int, nf: int, ns: int,
+              mu: float, params: A, x: A, x_hat: A, x_trial: A, w_ptr: A, w_col: A, w_val: A,
+              w_diag: A, pinned: A, face_verts: A, Dm_inv: A, grain: A, rest_area: A, lam: A,
+              g: A, grad: A, cm: A, what: A, kappa: A, twist: A, contact: A, lam_c: A,
+              stitch: A, lam_s: A, fric: A, lam_t: A, curv: A, face_slot: A, stitch_slot: A,
+              H: A, d: A, r: A, z: A, p: A, Ap: A, P_inv: A, pc_mode: int, f_ptr: A, f_idx: A,
+              f_val: A, f_perm: A, f_work: A, mg_int: A, mg_real: A, mg_block: A,
+              Wdx: A) -> float:
+        ti.loop_config(serialize=True)
+        acc = 0.0
+        for _ in range(1):
+            use_twist = params[P_SVD_DELTA] > 0.0 and K == 4 and params[P_CURVATURE] == 0.0
+            margin, c_scale = params[P_MARGIN], params[P_CONTACT_SCALE]
+            for n in range(nv):
+                d[n] = p[n]                                  # a direction to multiply with
+            for _rep in range(reps):
+                if which == 0:
+                    al.assemble_values(method, nf, x, face_verts, Dm_inv, grain, rest_area,
+                                       params, g)
+                elif which == 1:
+                    al.assemble_all(method, nf, x, face_verts, Dm_inv, grain, rest_area, params,
+                                    g, grad, cm, what, kappa, twist)
+                elif which == 2:
+                    acc += al.merit_constraints(K, nv, nf, ns, mu, x, lam, g, contact, lam_c,
+                                                stitch, lam_s, fric, lam_t)
+                elif which == 3:
+                    acc += al.metric_along(nv, w_ptr, w_col, w_val, x, x_hat, d, Wdx, Ap)[2]
+                elif which == 4:
+                    al.residual(K, nv, nf, ns, mu, x, Wdx, pinned, face_verts, lam, g, grad,
+                                contact, lam_c, stitch, lam_s, fric, lam_t, r)
+                elif which == 5:
+                    al.newton_matrix(K, nv, nf, ns, mu, margin, c_scale, use_twist, False, x,
+                                     w_ptr, w_col, w_val, w_diag, pinned, face_verts, rest_area,
+                                     lam, g, grad, cm, what, kappa, twist, contact, lam_c, fric,
+                                     lam_t, curv, face_slot, stitch_slot, H)
+                elif which == 6:
+                    for n in range(nv):
+                        Ap[n] = al.metric_times(n, w_ptr, w_col, H, p)
+                else:
+                    acc += al.precondition(pc_mode, nv, P_inv, f_ptr, f_idx, f_val, f_perm,
+                                           f_work, mg_int, mg_real, mg_block, r, z)
+        return acc
+
+    return piece
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--resolutions", type=int, nargs="+", default=[33, 91, 181])
+    ap.add_argument("--method", default="mapping")
+    ap.add_argument("--frames", type=int, default=6)
+    args = ap.parse_args()
+    from cloth import backend
+    backend.init("cpu", "f64")
+    rows = []
+    for res in args.resolutions:
+        sim, captured = capture(res, args.method, args.frames)
+        ms = time_pieces(captured)
+        rows.append((sim.model.n_faces, ms))
+        print(f"resolution {res}: {sim.model.n_faces} faces, "
+              + ", ".join(f"{p} {t:.3f} ms" for p, t in zip(PIECES, ms)), flush=True)
+    print()
+    print("| faces | " + " | ".join(PIECES) + " |")
+    print("|---" * (len(PIECES) + 1) + "|")
+    for faces, ms in rows:
+        cells = [f"{t:.3g} ms ({1e6 * t / faces:.0f} ns/face)" for t in ms]
+        print(f"| {faces} | " + " | ".join(cells) + " |")
+
+
+if __name__ == "__main__":
+    main()
