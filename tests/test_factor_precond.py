@@ -33,9 +33,10 @@ def test_kernel_applies_the_inverse_of_the_factored_matrix():
     factored (lumped, pinned-masked) matrix, for a random r; r.z is returned."""
     sim = _hanging("mapping", "implicit", res=6)
     sim.step_frame()
+    sim.step_frame()
     lim = sim.strain
     fp = lim._pc
-    assert fp is not None and fp.ready and lim.last_factorizations == 1     # made early
+    assert fp is not None and fp.ready and lim.last_factorizations == 1
     values = factor_precond.pinned_values(fp.metric, sim.model.pinned)
     fp.refresh(values)
     factored = fp.chol._to_factor(fp.chol.matrix(values))
@@ -72,29 +73,20 @@ def test_factor_and_block_jacobi_give_the_same_projection():
 
 
 def test_factor_is_refreshed_every_few_solves_and_only_for_small_meshes(monkeypatch):
-    """The factor is made before the first solve on a mesh and remade every REFRESH_SOLVES
-    solves, after a pin changes and on a mesh change; when the last mesh lived one solve
-    only (remeshing every substep) the first FIRST_AFTER solves run block Jacobi and it is
-    made after them. Above FACTOR_MAX_FACES faces the multigrid is made instead, and on the
-    split projection neither."""
+    """The first FIRST_AFTER solves on a mesh run block Jacobi, and the factor is made after
+    them; it is remade every REFRESH_SOLVES solves, after a pin changes and on a mesh
+    change; above FACTOR_MAX_FACES faces the multigrid is made instead, and on the split
+    projection neither."""
     from cloth.strain import solver
     sim = _hanging("mapping", "implicit", res=6)
     lim = sim.strain
     made = []
-    for _ in range(2 * factor_precond.REFRESH_SOLVES + 2):
+    for _ in range(2 * factor_precond.REFRESH_SOLVES + factor_precond.FIRST_AFTER):
         sim.step_frame()                             # one substep a frame
         made.append(lim.last_factorizations)
-    period = factor_precond.REFRESH_SOLVES
-    assert made[0] == 1 and made[period - 1] == made[2 * period - 1] == 1 and sum(made) == 3
-    lim.on_mesh_changed()                            # as a remesh does, after 22 solves
-    sim.step_frame()
-    assert lim.last_factorizations == 1              # made before the solve
-    lim.on_mesh_changed()                            # that mesh lived one solve
-    made = []
-    for _ in range(factor_precond.FIRST_AFTER):
-        sim.step_frame()
-        made.append(lim.last_factorizations)
-    assert made == [0] * (factor_precond.FIRST_AFTER - 1) + [1]
+    period, first = factor_precond.REFRESH_SOLVES, factor_precond.FIRST_AFTER - 1
+    assert made[:first] == [0] * first and made[first] == 1
+    assert made[first + period] == made[first + 2 * period] == 1 and sum(made) == 3
     free = int(np.flatnonzero(~sim.model.pinned)[0])
     sim.model.set_vertex_pin(free, True)             # e.g. held by the mouse
     assert not lim._pc.usable(sim.model.pinned)

@@ -32,10 +32,7 @@ from .buffers import PC_FACTOR
 
 # Refactorise the metric every REFRESH_SOLVES solves (it changes as the cloth deforms). The
 # first factor is made after FIRST_AFTER solves on a mesh: remeshing every frame makes a new
-# pattern each substep, and a factor made after its only solve would never be used. When the
-# previous pattern lived longer than one solve (or there was none), it is made before the
-# first solve instead (``early``): at 64.8k faces a block-Jacobi frame costs ~3.5 s against
-# ~1.5 s with the multigrid, whose hierarchy takes 0.43 s.
+# pattern each substep, and a factor made after its only solve would never be used.
 REFRESH_SOLVES = 10
 FIRST_AFTER = 2
 
@@ -43,13 +40,11 @@ FIRST_AFTER = 2
 class RefreshedPreconditioner:
     """The life cycle the factor and the multigrid (multigrid.py) share: made from the metric
     with pinned rows and columns the identity (``pinned_values``) after FIRST_AFTER solves on
-    a pattern (or, ``early``, before its first), remade every REFRESH_SOLVES solves and
-    whenever the pins change. A subclass
+    a pattern, remade every REFRESH_SOLVES solves and whenever the pins change. A subclass
     sets ``mode`` (the kernel's PC_* switch) and implements ``refresh(values, pinned)``."""
 
-    def __init__(self, metric, early=False):
+    def __init__(self, metric):
         self.metric = metric
-        self.early = early          # made before the first solve (``before_solve``)
         self.ready = False
         self.solves_since = 0
         self.solves = 0                         # on this pattern
@@ -63,14 +58,6 @@ class RefreshedPreconditioner:
             self.ready = False
         return self.ready
 
-    def before_solve(self, pinned):
-        """With ``early``, make it before the first solve on its pattern (from the metric of
-        that solve). Returns whether it did."""
-        if not (self.early and self.solves == 0 and not self.ready):
-            return False
-        self._make(pinned)
-        return True
-
     def after_solve(self, pinned):
         """Remake it when there is none yet or it is REFRESH_SOLVES solves old, but not
         before FIRST_AFTER solves on this pattern. Returns whether it did."""
@@ -79,15 +66,12 @@ class RefreshedPreconditioner:
         if self.solves < FIRST_AFTER or (self.ready and self.solves_since <
                                           REFRESH_SOLVES):
             return False
-        self._make(pinned)
-        return True
-
-    def _make(self, pinned):
         pinned = np.array(pinned[: self.metric.n], bool)
         self.refresh(pinned_values(self.metric, pinned), pinned)
         self.pinned = pinned
         self.solves_since = 0
         self.ready = True
+        return True
 
 
 class FactorPreconditioner(RefreshedPreconditioner):
@@ -101,8 +85,8 @@ class FactorPreconditioner(RefreshedPreconditioner):
     recompilation)."""
     mode = PC_FACTOR
 
-    def __init__(self, metric, early=False):
-        super().__init__(metric, early)
+    def __init__(self, metric):
+        super().__init__(metric)
         self.chol = linalg.SparseCholesky(metric.ptr_np, metric.col_np, metric.n,
                                           backend="cholmod", core=metric.core_np,
                                           vertex_order=True)

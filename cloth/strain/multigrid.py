@@ -78,8 +78,8 @@ class MultigridPreconditioner(RefreshedPreconditioner):
     signature: no recompilation). The life cycle is ``RefreshedPreconditioner``'s."""
     mode = PC_MULTIGRID
 
-    def __init__(self, metric, early=False):
-        super().__init__(metric, early)
+    def __init__(self, metric):
+        super().__init__(metric)
         self.ints = ti.ndarray(ti.i32, 1)
         self.reals = ti.ndarray(float, 1)
         self.blocks = ti.ndarray(mat3, max(metric.n, 1))

@@ -264,7 +264,6 @@ class StrainLimiter:
         self._system = None        # the implicit step's matrix (coupling "implicit")
         self._system_ready = False
         self._pc = None            # Factor- or MultigridPreconditioner of the implicit metric
-        self._solves_on_last_pattern = None   # (its ``early`` switch)
         self._stubs = None         # placeholder arrays for the preconditioners not in use
         self.precondition = "auto"
         self.multigrid_cg = None       # None: the method's MULTIGRID_CG
@@ -418,8 +417,6 @@ class StrainLimiter:
         self._full_mass = None
         self._chol = None
         self._system = None
-        if self._pc is not None:
-            self._solves_on_last_pattern = self._pc.solves
         self._pc = None
         self._system_ready = False
         self._mesh_key = self._current_mesh_key()
@@ -663,7 +660,6 @@ class StrainLimiter:
         # An inner loop stops once its steps are far below the tolerance (in metres).
         step_tol = 0.01 * self.tol * m.typical_edge()
         pc = None if contacts else self._pcg_preconditioner(metric)
-        made = pc is not None and pc.before_solve(m.pinned)
         pc_mode = pc.mode if pc is not None and pc.usable(m.pinned[: m.n_verts]) else PC_JACOBI
         if self._stubs is None:
             self._stubs = {PC_FACTOR: FactorStub(), PC_MULTIGRID: MultigridStub()}
@@ -684,9 +680,9 @@ class StrainLimiter:
                    mg.blocks, ws.Wdx, ws.stats)
         stats = ws.stats.to_numpy()
         rounds, newton = int(stats[ST_ITERS]), int(stats[ST_NEWTON])
-        self.last_factorizations = int(made)
+        self.last_factorizations = 0
         if pc is not None:
-            self.last_factorizations += int(pc.after_solve(m.pinned))
+            self.last_factorizations = int(pc.after_solve(m.pinned))
         return rounds, newton, bool(stats[ST_CONVERGED] > 0), stats
 
     def _pcg_preconditioner(self, metric):
@@ -715,10 +711,7 @@ class StrainLimiter:
             return None
         cls = FactorPreconditioner if kind == "factor" else MultigridPreconditioner
         if not isinstance(self._pc, cls) or self._pc.metric is not metric:
-            # Made before the first solve unless the last pattern lived for one solve only
-            # (remeshing every substep), where it would never be used (FIRST_AFTER).
-            early = self._pc is None and self._solves_on_last_pattern != 1
-            self._pc = cls(metric, early=early)
+            self._pc = cls(metric)
         return self._pc
 
     def constraint_values(self):
