@@ -729,9 +729,9 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
                     if L_known == 1:
                         L0 = L_x
                     else:
-                        L0 = quad_at(quad, 0.0) + merit_constraints(K, nv, nf, ns, mu, x, lam, g,
-                                                           contact, lam_c, stitch, lam_s,
-                                                           fric, lam_t)
+                        L0 = quad_at(quad, 0.0) + merit_constraints(
+                            K, nv, nf, ns, mu, x, lam, g, contact, lam_c, stitch, lam_s, fric,
+                            lam_t)
                 # Trials assemble the constraint values only; the gradients and curvature are
                 # assembled once, at the point reached (measured at 64.8k faces: 5 against 20
                 # ms an assembly, and up to 2-3 trials a Newton step there).

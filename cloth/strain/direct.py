@@ -70,8 +70,9 @@ def newton_system(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: 
                   what: A, kappa: A, twist: A, contact: A, lam_c: A, stitch: A, lam_s: A,
                   fric: A, lam_t: A, curv: A, face_slot: A, stitch_slot: A, H: A, r: A,
                   Wdx: A):
-    """r = -grad L_A (Wdx: work vector) and the projected-Newton matrix H (``al.newton_matrix``: the matrix the
-    PCG path's Newton steps solve with, in W's block pattern)."""
+    """r = -grad L_A (via Wdx = W (x - x_hat), a work vector) and the projected-Newton matrix
+    H (``al.newton_matrix``: the matrix the PCG path's Newton steps solve with, in W's block
+    pattern)."""
     ti.loop_config(serialize=True)
     for _ in range(1):
         exact = params[P_CURVATURE] > 0.0

@@ -183,10 +183,11 @@ class StrainLimiter:
     (or projection sweeps for the baselines).
 
     After each ``project`` call: ``last_iterations``, ``last_violation_max`` (strain units),
-    ``last_converged``, ``last_ms``, and for the AL ``last_newton`` / ``last_cg`` / ``last_trials`` (line-search trials) totals (on the
-    Cholesky path ``last_cg`` counts the CG iterations preconditioned by a reused factor, and
-    ``last_factorizations`` the numeric factorisations; on the PCG path it counts the
-    preconditioner's refreshes: a factorisation or a multigrid hierarchy).
+    ``last_converged``, ``last_ms``, and for the AL ``last_newton`` / ``last_cg`` /
+    ``last_trials`` (line-search trials) totals (on the Cholesky path ``last_cg`` counts the
+    CG iterations preconditioned by a reused factor, and ``last_factorizations`` the numeric
+    factorisations; on the PCG path it counts the preconditioner's refreshes: a
+    factorisation or a multigrid hierarchy).
 
     AL settings: ``max_newton`` Newton steps per round (None: ``newton_budget``), each a
     PCG solve of at most
