@@ -3,6 +3,8 @@ exponent k of cost ~ N^k per stage.
 
     python -m benchmarks.scaling --out docs/speed            # ~500 to ~100k triangles
     python -m benchmarks.scaling --quick --out results/scale  # ~500 to ~8k, a few minutes
+    python -m benchmarks.scaling --there-and-back --resolutions 33 46 65 91 129 181 \
+        --strain-frames 10 --out docs/speed   # #13's 2k-64k, drift cancelled (~25 min)
 
 Each size runs in its own child process (so its peak memory is its own):
   dynamics              the hanging scene (soft cloth, one 1/30 s substep per frame, CG to
@@ -214,7 +216,7 @@ def fit_exponent(ns, ms):
     return float(np.polyfit(np.log(ns[ok]), np.log(ms[ok]), 1)[0])
 
 
-def sweep(resolutions, frames, budget_s, timeout, log=print, strain_frames=None):
+def sweep(resolutions, frames, budget_s, timeout, log=print, strain_frames=None, back=False):
     base = run_child(3, list(METHODS), 2, timeout)
     log(f"baseline (8 triangles): peak RSS {base.get('peak_rss_mb', float('nan')):.0f} MB")
     rows, skipped = [], []
@@ -245,7 +247,33 @@ def sweep(resolutions, frames, budget_s, timeout, log=print, strain_frames=None)
         rows.append(r)
         log(f"{r['faces']:6d} triangles: " + ", ".join(f"{s} {v:.1f}" for s, v in r["ms"].items())
             + f" ms/frame; peak RSS {r['peak_rss_mb']:.0f} MB; child {r['wall_s']:.0f} s")
+    if back:
+        there_and_back(rows, frames, timeout, log, strain_frames)
     return base, rows, skipped
+
+
+def there_and_back(rows, frames, timeout, log=print, strain_frames=None):
+    """Run every size that ran again, largest first, with the same stages, and set each
+    stage's ms to the geometric mean of its two runs (the runs themselves are kept as
+    ``ms_up`` and ``ms_back``).
+
+    Why: this machine's speed drifts within a sweep (by up to 1.5x over a quarter of an hour,
+    seen as unchanged code fitting different exponents). Sizes run in rising order put any
+    drift onto the exponent; in the mirrored sequence each size's two runs sit symmetrically
+    about the sweep's middle in time, so a drift linear in time cancels in the mean's ratios
+    (up to second order), and the two passes' exponents show how large the drift was."""
+    for r in reversed([r for r in rows if "error" not in r]):
+        methods = [s.split(":", 1)[1] for s in r["ms"] if s.startswith("strain_limit:")]
+        b = run_child(r["resolution"], methods, frames, timeout, strain_frames)
+        if "error" in b:
+            log(f"{r['faces']} triangles, back: {b['error']}")
+            continue
+        r["ms_up"], r["ms_back"] = r["ms"], b["ms"]
+        r["ms"] = {s: float(np.sqrt(v * b["ms"][s])) if s in b["ms"] and v > 0 else v
+                   for s, v in r["ms_up"].items()}
+        r["peak_rss_mb"] = max(r["peak_rss_mb"], b["peak_rss_mb"])
+        log(f"{r['faces']:6d} triangles, back: " + ", ".join(
+            f"{s} {v:.1f}" for s, v in b["ms"].items()) + f" ms/frame; child {b['wall_s']:.0f} s")
 
 
 def write_outputs(base, rows, skipped, out, command, seconds, budget_s):
@@ -267,6 +295,11 @@ def write_outputs(base, rows, skipped, out, command, seconds, budget_s):
                    "k_8k": fit_exponent(*zip(*big)) if len(big) > 1 else float("nan"),
                    "k_2k_64k": fit_exponent(*zip(*issue)) if len(issue) > 1 else float("nan"),
                    "n_points": len(pts), "largest": int(max((p[0] for p in pts), default=0))}
+        for key in ("ms_up", "ms_back"):               # the two passes of --there-and-back
+            one = [(stage_n(r, s), r[key][s]) for r in good
+                   if key in r and s in r[key] and 2000 <= stage_n(r, s) <= 70000]
+            if len(one) > 1:
+                fits[s][f"k_2k_64k_{key[3:]}"] = fit_exponent(*zip(*one))
     with open(os.path.join(out, "scaling.json"), "w") as fh:
         json.dump({"command": command, "machine": machine(), "commit": commit(),
                    "seconds": seconds, "budget": budget_s, "baseline": base, "rows": rows,
@@ -316,6 +349,17 @@ def write_outputs(base, rows, skipped, out, command, seconds, budget_s):
         lines.append(f"| {label} | {f['k_all']:.2f} | {f['k_8k']:.2f} | "
                      f"{f['k_2k_64k']:.2f} | {f['n_points']} | "
                      f"{f['largest']} |")
+    passes = [s for s in STAGES if "k_2k_64k_up" in fits[s]]
+    if passes:
+        lines += ["", "Run there and back (`--there-and-back`): every size ran twice, in rising "
+                  "and then in falling order, and each time above is the geometric mean of its "
+                  "two runs, which cancels a drift of the machine's speed that is linear in "
+                  "time. The exponent over 2k-64k from each pass alone (the spread is the "
+                  "drift):", "", "| stage | k rising | k falling | k of the means |",
+                  "|---|---|---|---|"]
+        lines += [f"| {names[s]} | {fits[s]['k_2k_64k_up']:.2f} | "
+                  f"{fits[s]['k_2k_64k_back']:.2f} | {fits[s]['k_2k_64k']:.2f} |"
+                  for s in passes]
     if skipped:
         lines += ["", "Skipped (predicted time per frame above the --budget of "
                   f"{budget_s:g} s, from the exponent of the two sizes before):", ""]
@@ -391,6 +435,11 @@ def main(argv=None):
     ap.add_argument("--budget", type=float, default=40.0,
                     help="skip a stage predicted slower than this many seconds per frame")
     ap.add_argument("--timeout", type=float, default=1800.0, help="seconds per size")
+    ap.add_argument("--there-and-back", action="store_true",
+                    help="run the sizes again in falling order and average each size's two "
+                    "runs (cancels a linear drift of the machine's speed; twice the time)")
+    ap.add_argument("--resolutions", type=int, nargs="+", default=None,
+                    help=f"vertices per side of the sizes to run (default {FULL})")
     ap.add_argument("--child", type=int, help=argparse.SUPPRESS)
     ap.add_argument("--methods", nargs="*", default=list(METHODS), help=argparse.SUPPRESS)
     ap.add_argument("--replot", action="store_true",
@@ -408,8 +457,9 @@ def main(argv=None):
     argv = sys.argv[1:] if argv is None else argv
     frames = args.frames or (2 if args.quick else 3)
     t0 = time.perf_counter()
-    base, rows, skipped = sweep(QUICK if args.quick else FULL, frames, args.budget,
-                                args.timeout, strain_frames=args.strain_frames)
+    sizes = args.resolutions or (QUICK if args.quick else FULL)
+    base, rows, skipped = sweep(sorted(sizes), frames, args.budget, args.timeout,
+                                strain_frames=args.strain_frames, back=args.there_and_back)
     seconds = time.perf_counter() - t0
     write_outputs(base, rows, skipped, args.out, "python -m benchmarks.scaling " + " ".join(argv),
                   seconds, args.budget)
