@@ -39,5 +39,10 @@ def make_sheet(width, height, nu, nv, pattern="regular", seed=0, flip=None):
     # Diagonal a-c, or b-d where flipped; both keep counter-clockwise order in (u, v).
     t1 = np.where(flip[:, None], np.stack([a, b, d], 1), np.stack([a, b, c], 1))
     t2 = np.where(flip[:, None], np.stack([b, c, d], 1), np.stack([a, c, d], 1))
-    faces = np.concatenate([t1, t2]).astype(np.int32)
+    # Each quad's two triangles next to each other, quads in vertex order: a face's
+    # neighbours are then near it in memory, and a pass over the faces (the strain solve's
+    # Newton matrix) meets each vertex's matrix rows while they are still in cache. With all
+    # first triangles before all second ones the second half revisits rows long evicted: the
+    # Newton matrix at 64.8k faces took 31 ms, at 478 ns a face against 147 at 2k.
+    faces = np.stack([t1, t2], axis=1).reshape(-1, 3).astype(np.int32)
     return uv, faces
