@@ -104,15 +104,17 @@ def test_factor_is_refreshed_every_few_solves_and_only_for_small_meshes(monkeypa
 
 
 def test_rounds_take_fewer_newton_steps_with_the_factor():
-    """max_newton None: FACTOR_NEWTON steps per round with the factor, MAX_NEWTON without;
-    an explicit max_newton holds for both. A solve with the factor stays within its budget
-    (with inner_rtol 0 every round runs it in full)."""
-    from cloth.strain.solver import FACTOR_NEWTON, MAX_NEWTON
+    """max_newton None: FACTOR_NEWTON steps per round with the factor, MULTIGRID_NEWTON
+    with the multigrid, MAX_NEWTON with block Jacobi; an explicit max_newton holds for all.
+    A solve with the factor stays within its budget (with inner_rtol 0 every round runs it
+    in full)."""
+    from cloth.strain.solver import FACTOR_NEWTON, MAX_NEWTON, MULTIGRID_NEWTON
     sim = _hanging("mapping", "implicit", res=6)
     lim = sim.strain
     assert lim.max_newton is None
-    assert lim.newton_budget(PC_FACTOR) == lim.newton_budget(PC_MULTIGRID) == FACTOR_NEWTON
-    assert FACTOR_NEWTON < lim.newton_budget(PC_JACOBI) == MAX_NEWTON
+    assert lim.newton_budget(PC_FACTOR) == FACTOR_NEWTON
+    assert lim.newton_budget(PC_MULTIGRID) == MULTIGRID_NEWTON
+    assert MULTIGRID_NEWTON < FACTOR_NEWTON < lim.newton_budget(PC_JACOBI) == MAX_NEWTON
     lim.inner_rtol = 0.0
     lim._upload_params()
     for _ in range(4):
@@ -121,4 +123,5 @@ def test_rounds_take_fewer_newton_steps_with_the_factor():
     sim.step_frame()
     assert lim.last_newton == FACTOR_NEWTON * lim.last_iterations
     lim.max_newton = 7
-    assert lim.newton_budget(PC_FACTOR) == lim.newton_budget(PC_JACOBI) == 7
+    assert lim.newton_budget(PC_FACTOR) == lim.newton_budget(PC_JACOBI) == \
+        lim.newton_budget(PC_MULTIGRID) == 7

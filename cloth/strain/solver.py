@@ -117,6 +117,15 @@ FACTOR_CG, FACTOR_CG_MAX, FACTOR_CG_WORK = 6, 20, 6000
 # median of 5.0e-8 J (8 of 8 under), 13.5-13.7 ms a frame alone; resolution 9 at 1.4-3.8e-8
 # J for all three methods. Block Jacobi keeps 5 (tenth session: 3 shimmered at 1.8e-6 J).
 MAX_NEWTON, FACTOR_NEWTON = 5, 4
+# Newton steps per AL round with the multigrid (above FACTOR_MAX_FACES faces). Its rounds ran
+# their 4 steps in full (inner_rtol rarely stopped them), and the rounds are set by the
+# multiplier updates: hanging from the start, frames 2-11, median ms per frame with 4 / 3 / 2
+# steps (2026-12-03, 379a715, one run each): mapping at 64.8k faces 1822 / 1327 / 884 (5 / 5 /
+# 4 rounds), svd 1478 / - / 828 (4 / 4), warp-weft 1600 / 1242 / 1058 (5 / 5 / 5.5, up to
+# 15); at resolution 46 mapping 74 / 54 / 40. Every solve converged. At rest (resolution 46,
+# mean KE over frames 120-150) mapping 1.0e-7 / 3.5e-8 / 1.4e-7 J, svd 4.9e-9 / - / 6.8e-8 J;
+# warp-weft shimmers at 46 with any of them (1.6e-6 / 9.3e-6 / 3.2e-6 J).
+MULTIGRID_NEWTON = 2
 
 _host_loop_noted = False
 _no_pyamg_noted = False
@@ -611,9 +620,12 @@ class StrainLimiter:
 
     def newton_budget(self, pc_mode):
         """Newton steps per AL round: ``max_newton``, or when that is None FACTOR_NEWTON
-        with the factor or multigrid preconditioner and MAX_NEWTON with block Jacobi."""
+        with the factor, MULTIGRID_NEWTON with the multigrid and MAX_NEWTON with block
+        Jacobi."""
         if self.max_newton is not None:
             return self.max_newton
+        if pc_mode == PC_MULTIGRID:
+            return MULTIGRID_NEWTON
         return MAX_NEWTON if pc_mode == PC_JACOBI else FACTOR_NEWTON
 
     def pcg_budget(self, pc_mode):
