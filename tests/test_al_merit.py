@@ -109,7 +109,11 @@ def test_residual_is_minus_the_merit_gradient(method):
         fd = (merit_at(x0 + eps * d) - merit_at(x0 - eps * d)) / (2 * eps)
         analytic = -np.sum(r * d[:nv])
         assert abs(fd - analytic) <= 1e-5 * max(abs(analytic), 1e-12), (trial, fd, analytic)
-    # The line search's merit (quadratic term from W d once, solve_al) is the merit.
+    # The line search's merit (quadratic term from W d once, solve_al) is the merit. Its
+    # pieces do not depend on the method (assemble_all feeds both sides alike), so one
+    # method checks it: each method compiles its own kernel, ~10 s cold.
+    if method != "mapping":
+        return
     ws.d.from_numpy(d)
     for a in (1.0, 0.37):
         pos.from_numpy(x0)
