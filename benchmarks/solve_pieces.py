@@ -20,6 +20,7 @@ Prints a Markdown table: ms per piece and ns per face. Timings on a shared 2-cor
 carry tens of percent of noise; compare sizes within one run.
 """
 import argparse
+import functools
 import inspect
 import time
 
@@ -82,10 +83,12 @@ def time_pieces(a):
     return out
 
 
+@functools.lru_cache(maxsize=None)
 def piece_kernel():
     """The timing kernel: one piece of ``al.solve_al``, ``reps`` times, on the solve's own
-    arrays. Made on call (after ``backend.init``: the strain modules create Taichi types at
-    import, and the benchmarks must import none)."""
+    arrays. Made on first call (after ``backend.init``: the strain modules create Taichi
+    types at import, and the benchmarks must import none), then reused, so each size does not
+    compile it again."""
     import taichi as ti
 
     from cloth.strain import al
