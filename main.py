@@ -188,6 +188,11 @@ def main(argv=None):
         except (ConfigError, ValueError) as err:
             return fail(str(err))
 
+    headless = args.headless or not has_display()
+    if headless and not args.headless and not args.compare:
+        # Said before the simulator is built: building it may compile for minutes.
+        print(f"loom: no display found, running '{name}' headless "
+              "(use xvfb-run or a desktop for the window)", file=sys.stderr)
     from cloth.model import ModelError
     from cloth.simulator import Simulator
     try:
@@ -196,7 +201,6 @@ def main(argv=None):
     except (ModelError, ConfigError, ValueError) as err:
         return fail(str(err))
 
-    headless = args.headless or not has_display()
     if args.compare:
         if headless:
             return fail("--compare opens a window: run it on a desktop or under xvfb-run "
@@ -214,16 +218,13 @@ def main(argv=None):
             return run_app(sim, cfg, module)
         except RenderUnavailable as err:
             return fail(f"{err}; or use --headless", EXIT_NO_RENDER)
-    return run_headless(sim, cfg, args, name, announce=not args.headless)
+    return run_headless(sim, cfg, args, name)
 
 
-def run_headless(sim, cfg, args, name, announce):
+def run_headless(sim, cfg, args, name):
     from ui.headless import HeadlessRun
     from ui.render import RenderUnavailable
     out = args.out or os.path.join("out", name)
-    if announce:
-        print(f"loom: no display found, running '{name}' headless "
-              "(use xvfb-run or a desktop for the window)", file=sys.stderr)
     o = cfg["output"]
     run = HeadlessRun(sim, cfg, out, images=o["images"], video=o["video"], color=o["color"],
                       meshes=o["meshes"], every=o["every"], size=(o["width"], o["height"]),

@@ -30,6 +30,7 @@ import taichi as ti
 
 # Every stage's module (``sim.linear_solver = "direct"`` swaps in dynamics_sparse.py, imported
 # where it is built: it loads scipy).
+from . import compile_notice
 from . import metrics                                  # stage "metrics"
 from . import remesh                                   # stage "remesh"
 from .collision import THICKNESS, Collider            # stages "collision", "collision_final"
@@ -95,6 +96,7 @@ class Simulator:
         self.strain = None
         self.collider = None
         self.remesher = None
+        self._untried = {"dynamics", "collision"}
         self.stages = [
             Stage("dynamics", self._dynamics_step),
             Stage("collision", self._collide, enabled=bool(setup.obstacles) or setup.self_collision),
@@ -226,7 +228,8 @@ class Simulator:
             self.collider.contact_planes(t, self.strain.contact_planes,
                                          reach=0.5 * self.model.typical_edge(),
                                          mu_out=self.strain.contact_friction)
-        self.strain.project(h, contacts=with_contacts, warm=warm)
+        with compile_notice.first_use(*self._compile_work("strain_limit")):
+            self.strain.project(h, contacts=with_contacts, warm=warm)
 
     def _make_collider(self):
         c = self.settings.section("collision")
@@ -473,9 +476,40 @@ class Simulator:
         self.frame += 1
         self.last_good = self.model.mesh_arrays()
 
+    def _compile_work(self, stage):
+        """(what, key, estimate in s) of the kernels a stage compiles at its first call: the
+        key names the template variant, so a method switch announces its own compile
+        (cloth/compile_notice.py; estimates measured cold on 2 cores, full optimisation and
+        LOOM_FAST_COMPILE)."""
+        if stage == "strain_limit":
+            st = self.settings.strain
+            method = self.strain.method
+            key = f"strain solver:{method}:{st.solver}:{st.linear_solver}:{st.curvature}"
+            fast_path = st.solver == "al" and st.linear_solver == "pcg"
+            return (f"the strain solver for {method}", key, (120, 12) if fast_path else None)
+        if stage == "dynamics":
+            return ("the dynamics step", f"dynamics:{self.settings.sim.linear_solver}",
+                    (8, None))
+        if stage == "collision":
+            return ("the collision pass", "collision", (6, None))
+        return None
+
+    def compile_pending(self):
+        """The notice line when the next frame's strain solve will compile its kernels (a
+        method switched to for the first time on this machine), else None: the window shows
+        it before the step that compiles."""
+        if self.strain is None or not self.stage("strain_limit").enabled:
+            return None
+        return compile_notice.notice(*self._compile_work("strain_limit"))
+
     def _run_stage(self, s):
         t0 = time.perf_counter()
-        s.run()
+        if s.name in self._untried:       # its first run: it may compile (strain: per call)
+            self._untried.discard(s.name)
+            with compile_notice.first_use(*self._compile_work(s.name)):
+                s.run()
+        else:
+            s.run()
         ti.sync()
         s.ms += 1000.0 * (time.perf_counter() - t0)
         if not self.model.all_finite(self.model.n_verts):

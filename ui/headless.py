@@ -110,6 +110,8 @@ class HeadlessRun:
         self._prepare()
         progress = None if self.quiet else Progress(frames)
         try:
+            if progress:      # at once: the first frame may compile for a while
+                progress.update(0, "first frame")
             self._write_frame()
             for k in range(frames):
                 try:

@@ -10,6 +10,10 @@ class Progress:
         self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
         self.start = time.perf_counter()
         self._last = 0.0
+        self._open = False          # a bar is on the terminal's current line
+        # A compile notice ends the bar's line first (cloth/compile_notice.py).
+        from cloth import compile_notice
+        compile_notice.before_print.append(self.end_line)
 
     def update(self, done, note=""):
         now = time.perf_counter()
@@ -22,14 +26,22 @@ class Progress:
         width = 30
         fill = int(width * done / max(self.total, 1))
         line = (f"[{'#' * fill}{'.' * (width - fill)}] {done}/{self.total} {self.label}"
-                f"  {rate:5.1f}/s  eta {eta:5.0f}s  {note}")
+                f"  {rate:5.1f}/s  eta {f'{eta:5.0f}s' if rate > 0 else '    ?'}  {note}")
         if self.tty:
             self.stream.write("\r" + line[:120].ljust(120))
+            self._open = True
         else:
             self.stream.write(line + "\n")
         self.stream.flush()
 
-    def close(self):
-        if self.tty:
+    def end_line(self):
+        if self._open:
             self.stream.write("\n")
             self.stream.flush()
+            self._open = False
+
+    def close(self):
+        from cloth import compile_notice
+        if self.end_line in compile_notice.before_print:
+            compile_notice.before_print.remove(self.end_line)
+        self.end_line()

@@ -43,6 +43,7 @@ class AppState:
         self.paused = False
         self.message = ""           # last error or notice, shown in the panel
         self.failed = False         # the simulation diverged or a stage raised: reset first
+        self._defer_tick = False    # skip one tick: the panel shows a compile notice first
         self.render_ms = 0.0
         self.fps = 0.0
         self.grab = None            # (sim index, vertex) while a vertex is held
@@ -116,9 +117,15 @@ class AppState:
         self.resume() if self.paused else self.pause()
 
     def tick(self):
-        """One window frame: advance the simulation one frame unless paused."""
+        """One window frame: advance the simulation one frame unless paused (or, once, after
+        a method switch that compiles: that frame shows the notice first)."""
+        if self._defer_tick:
+            self._defer_tick = False
+            return
         if not self.paused:
             self._advance()
+            if self.message.startswith("compiling"):
+                self.message = ""
 
     def step(self):
         """Advance exactly one frame (the single-step button); pauses."""
@@ -209,6 +216,12 @@ class AppState:
         if ok:
             self.cfg["strain"]["method"] = name
             self.labels = [name]
+            line = self.sim.compile_pending()
+            if line is not None:
+                # Shown for one window frame before the step that compiles (the window does
+                # not respond while Taichi compiles).
+                self.message = line.replace("loom: ", "") + "; the window waits until it is done"
+                self._defer_tick = True
         return ok
 
     @property

@@ -1,0 +1,164 @@
+"""One line on stderr before a kernel compile that takes long, with the time it took last time.
+
+Taichi compiles a kernel at its first call (per template variant) and keeps the result in its
+offline cache. Cold, with full optimisation, the strain solve (strain/al.py ``solve_al``)
+takes about 2 minutes per method on a 2-core machine; without a word the program looks hung.
+The callers wrap the first call of each big piece of work::
+
+    with compile_notice.first_use("the strain solver for mapping", key, seconds=120):
+        limiter.project(h)
+
+and the first time a ``key`` is used in this process, a line such as
+
+    loom: compiling the strain solver for mapping (first use on this machine; last time 118 s)
+
+is printed before the call, unless this machine's record says the same code was compiled
+already (then Taichi loads it from its cache in a second or two and nothing is printed).
+The record (``loom_compile_times.json``) sits inside Taichi's offline cache directory, so
+emptying the cache empties it too. It maps each key to the fingerprint of what was compiled
+(Taichi version, arch, precision, optimisation, the source of the ``cloth`` package) and the
+seconds the last cold compile took. Later uses of a key in the same process cost one set
+lookup.
+
+Measured cold (empty cache, full optimisation, hanging with mapping, 2-core machine shared
+with another job; 2026-12-03): the strain solve's kernel 118 s, the dynamics step 7.8 s, the
+obstacle pass 5.9 s (tshirt), everything else under 2.5 s a kernel; warm, the strain solve
+loads in 2.3 s.
+"""
+import contextlib
+import hashlib
+import json
+import os
+import sys
+import time
+
+RECORD_NAME = "loom_compile_times.json"
+# A first call shorter than this was a cache load, not a compile: its time is not kept as the
+# estimate for the next cold compile.
+COMPILED_ABOVE_S = 5.0
+
+_used = set()            # keys whose first use in this process is over
+_fingerprint = None
+# Called before a notice is printed (a progress bar ends its line there).
+before_print = []
+
+
+def _record_path():
+    try:
+        from taichi.lang import impl
+        base = impl.current_cfg().offline_cache_file_path
+    except Exception:       # Taichi not started: no cache to speak of
+        return None
+    return os.path.join(base, RECORD_NAME) if base else None
+
+
+def _read(path):
+    try:
+        with open(path) as fh:
+            data = json.load(fh)
+        return data if isinstance(data, dict) else {}
+    except (OSError, ValueError):
+        return {}
+
+
+def _write(path, data):
+    """Atomic replace: test workers and a second window may write at the same time (the last
+    one wins; a lost entry only costs one more notice)."""
+    try:
+        os.makedirs(os.path.dirname(path), exist_ok=True)
+        tmp = f"{path}.{os.getpid()}.tmp"
+        with open(tmp, "w") as fh:
+            json.dump(data, fh, indent=1, sort_keys=True)
+        os.replace(tmp, path)
+    except OSError:
+        pass
+
+
+def fingerprint():
+    """What decides whether Taichi's cache holds a kernel: Taichi's version, the arch,
+    precision and optimisation level, and the source of every module of the cloth package
+    (a change anywhere counts as new code; the cache may still hold it, and then the notice
+    was one line too many)."""
+    global _fingerprint
+    if _fingerprint is None:
+        import taichi as ti
+        from . import backend
+        h = hashlib.sha1()
+        h.update(repr((ti.__version__, backend.arch(), backend.precision(),
+                       backend.fast_compile())).encode())
+        root = os.path.dirname(os.path.abspath(__file__))
+        for folder, dirs, files in sorted(os.walk(root)):
+            dirs.sort()
+            for name in sorted(files):
+                if name.endswith(".py"):
+                    with open(os.path.join(folder, name), "rb") as fh:
+                        h.update(name.encode() + fh.read())
+        _fingerprint = h.hexdigest()[:16]
+    return _fingerprint
+
+
+def will_compile(key):
+    """True when the first use of ``key`` in this process will (probably) compile: not used
+    yet here, and this machine's record has no compile of the same code."""
+    if key in _used:
+        return False
+    path = _record_path()
+    entry = _read(path).get(key, {}) if path else {}
+    return entry.get("fingerprint") != fingerprint()
+
+
+def notice(what, key, seconds=None):
+    """The line printed before a cold compile of ``what`` (None when it will not compile).
+    ``seconds``: see ``first_use``."""
+    if not will_compile(key):
+        return None
+    from . import backend
+    if isinstance(seconds, tuple):
+        seconds = seconds[1] if backend.fast_compile() else seconds[0]
+    path = _record_path()
+    entry = _read(path).get(key, {}) if path else {}
+    est = "the code changed since the last compile" if entry else "first use on this machine"
+    if "seconds" in entry:
+        est += f"; last time {_duration(entry['seconds'])}"
+    elif seconds is not None:
+        est += f"; about {_duration(seconds)} on a 2-core machine"
+    if backend.fast_compile():
+        est += ", fast compile"
+    return f"loom: compiling {what} ({est})"
+
+
+def _duration(seconds):
+    return f"{seconds:.0f} s" if seconds < 100 else f"{seconds / 60:.1f} min"
+
+
+@contextlib.contextmanager
+def first_use(what, key, seconds=None, stream=None):
+    """Around the call that compiles ``key``'s kernels the first time. ``seconds``: the
+    estimate to print while this machine has no record of its own (measured, 2-core CPU),
+    a number or (full optimisation, LOOM_FAST_COMPILE) with None for unknown."""
+    if key in _used:
+        yield
+        return
+    line = notice(what, key, seconds)
+    if line is not None:
+        for hook in before_print:
+            hook()
+        print(line, file=stream or sys.stderr, flush=True)
+    t0 = time.perf_counter()
+    yield
+    took = time.perf_counter() - t0
+    _used.add(key)
+    path = _record_path()
+    if path is None:
+        return
+    data = _read(path)
+    entry = dict(data.get(key, {}))
+    changed = entry.get("fingerprint") != fingerprint()
+    if not changed and line is None:
+        return                          # a cache load as recorded: nothing to write
+    entry["fingerprint"] = fingerprint()
+    if took >= COMPILED_ABOVE_S:
+        entry["seconds"] = round(took, 1)
+        entry["date"] = time.strftime("%Y-%m-%d")
+    data[key] = entry
+    _write(path, data)
