@@ -241,6 +241,13 @@ SCHEMA = {
         "thickness": Key("m", "distance the cloth keeps from obstacles", lo=0, lo_open=True),
         "self_collision": Key("", "cloth-cloth repulsion (spatial hash)"),
     },
+    "check": {
+        "rest_after": Key("s", "scene files: from then on the final check wants the cloth at "
+                          "rest (RMS speed under 4 mm/s); 0 = not checked", lo=0),
+        "drape_over": Key("", "scene files: name of a sphere obstacle the cloth must hang "
+                          "draped over (below its equator on every side it overhangs)"),
+        "touching": Key("", "scene files: names of obstacles the cloth must touch at the end"),
+    },
     "camera": {
         "position": Key("m", "camera position"),
         "lookat": Key("m", "point the camera looks at"),

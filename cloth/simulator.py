@@ -520,13 +520,23 @@ class Simulator:
         m = self.model
         return metrics.face_strains(m.positions(), m.uv, m.faces, m.grain)
 
+    def own_violation(self):
+        """Per face, how far the current method's own constraints are violated (strain, 0 when
+        they hold): the number strain limiting drives below ``strain.tol``. None when no
+        method limits the strain."""
+        if self.strain is None or not self.stage("strain_limit").enabled:
+            return None
+        own = self.strain.constraint_values()
+        if not own.size:
+            return np.zeros(self.model.n_faces)
+        return np.max(np.maximum(own, 0.0), axis=1)
+
     def metrics_row(self):
         """One row of metrics.csv for the current frame (column names fixed; see README)."""
         m = self.model
         x, v = m.positions(), m.velocities()
         st = metrics.face_strains(x, m.uv, m.faces, m.grain)
         area = m.rest_area
-        bands = self.bands()
         row = {"frame": self.frame, "time": round(self.time, 9), "vertices": m.n_verts,
                "faces": m.n_faces,
                "ms_total": sum(s.ms for s in self.stages)}
@@ -543,11 +553,11 @@ class Simulator:
         row["method"] = self.method
         row["sl_iterations"] = self.strain.last_iterations if self.strain is not None and \
             self.stage("strain_limit").enabled else 0
-        own = self.strain.constraint_values() if self.strain is not None and \
-            self.stage("strain_limit").enabled else np.zeros((m.n_faces, 1))
-        own_v = np.max(np.maximum(own, 0.0), axis=1) if own.size else np.zeros(m.n_faces)
-        row["own_violation_max"], row["own_violation_rms"] = metrics.summarize(own_v, area)
+        own_v = self.own_violation()
+        row["own_violation_max"], row["own_violation_rms"] = metrics.summarize(
+            np.zeros(m.n_faces) if own_v is None else own_v, area)
         row["bias_strain_max"] = float(np.max(np.abs(st["bias"])))
+        bands = self.bands()
         for name in ("warp", "weft"):
             row[f"{name}_violation_max"] = float(np.max(metrics.band_violation(st[name],
                                                                                 bands[name])))

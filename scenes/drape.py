@@ -6,6 +6,7 @@ from cloth.model import MeshArrays
 from cloth.sheet import make_sheet
 from cloth.simulator import SceneSetup
 
+from . import checks
 from .common import material_from, scene_defaults
 
 DEFAULTS = scene_defaults({
@@ -39,25 +40,36 @@ def build(cfg):
                       check_final=lambda sim: check_final(sim, cfg))
 
 
-def check_final(sim, cfg):
-    x = sim.model.positions()
-    if not np.all(np.isfinite(x)):
-        return False, "non-finite state"
+def drape_by(cfg):
+    """When the sheet must hang draped (s): ``checks.drape_time``, 0.76 s by default.
+    Measured with exact Newton steps (strain.linear_solver = "cholesky", resolution 25): the
+    sheet hangs below the equator on every side from frame 9 (0.30 s) to the end (frame 45,
+    lowest point 0.31 m). The default PCG steps leave it flat on the sphere's top (lowest
+    point 0.62 m at frame 45, the equator at 0.55 m; issue #32), and this check fails there."""
     s = cfg["sphere"]
-    d = np.linalg.norm(x - np.asarray(s["center"]), axis=1) - s["radius"]
+    return checks.drape_time(cfg["cloth"]["drop"], s["center"], s["radius"],
+                             cfg["sim"]["gravity"])
+
+
+def check_final(sim, cfg):
+    """Finite, outside the sphere and above the ground, the limits held, and from
+    ``drape_by`` on draped over the sphere: on it, and below its equator on every side it
+    overhangs (``checks.draped_over_sphere``), not a flat sheet on its top."""
+    s = cfg["sphere"]
     tol = cfg["collision"]["thickness"]
-    if d.min() < -tol:
-        return False, f"a vertex is {-d.min():.4f} m inside the sphere"
-    if x[:, 1].min() < -tol:
-        return False, "a vertex is below the ground"
-    top = np.asarray(s["center"])[1] + s["radius"]
-    if sim.time >= 2.0 and not x[:, 1].max() < top + 0.05:
-        return False, "the sheet has not come down onto the sphere"
-    # Still on it: some vertex within a few thicknesses of the sphere's surface near its top.
-    # (Measured with mapping at resolution 17 before the projection had friction: the sheet
-    # drifted sideways and slid off at about 2.5 s; with it, its centre stays within 1 cm
-    # for 4 s.)
-    near_top = (d < 4 * tol) & (x[:, 1] > top - 0.1)
-    if sim.time >= 2.0 and not near_top.any():
-        return False, "the sheet slid off the sphere"
-    return True, "draped over the sphere"
+    x = sim.model.positions()
+    center = np.asarray(s["center"], float)
+
+    def draped():
+        t = drape_by(cfg)
+        if sim.time < t:
+            return True, f"drape not checked before {t:.2f} s"
+        return checks.draped_over_sphere(x, center, s["radius"], margin=4 * tol)
+
+    return checks.combine(
+        lambda: checks.finite(sim),
+        lambda: checks.outside(np.linalg.norm(x - center, axis=1) - s["radius"], tol,
+                               "the sphere"),
+        lambda: checks.outside(x[:, 1], tol, "the ground"),
+        draped,
+        lambda: checks.limits_held(sim))

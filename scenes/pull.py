@@ -7,6 +7,7 @@ from cloth.model import MeshArrays
 from cloth.sheet import make_sheet
 from cloth.simulator import SceneSetup
 
+from . import checks
 from .common import scene_defaults
 
 DEFAULTS = scene_defaults({
@@ -57,14 +58,19 @@ def build(cfg):
 
 
 def check_final(sim, cfg):
-    x = sim.model.positions()
-    if not np.all(np.isfinite(x)):
-        return False, "non-finite state"
-    uv = sim.model.uv
-    corner = np.isclose(uv[:, 0], cfg["cloth"]["height"]) & np.isclose(uv[:, 1], 0.0)
-    rest = np.array([-0.5 * cfg["cloth"]["width"], cfg["cloth"]["top"] - cfg["cloth"]["height"], 0])
-    want = rest + np.asarray(cfg["pull"]["displacement"]) * ramp(sim.time, cfg["pull"]["duration"])
-    err = np.abs(x[corner][0] - want).max()
-    if err > 1e-9:
-        return False, f"the dragged corner is {err:.3g} m off its target"
-    return True, "corner dragged and held"
+    """Finite, the dragged corner on its target, and the limits held while the sheet is
+    stretched (the scene is the user stretching the garment against its limits)."""
+    def on_target():
+        uv = sim.model.uv
+        c = cfg["cloth"]
+        corner = np.isclose(uv[:, 0], c["height"]) & np.isclose(uv[:, 1], 0.0)
+        rest = np.array([-0.5 * c["width"], c["top"] - c["height"], 0.0])
+        want = rest + np.asarray(cfg["pull"]["displacement"]) * ramp(sim.time,
+                                                                     cfg["pull"]["duration"])
+        err = np.abs(sim.model.positions()[corner][0] - want).max()
+        if err > 1e-9:
+            return False, f"the dragged corner is {err:.3g} m off its target"
+        return True, "corner dragged and held"
+
+    return checks.combine(lambda: checks.finite(sim), on_target,
+                          lambda: checks.limits_held(sim))

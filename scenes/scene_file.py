@@ -64,6 +64,13 @@ FILE_SECTIONS = {
     "obstacles": [],              # [[obstacles]] tables, see OBSTACLE_KEYS
     "collision": {"thickness": THICKNESS, "self_collision": False},
     "camera": {"position": [0.0, 1.5, 3.0], "lookat": [0.0, 1.0, 0.0], "fov": 40.0},
+    # What the scene is for, tested by the final check on top of the checks every scene file
+    # gets (finite, pins on their targets, outside the obstacles, seams closed, limits held).
+    "check": {
+        "rest_after": 0.0,        # s: from then on the cloth must be at rest (0: not checked)
+        "drape_over": "",         # name of a sphere obstacle the cloth must hang draped over
+        "touching": [],           # names of obstacles the cloth must touch at the end
+    },
 }
 
 VEC3 = "a list of 3 numbers"
@@ -267,6 +274,7 @@ class SceneFile:
             stitches = np.concatenate([stitches, self._stitch_file(c["stitches"], g)])
         specs = [self._obstacle_spec(o, k) for k, o in enumerate(cfg["obstacles"])]
         _number(cfg["collision"]["thickness"], "collision.thickness", positive=True)
+        _check_targets(cfg["check"], specs)
         return g, mesh, groups, stitches, specs, tol
 
     def _stitch_file(self, path, g):
@@ -301,7 +309,7 @@ class SceneFile:
             raise ConfigError(f"{where}.kind = {kind!r} is not a kind of obstacle: use one of "
                               f"{', '.join(OBSTACLE_KEYS)}")
         keys = OBSTACLE_KEYS[kind]
-        spec = {"kind": kind}
+        spec = {"kind": kind, "name": str(o.get("name", ""))}
         for key in o:
             if key not in keys and key not in COMMON_OBSTACLE_KEYS:
                 raise ConfigError(f"unknown key '{where}.{key}' for a {kind}: it takes "
@@ -437,24 +445,78 @@ class SceneFile:
         return o
 
 
+def _check_targets(check, specs):
+    """The obstacles ``[check]`` names exist (and ``drape_over`` is a sphere)."""
+    names = {s["name"]: s for s in specs if s["name"]}
+    known = ", ".join(f"'{n}'" for n in names) or "none has a name"
+    wanted = ([("check.drape_over", check["drape_over"])] if check["drape_over"] else []) + \
+        [(f"check.touching[{k}]", n) for k, n in enumerate(check["touching"])]
+    for where, name in wanted:
+        if name not in names:
+            raise ConfigError(f"{where} = '{name}' names no obstacle (obstacles: {known}): give "
+                              "the obstacle name = \"...\" or fix the name")
+    if check["drape_over"] and names[check["drape_over"]]["kind"] != "sphere":
+        raise ConfigError(f"check.drape_over = '{check['drape_over']}' is a "
+                          f"{names[check['drape_over']]['kind']}: draping is checked over a "
+                          "sphere")
+
+
 def check_final(sim, cfg):
-    """Finite, pins on their targets, no vertex inside an obstacle beyond the thickness, and
-    (after 2 s) every seam closed to 2 cm."""
+    """Every scene file: finite, pins on their targets, no vertex inside an obstacle beyond
+    the thickness, every seam closed to 1 mm after 2 s, the limits held. Then what the file's
+    ``[check]`` asks: at rest from ``rest_after`` on, draped over the sphere ``drape_over``
+    (``checks.draped_over_sphere``, from ``checks.drape_time`` on), touching the obstacles
+    named in ``touching``."""
+    from . import checks
     x = sim.model.positions()
-    if not np.all(np.isfinite(x)):
-        return False, "non-finite state"
     tol = cfg["collision"]["thickness"]
-    for k, o in enumerate(sim.setup.obstacles):
-        phi, _ = o.sdf(x, sim.time)
-        if phi.min() < -tol:
-            return False, f"a vertex is {-phi.min():.4f} m inside obstacle {k} ({o.kind})"
-    st = np.asarray(sim.dynamics.stitches_np)
-    if len(st) and sim.time >= 2.0:
-        gap = np.linalg.norm(x[st[:, 0]] - x[st[:, 1]], axis=1).max()
-        if gap > 0.02:
-            return False, f"a seam is still {gap:.3f} m open"
-    return True, "finite" + (", outside the obstacles" if sim.setup.obstacles else "") + \
-        (", seams closed" if len(st) and sim.time >= 2.0 else "")
+    want = cfg["check"]
+    named = {o["name"]: k for k, o in enumerate(cfg["obstacles"]) if o.get("name")}
+    sdf = [o.sdf(x, sim.time)[0] for o in sim.setup.obstacles]
+
+    def pins():
+        m = sim.model
+        pinned = np.asarray(m.pinned[: m.n_verts], bool)
+        if not pinned.any():
+            return True, ""
+        target = m.vert_pin_target.to_numpy()[: m.n_verts][pinned]
+        err = float(np.abs(x[pinned] - target).max())
+        if err > 1e-6:
+            return False, f"a pinned vertex is {err:.3g} m off its target"
+        return True, "pins on their targets"
+
+    def obstacles():
+        for k, phi in enumerate(sdf):
+            ok, text = checks.outside(phi, tol, f"obstacle {k} ({sim.setup.obstacles[k].kind})")
+            if not ok:
+                return ok, text
+        return True, "outside the obstacles" if sdf else ""
+
+    def draped():
+        if not want["drape_over"]:
+            return True, ""
+        o = sim.setup.obstacles[named[want["drape_over"]]]
+        center, radius = o.pose(sim.time)[0], o.radius
+        t = checks.drape_time(sim.setup.mesh.x[:, 1].min(), center, radius,
+                              sim.settings.sim.gravity)
+        if sim.time < t:
+            return True, f"drape not checked before {t:.2f} s"
+        return checks.draped_over_sphere(x, center, radius, margin=4 * tol)
+
+    def touching():
+        for name in want["touching"]:
+            if not sdf[named[name]].min() < 3.0 * tol:
+                return False, f"the cloth does not touch '{name}'"
+        return True, ("touching " + ", ".join(want["touching"])) if want["touching"] else ""
+
+    def rest():
+        if not want["rest_after"] > 0:
+            return True, ""
+        return checks.at_rest(sim, after=want["rest_after"])
+
+    return checks.combine(lambda: checks.finite(sim), pins, obstacles,
+                          lambda: checks.seams_closed(sim, 1e-3, after=2.0),
+                          lambda: checks.limits_held(sim), draped, touching, rest)
 
 
 def is_scene_file(name):

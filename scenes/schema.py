@@ -113,7 +113,7 @@ def markdown():
               "`python main.py path/to/scene.toml` runs a scene described by the file; paths in "
               "it are relative to the file. Every common section above is allowed with the same "
               "keys, plus these (examples: `scenes/examples/`):", ""]
-    for sec in ("cloth", "collision", "camera"):
+    for sec in ("cloth", "collision", "camera", "check"):
         lines += [f"### [{sec}]", ""] + _table(sec, FILE_SECTIONS[sec]) + [""]
     lines += ["### Top level", "", "| key | meaning |", "|---|---|"]
     lines += [f"| `{k}` | {m.doc} |" for k, m in TOP_LEVEL.items()] + [""]

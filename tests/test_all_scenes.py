@@ -1,4 +1,5 @@
-"""Every registered scene runs headless for a few frames and passes its check_final()."""
+"""Every registered scene runs headless for a few frames and passes its check_final(). (That
+each check can fail, and what it tests later in a run: tests/test_final_checks.py.)"""
 import csv
 
 import numpy as np
@@ -95,63 +96,3 @@ def test_exact_strain_steps_let_the_drape_land_without_stopping_dead():
         ke.append(metrics.kinetic_energy(sim.model.velocities(), sim.model.mass))
     assert ke[7] >= 0.3 * max(ke[:8])
     assert sim.collider.last_contacts > 15
-
-
-def _state(x, time, stitches=None):
-    """What the final checks read of a simulator: positions, time and seams."""
-    from types import SimpleNamespace
-    return SimpleNamespace(model=SimpleNamespace(positions=lambda: np.asarray(x, float)),
-                           time=time, dynamics=SimpleNamespace(stitches_np=stitches))
-
-
-def test_drape_final_check_tells_a_draped_sheet_from_a_hovering_or_fallen_one():
-    """The smoke run above is too short (4 frames) for drape's checks after 2 s; here they
-    get states built to pass or fail each one."""
-    from scenes import drape
-    from scenes.common import resolve
-    cfg = resolve(drape.DEFAULTS, [])
-    c, r = np.asarray(cfg["sphere"]["center"]), cfg["sphere"]["radius"]
-    t = cfg["collision"]["thickness"]
-    # A cap of points just outside the sphere's top, and the rest of the sheet on the ground.
-    theta = np.linspace(0.0, 0.6, 8)
-    cap = c + (r + 0.5 * t) * np.c_[np.sin(theta), np.cos(theta), np.zeros_like(theta)]
-    ground = np.c_[np.linspace(-0.5, 0.5, 8), np.full(8, 0.5 * t), np.full(8, 0.45)]
-    draped = np.r_[cap, ground]
-    assert drape.check_final(_state(draped, 2.5), cfg) == (True, "draped over the sphere")
-    hovering = draped + [0.0, 0.3, 0.0]
-    ok, msg = drape.check_final(_state(hovering, 2.5), cfg)
-    assert not ok and "not come down" in msg
-    assert drape.check_final(_state(hovering, 1.0), cfg)[0]        # still falling: fine
-    slid = np.r_[ground, ground + [0.0, 0.0, -0.9]]
-    ok, msg = drape.check_final(_state(slid, 2.5), cfg)
-    assert not ok and "slid off" in msg
-    inside = np.r_[draped, [c + [0.0, r - 5 * t, 0.0]]]
-    ok, msg = drape.check_final(_state(inside, 0.1), cfg)
-    assert not ok and "inside the sphere" in msg
-
-
-def test_tshirt_final_check_needs_closed_seams_after_two_seconds():
-    from assets import mannequin_sdf
-    from scenes import tshirt
-    from scenes.common import resolve
-    cfg = resolve(tshirt.DEFAULTS, [])
-    # Points on the body's surface (pushed out along the SDF gradient) at chest height.
-    rng = np.random.default_rng(0)
-    x = np.c_[rng.uniform(-0.15, 0.15, 40), rng.uniform(1.2, 1.35, 40), np.zeros(40)]
-    for _ in range(30):
-        d = mannequin_sdf(x)
-        eps = 1e-5
-        grad = np.stack([(mannequin_sdf(x + eps * e) - d) / eps for e in np.eye(3)], axis=1)
-        x = x - (d - 0.002)[:, None] * grad / np.linalg.norm(grad, axis=1)[:, None]
-    assert mannequin_sdf(x).min() > 0
-    sewn = np.array([[0, 1]])
-    x_closed = x.copy()
-    x_closed[1] = x[0]
-    assert tshirt.check_final(_state(x_closed, 2.5, sewn), cfg)[0]
-    open_seam = x.copy()
-    open_seam[1] = x[0] + [0.05, 0.0, 0.0]
-    assert tshirt.check_final(_state(open_seam, 1.0, sewn), cfg)[0]    # still sewing: fine
-    ok, msg = tshirt.check_final(_state(open_seam, 2.5, sewn), cfg)
-    assert not ok and "seam is still" in msg
-    ok, msg = tshirt.check_final(_state(x_closed - [0.0, 1.0, 0.0], 0.5, sewn), cfg)
-    assert not ok
