@@ -126,15 +126,20 @@ def face_colors_legend(mode, x, uv, faces, grain, bands=None, rest_area=None,
     st = strains if strains is not None else metrics.face_strains(x, uv, faces, grain)
     warp, weft, bias = strain_bands(bands)
     if mode == "violation":
-        viol = np.maximum(metrics.band_violation(st["warp"], warp),
-                          metrics.band_violation(st["weft"], weft))
+        # The violation of the method's own constraints (``strains["own"]``, per face, from
+        # ``Simulator.own_violation``; None without a method), grey where it is within the
+        # solver's tolerance ``strains["own_tol"]``: what strain limiting enforces, whatever
+        # the method (the warp strain against its band is not, under svd or mapping).
+        own = st.get("own")
+        viol = np.zeros(len(faces)) if own is None else np.asarray(own, float)
+        viol = np.where(viol <= st.get("own_tol", 0.0), 0.0, viol)
         scale = 0.01
 
         def colors(v):
             v = np.asarray(v, float)
             return np.where((v <= 0)[:, None], INSIDE, _ramp(v / scale, SEQ))
-        return colors(viol), Legend("band violation (warp, weft)", 0.0, scale, colors,
-                                    note="grey: inside both bands")
+        return colors(viol), Legend("violation of the method's own limits", 0.0, scale, colors,
+                                    note="grey: held" if own is not None else "no method")
     key, band, title = {
         "warp-strain": ("warp", warp, "warp strain"),
         "weft-strain": ("weft", weft, "weft strain"),

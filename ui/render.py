@@ -253,6 +253,8 @@ def draw_cloth(renderer, sim, key="cloth", color="shading", wireframe=False, smo
     x = m.positions()
     if strains is None and color not in ("shading", "size"):
         strains = sim.face_strains()
+    if color == "violation":
+        strains = dict(strains, own=sim.own_violation(), own_tol=sim.settings.strain.tol)
     rgb, legend = face_colors_legend(color, x, m.uv, m.faces, m.grain, sim.bands(), m.rest_area,
                                      strains=strains)
     renderer.add_mesh(key, x, m.faces, rgb, wireframe=wireframe, smooth=smooth, offset=offset)

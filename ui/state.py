@@ -23,7 +23,38 @@ from cloth.simulator import STRAIN_METHODS, SimulationDiverged, Simulator
 
 COMPARE_METHODS = STRAIN_METHODS[:-1]      # the three families, without "none"
 BANDS = ("warp", "weft", "bias")
+# What each method bounds, one line for the panel: the read-outs then show the violation of
+# these constraints (the number the solver drives below strain.tol) and the warp, weft and
+# bias strains as strains, which only warp-weft bounds directly.
+LIMITS = {
+    "svd": "bounds the principal stretches (the larger by the warp band, the smaller by the "
+           "weft band), blind to the grain",
+    "warp-weft": "bounds the stretch along the warp and weft threads and the bias shear",
+    "mapping": "bounds the principal stretches mapped onto the grain: the warp may reach "
+               "sqrt(2) x its band at 45 deg",
+    "none": "limits nothing: the cloth stretches as its material lets it",
+}
 MATERIAL_KEYS = ("k_warp", "k_weft", "k_shear", "k_bend", "damp_mass", "damp_stiff")
+
+
+def readout_lines(r, width=40):
+    """The panel's lines for one simulator's ``AppState.readouts`` (at most ``width``
+    characters, the read-out column's width): what the method bounds, the violation of its
+    own constraints against the tolerance, the iterations, then the strains with their bands."""
+    import textwrap
+    lines = textwrap.wrap(f"{r['method']}: {r['limits']}", width, subsequent_indent="  ")
+    if r["own_violation"] is not None:
+        mx = r["own_violation"][0]
+        lines.append(f"own limits {'held' if mx <= r['tol'] else 'NOT HELD'}: max {mx:.1e} "
+                     f"(tol {r['tol']:.0e})")
+    lines.append(f"SL iters {r['sl_iterations']}  CG iters {r['cg_iterations']}")
+    lines.append(f"{'strain %':8s}{'min':>6s}{'max':>7s}{'rms':>6s}  band")
+    for name in BANDS:
+        lo, hi = r["bands"][name]
+        lines.append(f"{name:8s}{100 * r['strain_min'][name]:+6.2f}"
+                     f"{100 * r['strain_max'][name]:+7.2f}{100 * r['strain_rms'][name]:6.2f}"
+                     f"  {100 * lo:+.1f}..{100 * hi:+.1f}")
+    return lines
 
 
 def build_simulator(module, cfg):
@@ -401,9 +432,19 @@ class AppState:
             self._strain_cache[key] = self.sims[i].face_strains()
         return self._strain_cache[key]
 
+    def own_violation(self, i=0):
+        """Per-face violation of simulator ``i``'s own constraints (None without a method;
+        cached like ``strains``)."""
+        key = ("own", i, self.sims[i].frame, self.sims[i].method)
+        if key not in self._strain_cache:
+            self._strain_cache[key] = self.sims[i].own_violation()
+        return self._strain_cache[key]
+
     def readouts(self, i=0):
-        """Numbers for the panel: frame, time, faces, stage and render times, iterations, and
-        per-band max and area-weighted RMS violation (strain)."""
+        """Numbers for the panel: frame, time, faces, stage and render times, iterations, the
+        violation of the method's own constraints (max and area-weighted RMS, strain; None
+        without a method) with what the method bounds, and the warp, weft and bias strains
+        (min, max, area-weighted RMS)."""
         s = self.sims[i]
         st = self.strains(i)
         area = s.model.rest_area
@@ -416,11 +457,12 @@ class AppState:
                "sl_iterations": s.strain.last_iterations if s.strain is not None
                and s.stage("strain_limit").enabled else 0,
                "cg_iterations": s.dynamics.last_cg_iters}
-        viol = {}
-        for name in BANDS:
-            v = metrics.band_violation(st[name], b[name])
-            viol[name] = metrics.summarize(v, area)
-        out["violation"] = viol
+        own = self.own_violation(i)
+        out["own_violation"] = None if own is None else metrics.summarize(own, area)
+        out["tol"] = s.settings.strain.tol
+        out["limits"] = LIMITS[s.method]
+        out["bands"] = b
         out["strain_max"] = {n: float(np.max(st[n])) for n in BANDS}
         out["strain_min"] = {n: float(np.min(st[n])) for n in BANDS}
+        out["strain_rms"] = {n: metrics.weighted_rms(st[n], area) for n in BANDS}
         return out
