@@ -20,8 +20,11 @@ def machine():
         pass
     import taichi as ti
     version = ".".join(str(v) for v in ti.__version__)
+    import time
+    # The date goes with the machine into every results page's header (with the command and
+    # the commit: docs/index.md lists them).
     return (f"{os.cpu_count()}-core CPU ({model}), Taichi {version} cpu backend, f64, "
-            f"Python {platform.python_version()}")
+            f"Python {platform.python_version()}, run {time.strftime('%Y-%m-%d')}")
 
 
 def commit():
