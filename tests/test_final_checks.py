@@ -55,17 +55,18 @@ def sheet_over_sphere(center, radius, gap, half=0.5, n=25, flat_from=None, flare
     return x
 
 
-def drape_cfg():
+def drape_case():
+    """The drape scene's module and settings, its sphere (centre, radius), the thickness, a
+    time after the sheet must hang draped, and a draped sheet."""
     from scenes import drape
-    return drape, resolve(drape.DEFAULTS, [])
+    cfg = resolve(drape.DEFAULTS, [])
+    c, r = np.asarray(cfg["sphere"]["center"]), cfg["sphere"]["radius"]
+    t = cfg["collision"]["thickness"]
+    return drape, cfg, c, r, t, drape.drape_by(cfg) + 0.1, sheet_over_sphere(c, r, 0.5 * t)
 
 
 def test_drape_check_passes_a_draped_sheet_and_fails_a_flat_one_on_the_top():
-    drape, cfg = drape_cfg()
-    c, r = np.asarray(cfg["sphere"]["center"]), cfg["sphere"]["radius"]
-    t = cfg["collision"]["thickness"]
-    late = drape.drape_by(cfg) + 0.1
-    draped = sheet_over_sphere(c, r, 0.5 * t)
+    drape, cfg, c, r, t, late, draped = drape_case()
     ok, msg = drape.check_final(fake(draped, late), cfg)
     assert ok and "draped over the sphere (below its equator on all 8 sides)" in msg, msg
     # The issue's picture: the sheet lies flat on the sphere's top like a board.
@@ -89,11 +90,7 @@ def test_drape_check_passes_a_draped_sheet_and_fails_a_flat_one_on_the_top():
 
 
 def test_drape_check_fails_a_hovering_sheet_one_beside_the_sphere_and_one_inside_it():
-    drape, cfg = drape_cfg()
-    c, r = np.asarray(cfg["sphere"]["center"]), cfg["sphere"]["radius"]
-    t = cfg["collision"]["thickness"]
-    late = drape.drape_by(cfg) + 0.1
-    draped = sheet_over_sphere(c, r, 0.5 * t)
+    drape, cfg, c, r, t, late, draped = drape_case()
     ok, msg = drape.check_final(fake(draped + [0.0, 0.3, 0.0], late), cfg)
     assert not ok and "rests on the sphere's top" in msg, msg
     beside = draped.copy()
