@@ -62,7 +62,7 @@ def check_final(sim, cfg):
 
     def draped():
         t = drape_by(cfg)
-        if sim.time < t:
+        if checks.before(sim, t):
             return True, f"drape not checked before {t:.2f} s"
         return checks.draped_over_sphere(x, center, s["radius"], margin=4 * tol)
 

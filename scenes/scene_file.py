@@ -499,7 +499,7 @@ def check_final(sim, cfg):
         center, radius = o.pose(sim.time)[0], o.radius
         t = checks.drape_time(sim.setup.mesh.x[:, 1].min(), center, radius,
                               sim.settings.sim.gravity)
-        if sim.time < t:
+        if checks.before(sim, t):
             return True, f"drape not checked before {t:.2f} s"
         return checks.draped_over_sphere(x, center, radius, margin=4 * tol)
 
