@@ -123,6 +123,7 @@ def G_from_chord(angle):
 
 # ---- simulations ------------------------------------------------------------------------------
 CANT_L, CANT_WIDTH = 0.20, 0.08     # m: overhang of each half, strip width
+LEDGE = 0.10                        # m: the ledge cantilever's strip held on the ledge
 STRIP_L, STRIP_WIDTH = 1.0, 0.04                    # m: the hanging strip
 DIRECTIONS = ("warp", "weft", "bias", "bias-")
 
@@ -154,6 +155,17 @@ def cantilever_mesh(L, width, h, pattern="regular", direction="warp", seed=0):
     return uv2, faces2.astype(np.int32), angle
 
 
+def ledge_mesh(width, h, pattern="regular", direction="warp", seed=0, L=CANT_L, ledge=LEDGE):
+    """The ledge cantilever's strip [-ledge, L] x [0, width] (``strip_mesh``, shifted so the
+    ledge's edge is u = 0): the part on the ledge is pinned, the overhang L is free. The
+    ledge's edge and the tip are mesh lines (cuts), so the clamp and the tip are straight on
+    every pattern and direction."""
+    uv, faces, angle = strip_mesh(ledge + L, width, h, pattern, direction, seed,
+                                  cuts=(ledge + L, ledge))
+    uv = uv - np.array([ledge, 0.0])
+    return uv, faces, angle
+
+
 IRREGULAR = "irregular"      # a Delaunay triangulation of jittered points (no lattice)
 
 
@@ -181,6 +193,22 @@ def irregular_strip(length, width, h, seed=0, cuts=()):
     faces[area < 0] = faces[area < 0][:, ::-1]
     faces = faces[np.abs(area) > 1e-3 * h * h]
     return uv, faces.astype(np.int32), 0.0
+
+
+def _bias_rows(width, h, cuts):
+    """Half the number of vertex rows across a bias strip: the m >= 1 nearest to
+    width sqrt(2) / (2 h) (the finer on a tie) for which every cut lies an even number of
+    row spacings s = width / (2 m) from the last. The lattice's vertices on the edge rows then
+    fall on every cut line, not only on the last, and each cut is straight to the corners:
+    otherwise the tip is ragged (a 16 cm strip at 0.5 cm has L / s = 57.5 at the nearest m;
+    the ledge strips lost up to 5 % of their area at the tip, and read too stiff)."""
+    m0 = max(1, int(round(width * np.sqrt(2.0) / (2 * h))))
+    for m in sorted(range(max(1, m0 // 2), 2 * m0 + 2), key=lambda m: (abs(m - m0), -m)):
+        s = width / (2 * m)
+        k = [(c - cuts[-1]) / s for c in cuts]
+        if all(abs(x - 2 * round(x / 2)) < 1e-6 for x in k):
+            return m
+    return m0
 
 
 def strip_mesh(length, width, h, pattern="regular", direction="warp", seed=0, cuts=()):
@@ -218,7 +246,7 @@ def strip_mesh(length, width, h, pattern="regular", direction="warp", seed=0, cu
     # edge are cut along their diagonal parallel to it, so the outline is straight (cut
     # through the turned pattern, it would be a saw-tooth of 45-degree edges whose loose teeth
     # carry weight but little stiffness: a bias strip 2 cm meshes wide read 25 % too soft).
-    s = width / (2 * max(1, int(round(width * np.sqrt(2.0) / (2 * h)))))   # even rows
+    s = width / (2 * _bias_rows(width, h, cuts))                          # even rows
     leg = s * np.sqrt(2.0)
     n = int(np.ceil((length + width) / s)) + 4
     flip = quad_flips(n + 1, n + 1, pattern, seed)
@@ -387,6 +415,30 @@ def cantilever(rig, G=1.0, h=0.01, pattern="regular", direction="warp", seed=0,
                 chord_ref_deg=float(np.degrees(chord_angle(G))), ratio=G / G_eff,
                 asymmetry_deg=float(np.degrees(chords[1] - chords[0])),
                 steps=steps, faces=len(faces), shape=(shape - root[:2]) / L)
+
+
+def ledge(rig, G=1.0, h=0.01, pattern="regular", direction="warp", seed=0, material=None,
+          width=CANT_WIDTH, L=CANT_L):
+    """The lab's cantilever (ASTM D1388): a strip lies on a ledge (its vertices there pinned,
+    ``ledge_mesh``) and overhangs it by L with q L^3 / B = G. The chord from the middle of the
+    ledge's edge to the middle of the tip is read back through the elastica, whose clamp is
+    the ledge's edge (the pinned rows hold the slope there)."""
+    mat = material or make_material()
+    q = mat.density * G_ACC
+    mat.k_bend = q * L ** 3 / G
+    uv, faces, angle = ledge_mesh(width, h, pattern, direction, seed, L=L)
+    x = np.c_[uv[:, 0], np.zeros(len(uv)), uv[:, 1]]
+    held = uv[:, 0] <= 1e-12
+    model = rig.load(uv, x, faces, held, angle, mat)
+    steps = rig.settle()
+    xs = model.positions()
+    root = xs[np.abs(uv[:, 0]) < 1e-12].mean(axis=0)
+    tip = xs[np.abs(uv[:, 0] - L) < 1e-12].mean(axis=0)
+    chord = float(np.arctan2(root[1] - tip[1], tip[0] - root[0]))
+    return dict(kind="ledge", G=G, h=h, pattern=pattern, direction=direction, seed=seed,
+                width=width, chord_deg=float(np.degrees(chord)),
+                chord_ref_deg=float(np.degrees(chord_angle(G))), ratio=G / G_from_chord(chord),
+                steps=steps, faces=len(faces))
 
 
 def hanging_strip(rig, h=0.01, pattern="regular", direction="warp", k=200.0, seed=0,
