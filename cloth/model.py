@@ -283,7 +283,7 @@ class ClothModel:
         ev, ef, eo = build_edges(faces)
         nv, nf, ne = len(uv), len(faces), len(ev)
         if self.bending == "isotropic":
-            Q = bending_energy.isotropic_matrix(uv, faces, ev, ef, eo, area)
+            Q = bending_energy.isotropic_matrix(uv, faces, ev, ef, eo, area, mesh.pinned)
             bend_ptr, bend_col, bend_val = bending_energy.rows_with_diagonal_first(Q)
         else:
             bend_ptr, bend_col, bend_val = np.zeros(nv + 1, np.int32), np.zeros(0, np.int32), \
