@@ -1,11 +1,13 @@
 """Material calibration (#16): does the simulated cloth have the lab's bending rigidity and
 tensile moduli, at any resolution and with any triangulation?
 
-    python -m benchmarks.calibration           # ~1.5 min on 2 shared cores -> docs/calibration/
+    python -m benchmarks.calibration           # ~15 min on 2 shared cores -> docs/calibration/
     python -m benchmarks.calibration --quick   # h = 1 and 2 cm only
 
-Writes ``calibration.md`` (tables of B_eff / B and k_eff / k) and ``calibration.png``.
-Two static experiments, each against a reference computed here (nothing hard-coded):
+Writes ``calibration.md`` (tables of B_eff / B and k_eff / k), ``calibration.png`` and
+``ledge.png``. Three static experiments, each against a reference computed here (nothing
+hard-coded): the back-to-back cantilevers and the hanging strip below, and the lab's own
+cantilever on a ledge at widths 2-16 cm (benchmarks/ledge.py, #35).
 
 Cantilever (flexural rigidity B = ``material.k_bend``, N m). Two cantilevers back to back: a
 strip 2 L long (L = 20 cm, 8 cm wide) is held only along its middle line of vertices and both
@@ -123,7 +125,6 @@ def G_from_chord(angle):
 
 # ---- simulations ------------------------------------------------------------------------------
 CANT_L, CANT_WIDTH = 0.20, 0.08     # m: overhang of each half, strip width
-LEDGE = 0.10                        # m: the ledge cantilever's strip held on the ledge
 STRIP_L, STRIP_WIDTH = 1.0, 0.04                    # m: the hanging strip
 DIRECTIONS = ("warp", "weft", "bias", "bias-")
 
@@ -153,17 +154,6 @@ def cantilever_mesh(L, width, h, pattern="regular", direction="warp", seed=0):
     uv2 = np.r_[uv, np.c_[2 * L - uv[~on_line, 0], uv[~on_line, 1]]]
     faces2 = np.r_[faces, mirror[faces][:, ::-1]]          # reversed: counter-clockwise again
     return uv2, faces2.astype(np.int32), angle
-
-
-def ledge_mesh(width, h, pattern="regular", direction="warp", seed=0, L=CANT_L, ledge=LEDGE):
-    """The ledge cantilever's strip [-ledge, L] x [0, width] (``strip_mesh``, shifted so the
-    ledge's edge is u = 0): the part on the ledge is pinned, the overhang L is free. The
-    ledge's edge and the tip are mesh lines (cuts), so the clamp and the tip are straight on
-    every pattern and direction."""
-    uv, faces, angle = strip_mesh(ledge + L, width, h, pattern, direction, seed,
-                                  cuts=(ledge + L, ledge))
-    uv = uv - np.array([ledge, 0.0])
-    return uv, faces, angle
 
 
 IRREGULAR = "irregular"      # a Delaunay triangulation of jittered points (no lattice)
@@ -417,30 +407,6 @@ def cantilever(rig, G=1.0, h=0.01, pattern="regular", direction="warp", seed=0,
                 steps=steps, faces=len(faces), shape=(shape - root[:2]) / L)
 
 
-def ledge(rig, G=1.0, h=0.01, pattern="regular", direction="warp", seed=0, material=None,
-          width=CANT_WIDTH, L=CANT_L):
-    """The lab's cantilever (ASTM D1388): a strip lies on a ledge (its vertices there pinned,
-    ``ledge_mesh``) and overhangs it by L with q L^3 / B = G. The chord from the middle of the
-    ledge's edge to the middle of the tip is read back through the elastica, whose clamp is
-    the ledge's edge (the pinned rows hold the slope there)."""
-    mat = material or make_material()
-    q = mat.density * G_ACC
-    mat.k_bend = q * L ** 3 / G
-    uv, faces, angle = ledge_mesh(width, h, pattern, direction, seed, L=L)
-    x = np.c_[uv[:, 0], np.zeros(len(uv)), uv[:, 1]]
-    held = uv[:, 0] <= 1e-12
-    model = rig.load(uv, x, faces, held, angle, mat)
-    steps = rig.settle()
-    xs = model.positions()
-    root = xs[np.abs(uv[:, 0]) < 1e-12].mean(axis=0)
-    tip = xs[np.abs(uv[:, 0] - L) < 1e-12].mean(axis=0)
-    chord = float(np.arctan2(root[1] - tip[1], tip[0] - root[0]))
-    return dict(kind="ledge", G=G, h=h, pattern=pattern, direction=direction, seed=seed,
-                width=width, chord_deg=float(np.degrees(chord)),
-                chord_ref_deg=float(np.degrees(chord_angle(G))), ratio=G / G_from_chord(chord),
-                steps=steps, faces=len(faces))
-
-
 def hanging_strip(rig, h=0.01, pattern="regular", direction="warp", k=200.0, seed=0,
                   L=STRIP_L, width=STRIP_WIDTH):
     """A strip hanging from its top row (u = 0) with modulus k along it; k_eff / k from the
@@ -519,6 +485,8 @@ def run(quick=False, log=print):
                     log(f"locking    {pattern:11s} h={h:<6} {direction:4s} k_shear={k_shear:g}"
                         f" B_eff/B={r['ratio']:.3f}")
                     rows.append(r)
+    from benchmarks import ledge
+    rows += ledge.sweep(rig, sizes, log)
     for pattern in PATTERNS:
         for h in sizes:
             for direction in ("warp", "weft"):
@@ -538,7 +506,8 @@ def report(rows, out, seconds, command):
     rows_all = rows
     L = []
     L.append("# Material calibration: bending rigidity and tensile modulus\n")
-    L.append(f"Command: `{command}` ({seconds:.0f} s). Machine: {machine()}; commit {commit()}.\n")
+    L.append(f"Command: `{command}` ({seconds:.0f} s), {time.strftime('%Y-%m-%d')}. "
+             f"Machine: {machine()}; commit {commit()}.\n")
     L.append("Cantilever: two cantilevers back to back, a strip 8 cm wide held along its "
              "middle line, each half overhanging L = 20 cm under its own weight (0.15 kg/m^2; "
              f"membrane 3e4 N/m, shear {CALIBRATION_SHEAR:g} N/m, a woven's, so it barely "
@@ -555,8 +524,9 @@ def report(rows, out, seconds, command):
              "Delaunay triangulation of grid points jittered by up to 0.35 h, with no mesh "
              "lines and triangles of every shape (one direction: the mesh has none).\n")
     L.append("Bending energies: **isotropic** (the default, cloth/bending.py: the plate's "
-             "|II|^2 from the cotangent Laplacian's trace and a per-face quadratic fit's "
-             "deviator) and, for comparison, the **hinge** energy (discrete shells, weight "
+             "|II|^2, its trace by finite volumes over the vertices' cells and its deviator "
+             "from a per-face quadratic fit, consistent at free edges and clamps) and, for "
+             "comparison, the **hinge** energy (discrete shells, weight "
              f"{_bend_constant():g} |e|^2 / (A1 + A2); `sim.bending = \"hinge\"`).\n")
 
     def span(rs, key="ratio"):
@@ -621,6 +591,9 @@ def report(rows, out, seconds, command):
                  f"{r['chord_deg']:.2f} | {r['chord_ref_deg']:.2f} | {r['ratio']:.3f} | "
                  f"{r['ratio_hinge']:.3f} | {r['faces']} |")
     L.append("")
+    from benchmarks import ledge
+    ledge_rows = [r for r in rows if r["kind"] == "ledge"]
+    L += ledge.report_lines(ledge_rows)
     L.append("Hanging strip: 1 m x 4 cm from its top row, modulus k = 200 N/m along the strip "
              "(the other direction 5 x stiffer, shear k / 4). k_eff from the top row of faces "
              "through the membrane law; the linear reading rho g (L - h/2) / strain in the last "
@@ -638,6 +611,8 @@ def report(rows, out, seconds, command):
     with open(os.path.join(out, "calibration.md"), "w") as fh:
         fh.write("\n".join(L))
     plot(cant, strip, os.path.join(out, "calibration.png"))
+    if ledge_rows:
+        ledge.plot(ledge_rows, os.path.join(out, "ledge.png"))
 
 
 def plot(cant, strip, path):
