@@ -202,7 +202,9 @@ class ClothModel:
       w_e, the edge's share of k_bend (BEND_CONSTANT); zero under isotropic bending
       bend_ptr (V + 1, i32), bend_col (Q, i32), bend_val (Q):  the isotropic bending matrix
       (cloth/bending.py) by rows, each row's diagonal first; ``n_bend`` entries, none (every
-      row empty) under the hinge energy
+      row empty) under the hinge energy. Built by ``load`` from the mesh and its pins: faces
+      with three pinned vertices are a clamp, held flat (``set_vertex_pin`` does not rebuild
+      it; the next load, e.g. a remesh, does)
 
     ``bending``: "isotropic" (the default for a flat rest shape; k_bend is the plate's B in
     every direction) or "hinge" (the discrete-shells energy: needed for a curved rest shape
