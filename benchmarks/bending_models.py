@@ -227,8 +227,7 @@ def report(rows, out, seconds, ledge_rows=()):
     if ledge_rows:
         from benchmarks.ledge import WIDTHS
         v = [x for r in ledge_rows for x in r["ratios"] if x is not None]
-        L += ["", "## Linearised ledge cantilever (isotropic energy, #35)
-",
+        L += ["", "## Linearised ledge cantilever (isotropic energy, #35)\n",
               "The ledge of benchmarks/ledge.py linearised like the cantilever above: the "
               "strip's vertices on the 10 cm ledge pinned, the 20 cm overhang under its weight; "
               "B_eff / B = q L^4 / (8 B w_tip), by strip width (cm); a dash where the strip is "
