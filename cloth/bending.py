@@ -39,9 +39,10 @@ Boundaries, found from the topology and the pins (so a remeshed or sewn mesh get
   One row of pins (a hanging sheet's top row, a single corner) is no clamp: it holds the
   positions, not the slope, and is a free edge for the energy.
 
-Measured (docs/calibration/): the linearised ledge and back-to-back cantilevers read
-0.98-1.00 B over every width, pattern, direction and size of the calibration (2-16 cm wide,
-0.5-2 cm triangles) with at least two rows of triangles across.
+Measured (docs/calibration/, ``python -m benchmarks.calibration`` at 0e98473): the ledge
+cantilever reads 0.988-1.001 B at 0.5 cm, 0.953-1.003 at 1 cm, 0.973-1.007 at 2 cm, over
+widths 2-16 cm with at least two triangles across, every pattern and direction, 7 and 41.5
+deg (was 0.91-0.99, 0.65-0.96, 0.53-0.92); the back-to-back strips 0.971-1.005 (0.922-1.039).
 
 A rigid motion of the flat rest sheet has zero energy: every term is a second derivative or a
 flux balance, exact on affine maps. The energy has no rest curvature, so a model with a
