@@ -1,6 +1,6 @@
 """Bending energies compared on the calibration's strips (#16), without the simulator:
 
-    python -m benchmarks.bending_models     # ~15 s -> docs/calibration/bending_models.md
+    python -m benchmarks.bending_models     # ~1 min -> docs/calibration/bending_models_table.md
 
 Every energy here is quadratic in the positions, E = (B / 2) sum_c x_c^T K x_c over the three
 coordinates (constant Hessian K, exact for an isometric bend of the flat sheet, see below), so
@@ -24,9 +24,14 @@ hinge      the simulator's: BEND_CONSTANT |e|^2 / (A1 + A2) theta^2 / 2 per inte
 face fit   per face, the quadratic X(u) through its three vertices and the three across its
            edges (across a boundary edge: X_nn = 0, the moment-free edge); energy
            A (|X_uu|^2 + |X_vv|^2 + 2 |X_uv|^2) / 2. Exact for quadratic fields, isotropic.
-mixed      (tr H)^2 / 2 from the cotangent Laplacian at interior vertices (the face fit's
-           trace at boundary vertices) plus the face fit's deviatoric part |dev H|^2: again
-           |H|^2 in the continuum. The simulator's isotropic bending (cloth/bending.py).
+mixed      (tr H)^2 / 2 by finite volumes over the vertices' cells (the cotangent Laplacian,
+           plus the flux through the outline at free edges and clamps) plus the face fit's
+           deviatoric part |dev H|^2: again |H|^2 in the continuum. The simulator's isotropic
+           bending (cloth/bending.py).
+
+ledge      (mixed only) the linearised ledge cantilever of benchmarks/ledge.py at widths
+           2-16 cm: the clamp (pinned rows) and the free long edges, which the back-to-back
+           strips do not test.
 """
 import argparse
 import os
@@ -118,9 +123,11 @@ def K_face_fit(m):
 
 
 def K_mixed(m):
-    """The simulator's isotropic energy: Laplacian trace plus face-fit deviator."""
+    """The simulator's isotropic energy: finite-volume trace plus face-fit deviator, with the
+    clamp where ``m`` has pins."""
     from cloth.bending import isotropic_matrix
-    return isotropic_matrix(m["uv"], m["faces"], m["ev"], m["ef"], m["eo"], m["area"])
+    return isotropic_matrix(m["uv"], m["faces"], m["ev"], m["ef"], m["eo"], m["area"],
+                            m.get("pinned"))
 
 
 MODELS = (("hinge (= per-edge quadratic)", K_hinge), ("face fit", K_face_fit), ("mixed", K_mixed))
@@ -146,6 +153,37 @@ def cantilever_ratio(m, K):
     return L_HALF ** 4 / (8.0 * tip)
 
 
+def ledge_ratio(pattern, direction, h, width, K_of=K_mixed):
+    """B_eff / B of the linearised ledge cantilever (benchmarks.ledge's strip: its vertices
+    on the ledge, u <= 0, pinned; overhang L_HALF): w_tip = q L^4 / (8 B)."""
+    from benchmarks.ledge import ledge_mesh
+    from cloth.model import build_edges, signed_material_areas
+    uv, faces, _ = ledge_mesh(width, h, pattern, direction, L=L_HALF)
+    ev, ef, eo = build_edges(faces)
+    A = signed_material_areas(uv, faces)
+    free = uv[:, 0] > 1e-12
+    m = dict(uv=uv, faces=faces.astype(np.int64), ev=ev, ef=ef, eo=eo, area=A, pinned=~free)
+    K = K_of(m)
+    load = np.zeros(len(uv))
+    np.add.at(load, faces.ravel(), np.repeat(A / 3, 3))
+    w = np.zeros(len(uv))
+    w[free] = spl.spsolve(K[free][:, free].tocsc(), load[free])
+    return L_HALF ** 4 / (8.0 * w[np.abs(uv[:, 0] - L_HALF) < 1e-12].mean())
+
+
+def run_ledge():
+    from benchmarks.calibration import IRREGULAR
+    from benchmarks.ledge import WIDTHS
+    rows = []
+    for pattern in PATTERNS + (IRREGULAR,):
+        for h in SIZES:
+            for direction in (("warp",) if pattern == IRREGULAR else ("warp", "weft") + DIRECTIONS[1:]):
+                rows.append(dict(pattern=pattern, h=h, direction=direction, ratios=[
+                    ledge_ratio(pattern, direction, h, w) if w >= 2 * h - 1e-9 else None
+                    for w in WIDTHS]))
+    return rows
+
+
 def run():
     rows = []
     for pattern in PATTERNS:
@@ -162,10 +200,16 @@ def run():
     return rows
 
 
-def report(rows, out, seconds):
+def _commit():
+    from benchmarks.harness import commit
+    return commit()
+
+
+def report(rows, out, seconds, ledge_rows=()):
     names = [n for n, _ in MODELS]
     L = ["# Bending energies on the calibration strips: hinge, per-edge quadratic, isotropic fits\n",
-         f"Command: `python -m benchmarks.bending_models` ({seconds:.0f} s); the energies and "
+         f"Command: `python -m benchmarks.bending_models` ({seconds:.0f} s), "
+         f"{time.strftime('%Y-%m-%d')}, commit {_commit()}; the energies and "
          "measures are defined in the module docstring (benchmarks/bending_models.py). "
          "B_eff / B of the linearised cantilever (small deflection, G -> 0) and E / E_plate of "
          "an isometric cylinder along the strip (curvature 2 / m), 2 x 20 cm strips 8 cm wide.\n",
@@ -180,6 +224,19 @@ def report(rows, out, seconds):
     L.append("The exact (nonlinear) hinge energy of the same cylinders divided by its quadratic "
              "stand-in: " + f"{min(r['cyl_hinge_exact'] / r['cyl ' + names[0]] for r in rows):.4f}"
              " ... " + f"{max(r['cyl_hinge_exact'] / r['cyl ' + names[0]] for r in rows):.4f}.")
+    if ledge_rows:
+        from benchmarks.ledge import WIDTHS
+        v = [x for r in ledge_rows for x in r["ratios"] if x is not None]
+        L += ["", "## Linearised ledge cantilever (isotropic energy, #35)\n",
+              "The ledge of benchmarks/ledge.py linearised like the cantilever above: the "
+              "strip's vertices on the 10 cm ledge pinned, the 20 cm overhang under its weight; "
+              "B_eff / B = q L^4 / (8 B w_tip), by strip width (cm); a dash where the strip is "
+              f"narrower than two triangles. All: **{min(v):.3f} ... {max(v):.3f}**.\n",
+              "| pattern | h (cm) | direction | " + " | ".join(f"{100 * w:g}" for w in WIDTHS)
+              + " |", "|" + " --- |" * (3 + len(WIDTHS))]
+        for r in ledge_rows:
+            L.append(f"| {r['pattern']} | {r['h'] * 100:g} | {r['direction']} | " + " | ".join(
+                "-" if x is None else f"{x:.3f}" for x in r["ratios"]) + " |")
     os.makedirs(out, exist_ok=True)
     with open(os.path.join(out, "bending_models_table.md"), "w") as fh:
         fh.write("\n".join(L) + "\n")
@@ -190,8 +247,8 @@ def main():
     ap.add_argument("--out", default=os.path.join(ROOT, "docs", "calibration"))
     a = ap.parse_args()
     t0 = time.perf_counter()
-    rows = run()
-    report(rows, a.out, time.perf_counter() - t0)
+    rows, ledge_rows = run(), run_ledge()
+    report(rows, a.out, time.perf_counter() - t0, ledge_rows)
     print(f"wrote {os.path.join(a.out, 'bending_models_table.md')}")
 
 

@@ -1,11 +1,13 @@
 """Material calibration (#16): does the simulated cloth have the lab's bending rigidity and
 tensile moduli, at any resolution and with any triangulation?
 
-    python -m benchmarks.calibration           # ~1.5 min on 2 shared cores -> docs/calibration/
+    python -m benchmarks.calibration           # ~15 min on 2 shared cores -> docs/calibration/
     python -m benchmarks.calibration --quick   # h = 1 and 2 cm only
 
-Writes ``calibration.md`` (tables of B_eff / B and k_eff / k) and ``calibration.png``.
-Two static experiments, each against a reference computed here (nothing hard-coded):
+Writes ``calibration.md`` (tables of B_eff / B and k_eff / k), ``calibration.png`` and
+``ledge.png``. Three static experiments, each against a reference computed here (nothing
+hard-coded): the back-to-back cantilevers and the hanging strip below, and the lab's own
+cantilever on a ledge at widths 2-16 cm (benchmarks/ledge.py, #35).
 
 Cantilever (flexural rigidity B = ``material.k_bend``, N m). Two cantilevers back to back: a
 strip 2 L long (L = 20 cm, 8 cm wide) is held only along its middle line of vertices and both
@@ -183,6 +185,22 @@ def irregular_strip(length, width, h, seed=0, cuts=()):
     return uv, faces.astype(np.int32), 0.0
 
 
+def _bias_rows(width, h, cuts):
+    """Half the number of vertex rows across a bias strip: the m >= 1 nearest to
+    width sqrt(2) / (2 h) (the finer on a tie) for which every cut lies an even number of
+    row spacings s = width / (2 m) from the last. The lattice's vertices on the edge rows then
+    fall on every cut line, not only on the last, and each cut is straight to the corners:
+    otherwise the tip is ragged (a 16 cm strip at 0.5 cm has L / s = 57.5 at the nearest m;
+    the ledge strips lost up to 5 % of their area at the tip, and read too stiff)."""
+    m0 = max(1, int(round(width * np.sqrt(2.0) / (2 * h))))
+    for m in sorted(range(max(1, m0 // 2), 2 * m0 + 2), key=lambda m: (abs(m - m0), -m)):
+        s = width / (2 * m)
+        k = [(c - cuts[-1]) / s for c in cuts]
+        if all(abs(x - 2 * round(x / 2)) < 1e-6 for x in k):
+            return m
+    return m0
+
+
 def strip_mesh(length, width, h, pattern="regular", direction="warp", seed=0, cuts=()):
     """A strip [0, length] x [0, width] in material coordinates (u along the strip) meshed by
     ``make_sheet`` with legs of about ``h``, cut from a sheet meshed along its grain:
@@ -218,7 +236,7 @@ def strip_mesh(length, width, h, pattern="regular", direction="warp", seed=0, cu
     # edge are cut along their diagonal parallel to it, so the outline is straight (cut
     # through the turned pattern, it would be a saw-tooth of 45-degree edges whose loose teeth
     # carry weight but little stiffness: a bias strip 2 cm meshes wide read 25 % too soft).
-    s = width / (2 * max(1, int(round(width * np.sqrt(2.0) / (2 * h)))))   # even rows
+    s = width / (2 * _bias_rows(width, h, cuts))                          # even rows
     leg = s * np.sqrt(2.0)
     n = int(np.ceil((length + width) / s)) + 4
     flip = quad_flips(n + 1, n + 1, pattern, seed)
@@ -467,6 +485,8 @@ def run(quick=False, log=print):
                     log(f"locking    {pattern:11s} h={h:<6} {direction:4s} k_shear={k_shear:g}"
                         f" B_eff/B={r['ratio']:.3f}")
                     rows.append(r)
+    from benchmarks import ledge
+    rows += ledge.sweep(rig, sizes, log)
     for pattern in PATTERNS:
         for h in sizes:
             for direction in ("warp", "weft"):
@@ -486,7 +506,8 @@ def report(rows, out, seconds, command):
     rows_all = rows
     L = []
     L.append("# Material calibration: bending rigidity and tensile modulus\n")
-    L.append(f"Command: `{command}` ({seconds:.0f} s). Machine: {machine()}; commit {commit()}.\n")
+    L.append(f"Command: `{command}` ({seconds:.0f} s), {time.strftime('%Y-%m-%d')}. "
+             f"Machine: {machine()}; commit {commit()}.\n")
     L.append("Cantilever: two cantilevers back to back, a strip 8 cm wide held along its "
              "middle line, each half overhanging L = 20 cm under its own weight (0.15 kg/m^2; "
              f"membrane 3e4 N/m, shear {CALIBRATION_SHEAR:g} N/m, a woven's, so it barely "
@@ -503,8 +524,9 @@ def report(rows, out, seconds, command):
              "Delaunay triangulation of grid points jittered by up to 0.35 h, with no mesh "
              "lines and triangles of every shape (one direction: the mesh has none).\n")
     L.append("Bending energies: **isotropic** (the default, cloth/bending.py: the plate's "
-             "|II|^2 from the cotangent Laplacian's trace and a per-face quadratic fit's "
-             "deviator) and, for comparison, the **hinge** energy (discrete shells, weight "
+             "|II|^2, its trace by finite volumes over the vertices' cells and its deviator "
+             "from a per-face quadratic fit, consistent at free edges and clamps) and, for "
+             "comparison, the **hinge** energy (discrete shells, weight "
              f"{_bend_constant():g} |e|^2 / (A1 + A2); `sim.bending = \"hinge\"`).\n")
 
     def span(rs, key="ratio"):
@@ -569,6 +591,9 @@ def report(rows, out, seconds, command):
                  f"{r['chord_deg']:.2f} | {r['chord_ref_deg']:.2f} | {r['ratio']:.3f} | "
                  f"{r['ratio_hinge']:.3f} | {r['faces']} |")
     L.append("")
+    from benchmarks import ledge
+    ledge_rows = [r for r in rows if r["kind"] == "ledge"]
+    L += ledge.report_lines(ledge_rows)
     L.append("Hanging strip: 1 m x 4 cm from its top row, modulus k = 200 N/m along the strip "
              "(the other direction 5 x stiffer, shear k / 4). k_eff from the top row of faces "
              "through the membrane law; the linear reading rho g (L - h/2) / strain in the last "
@@ -586,6 +611,8 @@ def report(rows, out, seconds, command):
     with open(os.path.join(out, "calibration.md"), "w") as fh:
         fh.write("\n".join(L))
     plot(cant, strip, os.path.join(out, "calibration.png"))
+    if ledge_rows:
+        ledge.plot(ledge_rows, os.path.join(out, "ledge.png"))
 
 
 def plot(cant, strip, path):

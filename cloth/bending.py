@@ -1,5 +1,5 @@
-"""The isotropic bending energy (issue #16): a constant matrix Q over the vertices, built on
-the host from the material mesh whenever the mesh changes.
+"""The isotropic bending energy (issues #16, #35): a constant matrix Q over the vertices, built
+on the host from the material mesh and its pins whenever the mesh changes.
 
     E_bend = (B / 2) sum_c x_c^T Q x_c         (c = the three world coordinates, B = k_bend)
 
@@ -7,41 +7,59 @@ For an isometric bend of the flat sheet X(u, v) (cloth barely stretches), the se
 derivatives are X_ab = II_ab n, so the plate energy density (B / 2) |II|^2 equals
 (B / 2) (|X_uu|^2 + |X_vv|^2 + 2 |X_uv|^2), which is quadratic in the positions: its matrix
 is constant, its forces are exact and linear (-B Q x) and its Hessian is B Q itself. It is
-isotropic by construction. The hinge energy it replaces bends a strip at 45 degrees to the
-mesh lines 0.8-3.8 times too stiffly, because no per-edge energy can be isotropic on a grid
-(docs/calibration/bending_models.md).
+isotropic by construction, with Poisson ratio 0. The hinge energy it replaces bends a strip
+at 45 degrees to the mesh lines 0.8-3.8 times too stiffly (docs/calibration/bending_models.md).
 
-|II|^2 is split as (tr II)^2 / 2 + |dev II|^2, and the two parts come from different places,
-each where it converges:
+|II|^2 is split as (tr II)^2 / 2 + |dev II|^2:
 
-- tr II at interior vertices: the cotangent Laplacian, (L x)_v / A_v (A_v = a third of the
-  areas around v). It is exact for quadratic fields on these meshes and symmetric, so the
-  chequerboard mode of criss-cross meshes costs energy.
-- |dev II|^2 per face, and tr II at boundary vertices: the face fit. It is the quadratic
-  X(u) through the face's three vertices and the three vertices across its edges, in material
-  coordinates. Across a boundary edge the missing sixth point is replaced by X_nn = 0, the
-  moment-free edge (Poisson ratio 0).
+- tr II per vertex, by finite volumes over the vertex's cell (Voronoi, or Meyer's mixed cell
+  where a face is obtuse, ``cell_areas``): A_v tr II = the flux of grad X out of the cell. The
+  cotangent Laplacian is that flux through the cell's inner sides; where the cell meets the
+  outline, the flux through its share of the outline is added (``trace_rows``). On the grids'
+  right-angled meshes this is exact for quadratic fields at every vertex, whatever the
+  pattern: the lumped third of the areas was not (0.75 and 1.5 times the trace at the two
+  kinds of vertex of the alternating pattern, which read 1-3 % stiff at 0.5 cm).
+- |dev II|^2 per face from the face fit: the quadratic X(u) through the face's three vertices
+  and the three across its edges, in material coordinates.
 
-On its own, the face fit is 25-45 % too soft on the alternating pattern, through the
-chequerboard, whose fit is pure trace. The Laplacian's trace fixes that, and the face fit's
-deviator is blind to the chequerboard.
+Boundaries, found from the topology and the pins (so a remeshed or sewn mesh gets them too):
 
-Measured (docs/calibration/): the linearised cantilever reads 0.96-1.04 B for every pattern,
-direction and triangle size of the calibration (0.5-2 cm), against the hinge's 0.94-2.9.
+- A free edge (one face): the natural boundary condition, no moment across it. The fit
+  replaces the missing sixth point by X_nn = 0 (Poisson ratio 0), and the trace's flux through
+  the outline comes from that fit's normal slope along the edge. The old trace at boundary
+  vertices, the face fit's own over a third of their faces, left the outline soft: strips 2 cm
+  wide read 0.79 B on the ledge at 1 cm (docs/calibration/).
+- A clamp: faces whose three vertices are pinned (``held_faces``; two rows of pins or more)
+  are held flat and carry no energy; the energy lives on the free part, whose edges with them
+  are clamped. There the fit's sixth condition is that its slope across the edge equals the
+  held face's (a C1 join, the clamp's slope), and the trace's flux through the edge is the held
+  face's. The whole stencil over a clamp line is the mirror image of the free side's
+  (Ciarlet-Raviart's clamped plate): pinned rows counted as bendable cloth read 10 % soft at
+  1 cm, a first-order error (the hinge line's turn got a whole cell's compliance, not half).
+  One row of pins (a hanging sheet's top row, a single corner) is no clamp: it holds the
+  positions, not the slope, and is a free edge for the energy.
 
-A rigid motion of the flat rest sheet has zero energy: every term is a second derivative, and
-those vanish on affine maps. The energy has no rest curvature, so a model with a curved rest
-shape (``rest_x``) keeps the hinge energy (cloth/model.py).
+Measured (docs/calibration/, ``python -m benchmarks.calibration`` at 0e98473): the ledge
+cantilever reads 0.988-1.001 B at 0.5 cm, 0.953-1.003 at 1 cm, 0.973-1.007 at 2 cm, over
+widths 2-16 cm with at least two triangles across, every pattern and direction, 7 and 41.5
+deg (was 0.91-0.99, 0.65-0.96, 0.53-0.92); the back-to-back strips 0.971-1.005 (0.922-1.039).
+
+A rigid motion of the flat rest sheet has zero energy: every term is a second derivative or a
+flux balance, exact on affine maps. The energy has no rest curvature, so a model with a
+curved rest shape (``rest_x``) keeps the hinge energy (cloth/model.py).
 """
 import numpy as np
 import scipy.sparse as sp
 
-# A face whose six points nearly lie on one conic has an ill-posed quadratic fit; beyond this
-# condition number of its (scaled) 6 x 6 system the face gets the least-squares (pseudo-
-# inverse) fit instead. Measured: never on the grids (condition ~10); on the hanging sheet
-# remeshed for 60 frames from 31 x 31, 3 of 1822 faces, all exactly singular (1e17), the rest
-# under 50.
+# A face whose six conditions are nearly dependent (its points nearly on one conic) has an
+# ill-posed quadratic fit; beyond this condition number of its (scaled) 6 x 6 system the face
+# gets the least-squares (pseudo-inverse) fit instead. Measured: never on the grids (condition
+# ~10); on the hanging sheet remeshed for 60 frames from 31 x 31, 3 of 1822 faces, all exactly
+# singular (1e17), the rest under 50.
 MAX_FIT_CONDITION = 1e8
+
+# What stands in slot 3 + k of a face's fit (across the edge opposite its vertex k).
+POINT, FREE_EDGE, CLAMPED_EDGE = 0, 1, 2
 
 
 def face_stencils(faces, edge_faces, edge_opp):
@@ -59,28 +77,91 @@ def face_stencils(faces, edge_faces, edge_opp):
     return sten
 
 
-def face_fit(uv, faces, edge_faces, edge_opp, area):
-    """(stencil (F, 6), C (F, 3, 6)): X_uu, X_vv and X_uv of face f are C[f] @ x[stencil[f]].
-    A missing neighbour's slot holds the face's vertex 0 with zero weight; the fit then obeys
-    X_nn = 0 across that edge (n its material normal)."""
-    uv, faces = np.asarray(uv, np.float64), np.asarray(faces, np.int64)
-    nf = len(faces)
-    sten = face_stencils(faces, edge_faces, edge_opp)
-    present = sten >= 0
-    tri = uv[faces]
-    centre = tri.mean(axis=1)
-    scale = np.sqrt(2.0 * np.asarray(area, np.float64))[:, None]     # ~ the face's size
-    p = (uv[np.maximum(sten, 0)] - centre[:, None]) / scale[:, :, None]
-    ones = np.ones((nf, 6))
-    V = np.stack([ones, p[..., 0], p[..., 1], 0.5 * p[..., 0] ** 2, 0.5 * p[..., 1] ** 2,
-                  p[..., 0] * p[..., 1]], axis=2)
-    for n in range(3):
-        miss = np.flatnonzero(~present[:, 3 + n])
-        t = tri[miss, (n + 2) % 3] - tri[miss, (n + 1) % 3]
-        t /= np.linalg.norm(t, axis=1, keepdims=True)
-        a, b = t[:, 1], -t[:, 0]                                   # the edge's normal
-        zero = np.zeros_like(a)
-        V[miss, 3 + n] = np.stack([zero, zero, zero, a * a, b * b, 2 * a * b], axis=1)
+def held_faces(faces, pinned):
+    """(F,) bool: faces whose three vertices are pinned, held flat (the clamp)."""
+    if pinned is None:
+        return np.zeros(len(faces), bool)
+    return np.asarray(pinned, bool)[np.asarray(faces, np.int64)].all(axis=1)
+
+
+def _values(p):
+    """(..., 6): the fit's monomials 1, u, v, u^2 / 2, v^2 / 2, u v at the points p (..., 2)."""
+    u, v = p[..., 0], p[..., 1]
+    return np.stack([np.ones_like(u), u, v, 0.5 * u * u, 0.5 * v * v, u * v], axis=-1)
+
+
+def _slopes(p, n):
+    """(..., 6): the monomials' derivatives along the directions n (..., 2) at p."""
+    u, v, a, b = p[..., 0], p[..., 1], n[..., 0], n[..., 1]
+    return np.stack([np.zeros_like(u), a, b, a * u, b * v, a * v + b * u], axis=-1)
+
+
+class FaceFits:
+    """Every face's quadratic fit as linear maps of the values at its stencil ``sten``
+    (F, 6): ``coef[f] @ x[sten[f]]`` are the coefficients of ``_values`` in the face's frame
+    p = (u - centre) / scale. ``kind`` (F, 3) says what stands in slot 3 + k (POINT,
+    FREE_EDGE or CLAMPED_EDGE); ``edge_*`` (F, 3, ...) are the edge opposite vertex k: its
+    ends (a, b), length and outward unit normal in material space. On a CLAMPED_EDGE,
+    ``held_slope[f, k] @ x[sten[f]]`` is the held face's slope across the edge (grad X . n)."""
+
+    def __init__(self, uv, faces, edge_faces, edge_opp, area, held=None):
+        uv, faces = np.asarray(uv, np.float64), np.asarray(faces, np.int64)
+        nf = len(faces)
+        held = np.zeros(nf, bool) if held is None else np.asarray(held, bool)
+        sten = face_stencils(faces, edge_faces, edge_opp)
+        tri = uv[faces]
+        self.centre = tri.mean(axis=1)
+        self.scale = np.sqrt(2.0 * np.asarray(area, np.float64))     # ~ the face's size
+        self.edge_a, self.edge_b = tri[:, [1, 2, 0]], tri[:, [2, 0, 1]]
+        t = self.edge_b - self.edge_a
+        self.edge_len = np.linalg.norm(t, axis=2)
+        self.edge_normal = np.stack([t[..., 1], -t[..., 0]], -1) / self.edge_len[..., None]
+        # The across vertex's face is held when it and the edge's ends are all pinned.
+        across_held = np.zeros((nf, 3), bool)
+        if held.any():
+            pinned = np.zeros(len(uv), bool)
+            pinned[faces[held].ravel()] = True
+            for k in range(3):
+                across_held[:, k] = (sten[:, 3 + k] >= 0) & pinned[np.maximum(sten[:, 3 + k], 0)] \
+                    & pinned[faces[:, (k + 1) % 3]] & pinned[faces[:, (k + 2) % 3]]
+        self.kind = np.where(sten[:, 3:] < 0, FREE_EDGE,
+                             np.where(across_held & ~held[:, None], CLAMPED_EDGE, POINT))
+        p = (uv[np.maximum(sten, 0)] - self.centre[:, None]) / self.scale[:, None, None]
+        V = _values(p)                           # rows: the conditions; POINT rows as they are
+        R = np.broadcast_to(np.eye(6), (nf, 6, 6)).copy()    # condition = R @ stencil values
+        self.held_slope = np.zeros((nf, 3, 6))
+        for k in range(3):
+            s = 3 + k
+            n = self.edge_normal[:, k]
+            free = self.kind[:, k] == FREE_EDGE
+            # X_nn = 0 across a free edge: no moment there (Poisson ratio 0).
+            V[free, s] = np.c_[np.zeros((free.sum(), 3)), n[free, 0] ** 2, n[free, 1] ** 2,
+                               2 * n[free, 0] * n[free, 1]]
+            R[free, s, s] = 0.0
+            sten[free, s] = faces[free, 0]       # a placeholder with zero weight
+            cl = np.flatnonzero(self.kind[:, k] == CLAMPED_EDGE)
+            if len(cl):
+                # The slope across the edge, at its middle (its mean along the edge: the fit's
+                # slope is linear there), equals the held face's, whose vertices are the
+                # edge's ends and the across vertex.
+                mid = 0.5 * (self.edge_a[cl, k] + self.edge_b[cl, k])
+                V[cl, s] = _slopes((mid - self.centre[cl]) / self.scale[cl, None], n[cl]) \
+                    / self.scale[cl, None]
+                q = np.stack([uv[faces[cl, (k + 1) % 3]], uv[faces[cl, (k + 2) % 3]],
+                              uv[sten[cl, s]]], axis=1)
+                grad = np.linalg.inv(np.stack([q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]], 2))
+                slope = np.zeros((len(cl), 6))
+                slope[:, (k + 1) % 3] = -((grad[:, 0] + grad[:, 1]) * n[cl]).sum(1)
+                slope[:, (k + 2) % 3] = (grad[:, 0] * n[cl]).sum(1)
+                slope[:, s] = (grad[:, 1] * n[cl]).sum(1)
+                R[cl, s] = slope
+                self.held_slope[cl, k] = slope
+        self.sten = sten
+        self.coef = _solve_fits(V) @ R
+
+
+def _solve_fits(V):
+    """V^-1 per face; the pseudo-inverse where V is ill-conditioned (MAX_FIT_CONDITION)."""
     try:
         Vinv = np.linalg.inv(V)
     except np.linalg.LinAlgError:       # an exactly singular face: every face by pinv
@@ -89,8 +170,14 @@ def face_fit(uv, faces, edge_faces, edge_opp, area):
     bad = ~(cond < MAX_FIT_CONDITION)
     if bad.any():
         Vinv[bad] = np.linalg.pinv(V[bad], rcond=1.0 / MAX_FIT_CONDITION)
-    C = Vinv[:, 3:6, :] / scale[:, :, None] ** 2 * present[:, None, :]
-    return np.where(present, sten, faces[:, :1]), C
+    return Vinv
+
+
+def face_fit(uv, faces, edge_faces, edge_opp, area, held=None):
+    """(stencil (F, 6), C (F, 3, 6)): X_uu, X_vv and X_uv of face f are C[f] @ x[stencil[f]]
+    (the ``FaceFits`` of the mesh, second derivatives in material units)."""
+    fits = FaceFits(uv, faces, edge_faces, edge_opp, area, held)
+    return fits.sten, fits.coef[:, 3:6] / fits.scale[:, None, None] ** 2
 
 
 def cotan_laplacian(uv, faces):
@@ -110,6 +197,61 @@ def cotan_laplacian(uv, faces):
                          (n, n))
 
 
+def cell_areas(uv, faces):
+    """(F, 3): each face's share of its vertices' cells, Meyer et al.'s mixed area: the
+    Voronoi (circumcentric) share where the face is not obtuse (then the cotangent Laplacian
+    is the flux through the cell's sides), else half the face to the obtuse vertex and a
+    quarter to the others (positive on any mesh)."""
+    P = np.asarray(uv, np.float64)[np.asarray(faces, np.int64)]
+    cot = np.empty((len(P), 3))
+    for k in range(3):
+        a, b = P[:, (k + 1) % 3] - P[:, k], P[:, (k + 2) % 3] - P[:, k]
+        cot[:, k] = (a * b).sum(1) / np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])
+    share = np.empty((len(P), 3))
+    for k in range(3):
+        i, j = (k + 1) % 3, (k + 2) % 3
+        # The cell's part of the face: two right triangles on the half edges k-i and k-j.
+        share[:, k] = (((P[:, i] - P[:, k]) ** 2).sum(1) * cot[:, j]
+                       + ((P[:, j] - P[:, k]) ** 2).sum(1) * cot[:, i]) / 8.0
+    obtuse = (cot < 0).any(axis=1)
+    a, b = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
+    area = 0.5 * np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])
+    share[obtuse] = np.where(cot[obtuse] < 0, 0.5, 0.25) * area[obtuse, None]
+    return share
+
+
+def _sparse(rows, cols, vals, n):
+    return sp.csr_matrix((np.ravel(vals), (np.ravel(rows), np.ravel(cols))), (n, n))
+
+
+def trace_rows(uv, faces, fits, live, n):
+    """(T (V x V), A (V,)): tr II at vertex v is (T x)_v, over the cell of area A_v on the
+    live (not held) faces; A_v = 0 where a vertex has none. A_v tr II = the flux of grad X out
+    of the cell: the cotangent Laplacian's through its inner sides; through a clamped edge,
+    the held face's slope over the half edge at each end; through a free edge, the fit's slope
+    across it (linear along the edge) over each end's half."""
+    A = np.zeros(n)
+    np.add.at(A, faces[live].ravel(), cell_areas(uv, faces[live]).ravel())
+    flux = [-cotan_laplacian(uv, faces[live])]
+    for k in range(3):
+        a_end, b_end = faces[:, (k + 1) % 3], faces[:, (k + 2) % 3]
+        cl = np.flatnonzero(live & (fits.kind[:, k] == CLAMPED_EDGE))
+        half = 0.5 * fits.edge_len[cl, k, None] * fits.held_slope[cl, k]
+        for end in (a_end, b_end):
+            flux.append(_sparse(np.repeat(end[cl, None], 6, 1), fits.sten[cl], half, n))
+        fr = np.flatnonzero(live & (fits.kind[:, k] == FREE_EDGE))
+        scale = fits.scale[fr, None]
+        nrm = fits.edge_normal[fr, k]
+        ga, gb = (np.einsum("fi,fij->fj", _slopes((e[fr, k] - fits.centre[fr]) / scale, nrm),
+                            fits.coef[fr]) / scale for e in (fits.edge_a, fits.edge_b))
+        el = fits.edge_len[fr, k, None]
+        # The half edge next to an end: the slope there is (3 g_end + g_other) / 4.
+        for end, g in ((a_end, (3 * ga + gb) / 8), (b_end, (ga + 3 * gb) / 8)):
+            flux.append(_sparse(np.repeat(end[fr, None], 6, 1), fits.sten[fr], el * g, n))
+    inv = np.where(A > 0, 1.0 / np.where(A > 0, A, 1.0), 0.0)
+    return sp.diags(inv) @ sum(flux[1:], flux[0]), A
+
+
 def _face_rows(sten, rows, n):
     """The (k F) x n operator whose row k f + r is rows[r][f] on face f's stencil."""
     F, k = len(sten), len(rows)
@@ -119,31 +261,24 @@ def _face_rows(sten, rows, n):
                          (k * F, n))
 
 
-def isotropic_matrix(uv, faces, edge_verts, edge_faces, edge_opp, area):
-    """Q (V x V, symmetric positive semi-definite, CSR) of E = (B / 2) sum_c x_c^T Q x_c."""
+def isotropic_matrix(uv, faces, edge_verts, edge_faces, edge_opp, area, pinned=None):
+    """Q (V x V, symmetric positive semi-definite, CSR) of E = (B / 2) sum_c x_c^T Q x_c.
+    ``pinned`` (V,) bool: faces with three pinned vertices are the clamp (``held_faces``)."""
     uv, faces = np.asarray(uv, np.float64), np.asarray(faces, np.int64)
     area = np.asarray(area, np.float64)
-    ev, ef = np.asarray(edge_verts, np.int64), np.asarray(edge_faces, np.int64)
     n = len(uv)
-    lumped = np.zeros(n)
-    np.add.at(lumped, faces.ravel(), np.repeat(area / 3.0, 3))
-    boundary = np.zeros(n, bool)
-    boundary[ev[ef[:, 1] < 0].ravel()] = True
-    # (tr II)^2 / 2: A_v ((L x)_v / A_v)^2 at interior vertices ...
-    interior = np.where(boundary, 0.0, 1.0 / np.maximum(lumped, 1e-300))
-    Li = sp.diags(interior) @ cotan_laplacian(uv, faces)
-    trace = Li.T @ sp.diags(np.where(boundary, 0.0, lumped)) @ Li
-    # ... and the face fit's trace over the boundary vertices' thirds of their faces.
-    sten, C = face_fit(uv, faces, ef, edge_opp, area)
-    T = _face_rows(sten, [C[:, 0] + C[:, 1]], n)
-    near_boundary = sum(np.where(boundary[faces[:, k]], area / 3.0, 0.0) for k in range(3))
-    trace = trace + T.T @ sp.diags(near_boundary) @ T
-    # |dev II|^2 = (X_uu - X_vv)^2 / 2 + 2 X_uv^2 from the face fit, over every face.
-    D = _face_rows(sten, [(C[:, 0] - C[:, 1]) / np.sqrt(2.0), np.sqrt(2.0) * C[:, 2]], n)
-    Q = 0.5 * trace + D.T @ sp.diags(np.repeat(area, 2)) @ D
+    live = ~held_faces(faces, pinned)
+    fits = FaceFits(uv, faces, edge_faces, edge_opp, area, ~live)
+    # (tr II)^2 / 2 over the vertices' cells ...
+    T, A = trace_rows(uv, faces, fits, live, n)
+    trace = T.T @ sp.diags(A) @ T
+    # ... and |dev II|^2 = (X_uu - X_vv)^2 / 2 + 2 X_uv^2 over the live faces.
+    C = fits.coef[:, 3:6] / fits.scale[:, None, None] ** 2
+    D = _face_rows(fits.sten, [(C[:, 0] - C[:, 1]) / np.sqrt(2.0), np.sqrt(2.0) * C[:, 2]], n)
+    Q = 0.5 * trace + D.T @ sp.diags(np.repeat(np.where(live, area, 0.0), 2)) @ D
     Q = (0.5 * (Q + Q.T)).tocsr()
-    # Rows that sum to exactly zero (they do up to round-off: every term is a second
-    # derivative): the kernels then apply Q to differences x_k - x_i, whose accuracy does not
+    # Rows that sum to exactly zero (they do up to round-off: every term vanishes on affine
+    # maps): the kernels then apply Q to differences x_k - x_i, whose accuracy does not
     # depend on how far the cloth is from the origin.
     Q = (Q - sp.diags(np.asarray(Q.sum(axis=1)).ravel())).tocsr()
     Q.sum_duplicates()

@@ -16,9 +16,10 @@ stiffness, exact for large rotations.
 
 Bending, one of two energies (``ClothModel.bending``):
 - isotropic (the default): ``(k_bend / 2) sum_c x_c^T Q x_c`` with Q a constant matrix built
-  from the material mesh (cloth/bending.py), the plate energy (B / 2) |II|^2 of an isometric
-  bend; k_bend is the flexural rigidity B in every direction (0.96-1.05 B over the
-  calibration's patterns, directions and 0.5-2 cm triangles, docs/calibration/). Its forces
+  from the material mesh and its pins (cloth/bending.py), the plate energy (B / 2) |II|^2 of
+  an isometric bend, consistent at free edges and clamps; k_bend is the flexural rigidity B in
+  every direction (docs/calibration/calibration.md: back-to-back and ledge cantilevers over
+  the calibration's patterns, directions, widths and 0.5-2 cm triangles). Its forces
   are -k_bend Q x and its stiffness k_bend Q, exactly; Q is stored by rows (``bend_ptr``,
   ``bend_col``, ``bend_val``), and it couples vertices two rings apart.
 - hinge (discrete shells, for a curved rest shape): ``k_bend w_e (theta - theta_0)^2 / 2``

@@ -202,7 +202,9 @@ class ClothModel:
       w_e, the edge's share of k_bend (BEND_CONSTANT); zero under isotropic bending
       bend_ptr (V + 1, i32), bend_col (Q, i32), bend_val (Q):  the isotropic bending matrix
       (cloth/bending.py) by rows, each row's diagonal first; ``n_bend`` entries, none (every
-      row empty) under the hinge energy
+      row empty) under the hinge energy. Built by ``load`` from the mesh and its pins: faces
+      with three pinned vertices are a clamp, held flat (``set_vertex_pin`` does not rebuild
+      it; the next load, e.g. a remesh, does)
 
     ``bending``: "isotropic" (the default for a flat rest shape; k_bend is the plate's B in
     every direction) or "hinge" (the discrete-shells energy: needed for a curved rest shape
@@ -283,7 +285,7 @@ class ClothModel:
         ev, ef, eo = build_edges(faces)
         nv, nf, ne = len(uv), len(faces), len(ev)
         if self.bending == "isotropic":
-            Q = bending_energy.isotropic_matrix(uv, faces, ev, ef, eo, area)
+            Q = bending_energy.isotropic_matrix(uv, faces, ev, ef, eo, area, mesh.pinned)
             bend_ptr, bend_col, bend_val = bending_energy.rows_with_diagonal_first(Q)
         else:
             bend_ptr, bend_col, bend_val = np.zeros(nv + 1, np.int32), np.zeros(0, np.int32), \
