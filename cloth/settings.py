@@ -20,7 +20,7 @@ from typing import Optional
 from .config import ConfigError, NUMBER_OR_WORD, merge
 from .remesh import RemeshParams
 from .strain.families import METHODS
-from .strain.defaults import AL_ROUNDS
+from .strain.defaults import AL_ROUNDS, KKT_VELOCITY, STOP
 
 STRAIN_METHODS = METHODS + ("none",)
 
@@ -96,6 +96,11 @@ COMMON_DEFAULTS = {
         "curvature": "model",
         "iters": AL_ROUNDS,       # outer-round budget per projection (why 100: strain/solver.py)
         "tol": 1e-4,              # largest violation accepted, in strain
+        # When a projection is done: "violation" (the limits hold) or "kkt" (the limits hold
+        # and the answer is stationary: its Newton step is below kkt_velocity x h). Why not
+        # "kkt" by default: cloth/strain/defaults.py.
+        "stop": STOP,
+        "kkt_velocity": KKT_VELOCITY,
         # mapping only: width (in eta1^2 - eta2^2) of the closure of its feasible set at
         # isotropy, where the paper's constraint depends on an arbitrary principal frame;
         # 0 = the paper's constraint exactly (see constraints.MAPPING_ISO).
@@ -182,6 +187,13 @@ SCHEMA = {
                          choices=("exact", "model")),
         "iters": Key("", "outer-iteration budget per projection", lo=1),
         "tol": Key("strain", "largest constraint violation accepted", lo=0, lo_open=True),
+        "stop": Key("", "when a projection is done: violation (the limits hold; the answer "
+                    "depends on where the solve started) or kkt (the limits hold and the "
+                    "answer is stationary: its Newton step below kkt_velocity x h; meant for "
+                    "exact steps, strain.linear_solver = cholesky)",
+                    choices=("violation", "kkt")),
+        "kkt_velocity": Key("m/s", "stationarity tolerance of the kkt stop, as a velocity",
+                            lo=0, lo_open=True),
         "isotropy": Key("", "mapping only: width of the closure of its feasible set at "
                         "isotropy; 0 = the paper's constraint exactly", lo=0),
     },

@@ -83,6 +83,7 @@ class Simulator:
         sim = self.settings.sim
         self.frame, self.time = 0, 0.0
         self.grow_count = 0
+        self._sl_stationarity = 0.0
         self.model = ClothModel(setup.mesh, setup.material,
                                 capacity_factor=self._capacity_factor(setup.mesh,
                                                                       self.settings.remesh),
@@ -199,7 +200,8 @@ class Simulator:
             self.model, method=method, warp=tuple(st.warp), weft=tuple(st.weft),
             bias=tuple(st.bias) if st.bias else None, solver=st.solver, tol=st.tol,
             max_iters=st.iters, mapping_iso=st.isotropy, stitches=self.dynamics.stitches_np,
-            coupling=st.coupling, linear_solver=st.linear_solver, curvature=st.curvature)
+            coupling=st.coupling, linear_solver=st.linear_solver, curvature=st.curvature,
+            stop=st.stop, kkt_velocity=st.kkt_velocity)
         self.strain.precondition = st.precondition
         self._enable_strain_limit(method != "none")
 
@@ -217,6 +219,7 @@ class Simulator:
 
     def _strain_limit(self):
         self._project_limits(self.h, self.time + self.h)
+        self._sl_stationarity = self.strain.last_stationarity
 
     def _project_limits(self, h, t, warm=True):
         """Strain projection with the obstacles' contacts at time t as constraints."""
@@ -551,8 +554,11 @@ class Simulator:
             row[f"{name}_strain_max"], row[f"{name}_strain_rms"] = metrics.summarize(st[name], area)
         row["nan"] = int(not (np.all(np.isfinite(x)) and np.all(np.isfinite(v))))
         row["method"] = self.method
-        row["sl_iterations"] = self.strain.last_iterations if self.strain is not None and \
-            self.stage("strain_limit").enabled else 0
+        on = self.strain is not None and self.stage("strain_limit").enabled
+        row["sl_iterations"] = self.strain.last_iterations if on else 0
+        # The stationarity the frame's last strain-limiting step reached (m/s: its Newton step
+        # at the answer over h; below strain.kkt_velocity when it converged).
+        row["sl_stationarity"] = self._sl_stationarity if on else 0.0
         own_v = self.own_violation()
         row["own_violation_max"], row["own_violation_rms"] = metrics.summarize(
             np.zeros(m.n_faces) if own_v is None else own_v, area)

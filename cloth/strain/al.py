@@ -7,8 +7,8 @@ algorithm, in the order the kernel runs them.
 """
 import taichi as ti
 
-from .buffers import (CONTACT_SLOTS, NO_CONTACT, P_C_STEP, P_CONTACT_SCALE, P_CURVATURE,
-                      P_DELTA, P_INNER_RTOL, P_ISO, P_MARGIN,
+from .buffers import (CONTACT_SLOTS, N_STATS, NO_CONTACT, P_C_STEP, P_CONTACT_SCALE,
+                      P_CURVATURE, P_DELTA, P_INNER_RTOL, P_ISO, P_KKT_TOL, P_MARGIN, ST_KKT,
                       P_SHEAR, P_SVD_DELTA, PC_FACTOR, PC_JACOBI, PC_MULTIGRID, P_WARP, P_WEFT, ST_CG, ST_COMP, ST_CONVERGED,
                       ST_ITERS, ST_NEWTON, ST_START_VIOL, ST_TRIALS, ST_VIOL, A, T)
 from . import multigrid
@@ -87,6 +87,15 @@ def dot(a: T, b: T, nv):
     for n in range(nv):
         s += a[n].dot(b[n])
     return s
+
+
+@ti.func
+def max_norm(nv, a: T):
+    """The largest |a_n| (a vertex vector's infinity norm over vertices)."""
+    m = 0.0
+    for n in range(nv):
+        m = ti.max(m, a[n].norm())
+    return m
 
 
 @ti.func
@@ -687,6 +696,14 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
         rounds, newton, cg_total, trials = 0, 0, 0, 0
         viol, comp = 0.0, 0.0
         converged = 0
+        # The KKT stop (``kkt_tol`` > 0): a round that ends feasible (violation and multiplier
+        # change below tol) only proposes convergence; the next round's first Newton step,
+        # computed with the new multipliers, must then move no vertex further than kkt_tol.
+        # That step is the distance to the minimiser as far as the Newton model sees it, so
+        # the stop bounds stationarity, not only feasibility (issue #32).
+        kkt_tol = params[P_KKT_TOL]
+        proposed = 0
+        kkt = 0.0
         for n in range(nv):
             x_trial[n] = x[n]
         first = 1
@@ -696,6 +713,7 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
         while rounds < max_rounds and converged == 0:
             inner = 0
             rr_first = 0.0
+            d_max = 0.0
             while inner < max_newton:
                 slope, cg_it = 0.0, 0
                 L0 = 0.0
@@ -718,6 +736,13 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
                     cg_total += cg_it
                     newton += 1
                     inner += 1
+                    d_max = max_norm(nv, d)
+                    if inner == 1:
+                        kkt = d_max
+                        if proposed == 1 and d_max <= kkt_tol:
+                            converged = 1       # stationary with these multipliers
+                            break
+                        proposed = 0
                 if first == 0 and not slope < 0.0:
                     break
                 # The merit's quadratic term along x + a d from W d, computed once (into Ap,
@@ -790,9 +815,9 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
                         margin *= 0.25
                     elif alpha < 0.25 or tries == 12:
                         margin = ti.min(ti.max(4.0 * margin, 1e-4), 0.1)
-                if step < step_tol:
+                if step < step_tol or (kkt_tol > 0.0 and d_max <= kkt_tol):
                     break
-            if converged == 2:
+            if converged != 0:
                 break
             viol, comp = update_multipliers(K, nv, nf, ns, mu, mu_max, x, rest_area, lam, g,
                                             contact, lam_c, stitch, lam_s, fric, lam_t,
@@ -800,8 +825,14 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
             L_known = 0
             rounds += 1
             if viol < tol and comp < tol:
-                converged = 1
-            mu = ti.min(mu * mu_grow, mu_max)
+                if kkt_tol > 0.0:
+                    proposed = 1
+                else:
+                    converged = 1
+            # The penalty grows only while the limits are not met (under the KKT stop a
+            # feasible round continues for stationarity, which a stiffer penalty only slows).
+            if not (kkt_tol > 0.0 and viol < tol):
+                mu = ti.min(mu * mu_grow, mu_max)
         stats[ST_ITERS] = rounds
         stats[ST_VIOL] = viol
         stats[ST_CONVERGED] = ti.min(converged, 1)
@@ -809,6 +840,7 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
         stats[ST_NEWTON] = newton
         stats[ST_COMP] = comp
         stats[ST_TRIALS] = trials
+        stats[ST_KKT] = kkt
 
 
 @ti.kernel
@@ -839,7 +871,7 @@ def begin_solve(nv: int, h: float, friction: int, clear: int, x_in: A, v_in: A, 
         if clear:
             for j in ti.static(range(CONTACT_SLOTS)):
                 contact[n, j] = ti.Vector([0.0, 0.0, 0.0, NO_CONTACT])
-    for i in range(8):
+    for i in range(N_STATS):
         stats[i] = 0.0
 
 

@@ -27,6 +27,10 @@ from .constraints import K_MAX
 
 # Indices into the ``stats`` array (read back once per solve).
 ST_ITERS, ST_VIOL, ST_CONVERGED, ST_CG, ST_NEWTON, ST_COMP, ST_START_VIOL, ST_TRIALS = range(8)
+# The stationarity reached (metres): the largest vertex move of the Newton step computed at the
+# final point with the final multipliers (the KKT test's measure, ``al.solve_al``).
+ST_KKT = 8
+N_STATS = 9
 # The PCG's preconditioner (``al.precondition``): H's 3x3 diagonal blocks, a sparse Cholesky
 # factor of the implicit step's matrix (factor_precond.py), its aggregation multigrid
 # (multigrid.py).
@@ -40,7 +44,10 @@ P_CURVATURE, P_C_STEP = 11, 12
 # A round's inner loop stops once |grad L_A| fell below this fraction of its first value (0:
 # run max_newton steps).
 P_INNER_RTOL = 13
-N_PARAMS = 14
+# The KKT stop's stationarity tolerance (metres: the largest vertex move of a Newton step at the
+# answer); 0 = the old stop on violation and multiplier change alone.
+P_KKT_TOL = 14
+N_PARAMS = 15
 # A vertex without a contact half-space: n = 0 and d far below any position, so d - n.x never
 # comes near activating.
 NO_CONTACT = -1e30
@@ -91,7 +98,7 @@ class Workspace:
         self.P_inv = ti.ndarray(ti.types.matrix(3, 3, float), V)
         self.cnt = ti.ndarray(float, V)
         self.params = ti.ndarray(float, N_PARAMS)  # bands (warp, weft, shear), margin, deltas
-        self.stats = ti.ndarray(float, 8)
+        self.stats = ti.ndarray(float, N_STATS)
         self.info = ti.ndarray(float, 8)          # the direct solver's per-kernel results
         self.H = None                             # the Newton matrix's values (per pattern)
         self.set_stitch_capacity(1)

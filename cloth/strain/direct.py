@@ -31,9 +31,9 @@ from .. import ndarrays
 from . import exact_curvature
 from .al import (assemble_all, choose_start, fill_c_curvature, merit, metric_gradient,
                  newton_matrix, residual, update_multipliers, vertex_violation, violation_of)
-from .buffers import (P_CONTACT_SCALE, P_CURVATURE, P_MARGIN, P_SVD_DELTA, PC_JACOBI, ST_CG,
-                      ST_COMP,
-                      ST_CONVERGED, ST_ITERS, ST_NEWTON, ST_START_VIOL, ST_VIOL, A)
+from .buffers import (P_CONTACT_SCALE, P_CURVATURE, P_MARGIN, P_SVD_DELTA,
+                      PC_JACOBI, ST_CG, ST_COMP, ST_CONVERGED, ST_ITERS, ST_KKT, ST_NEWTON,
+                      ST_START_VIOL, ST_VIOL, A)
 
 # LOOM_DEBUG_DIRECT=1 prints every Newton step (residual, step, line-search alpha).
 _DEBUG = bool(os.environ.get("LOOM_DEBUG_DIRECT"))
@@ -177,8 +177,12 @@ def solve(lim, mid, K, metric, chol, mu, mu_max, step_tol):
     converged = False
     viol = comp = 0.0
     n3 = 3 * nv
+    # The KKT stop, as in al.solve_al: a feasible round proposes convergence, the next
+    # round's first Newton step must then move no vertex further than kkt_tol.
+    kkt_tol = lim.kkt_length
+    proposed, kkt = False, 0.0
     while rounds < lim.max_iters and not converged:
-        for _ in range(lim.newton_budget(PC_JACOBI)):
+        for inner in range(lim.newton_budget(PC_JACOBI)):
             if lim.exact_curvature:
                 ndarrays.zero(ws.kappa)      # the model's curvature off: the exact one is added
                 ndarrays.zero(ws.twist)
@@ -192,8 +196,15 @@ def solve(lim, mid, K, metric, chol, mu, mu_max, step_tol):
             factorizations += int(fresh)
             step = np.zeros((ws.d.shape[0], 3))
             step[:nv] = sol.reshape(nv, 3)
-            ws.d.from_numpy(step)
             newton += 1
+            d_max = float(np.linalg.norm(step[:nv], axis=1).max()) if nv else 0.0
+            if inner == 0:
+                kkt = d_max
+                if proposed and d_max <= kkt_tol:
+                    converged = True            # stationary with these multipliers
+                    break
+                proposed = False
+            ws.d.from_numpy(step)
             line_search(mid, K, nv, nf, ns, mu, ws.x, ws.x_hat, ws.x_trial, ws.d, ws.r,
                         metric.ptr, metric.col, metric.val, metric.diag, ws.face_verts,
                         ws.Dm_inv, ws.grain, ws.rest_area, ws.params, ws.lam, ws.g,
@@ -203,18 +214,27 @@ def solve(lim, mid, K, metric, chol, mu, mu_max, step_tol):
             if _DEBUG:
                 print(f"  round {rounds} newton {newton}: |r| {np.linalg.norm(rhs):.3e} alpha "
                       f"{out[I_ALPHA]:.3g} step {out[I_STEP]:.3e} slope {out[I_SLOPE]:.3e} mu {mu:.3g}")
-            if out[I_ALPHA] == 0.0 or out[I_STEP] < step_tol:
+            if out[I_ALPHA] == 0.0 or out[I_STEP] < step_tol or (kkt_tol > 0 and
+                                                                  d_max <= kkt_tol):
                 break
+        if converged:
+            break
         multipliers(K, nv, nf, ns, mu, mu_max, ws.x, ws.rest_area, ws.params, ws.lam, ws.g,
                     ws.contact, ws.lam_c, ws.stitch, ws.lam_s, ws.fric, ws.lam_t, info)
         out = info.to_numpy()
         viol, comp = float(out[I_VIOL]), float(out[I_COMP])
         rounds += 1
-        converged = viol < lim.tol and comp < lim.tol
-        mu = min(mu * lim.mu_grow, mu_max)
+        feasible = viol < lim.tol and comp < lim.tol
+        if kkt_tol > 0:
+            proposed = feasible
+        else:
+            converged = feasible
+        if not (kkt_tol > 0 and viol < lim.tol):
+            mu = min(mu * lim.mu_grow, mu_max)
     stats[ST_ITERS], stats[ST_VIOL], stats[ST_COMP] = rounds, viol, comp
     stats[ST_CONVERGED], stats[ST_NEWTON] = float(converged), newton
     stats[ST_CG] = cg_total
+    stats[ST_KKT] = kkt
     lim.last_factorizations = factorizations
     ws.stats.from_numpy(stats)
     return rounds, newton, converged

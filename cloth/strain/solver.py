@@ -32,11 +32,19 @@ from .factor_precond import FactorPreconditioner, FactorStub
 from .multigrid import HAVE_PYAMG, MAX_COARSE, MultigridPreconditioner, MultigridStub
 from .c_curvature import C_STEP_F32, C_STEP_F64
 from .buffers import (PC_FACTOR, PC_JACOBI, PC_MULTIGRID, ST_CG, ST_CONVERGED, ST_ITERS,
-                      ST_NEWTON, ST_START_VIOL, ST_TRIALS, ST_VIOL, Workspace)
+                      ST_KKT, ST_NEWTON, ST_START_VIOL, ST_TRIALS, ST_VIOL,
+                      Workspace)
 
 METHOD_NAMES = METHODS + ("none",)
 SOLVERS = ("al", "jacobi", "gauss-seidel")
 COUPLINGS = ("implicit", "projection")
+# How a projection decides it is done: "kkt" also asks for stationarity (the Newton step at the
+# answer, with the final multipliers, moves no vertex by more than ``kkt_velocity`` x h), so the
+# answer is the minimiser to that accuracy; "violation" stops on feasibility and multiplier
+# change alone (the rule before issue #32: the answer then depends on where the solve started
+# and on the solver's settings, and a landing sheet was damped to a stop).
+STOPS = ("kkt", "violation")
+
 # Initial AL penalty per coupling, x the metric's mean diagonal (``_mean_mass``). Under
 # "implicit" the warm multipliers are the ones a resting cloth needs, and a stiffer start lets
 # the first round end the solve. Measured on hanging, mapping, mean kinetic energy over frames
@@ -179,7 +187,7 @@ def _check_band(name, band, lower_limit=-1.0):
     return lo, hi
 
 
-from .defaults import AL_ROUNDS  # noqa: E402 (the settings' default too)
+from .defaults import AL_ROUNDS, KKT_VELOCITY, STOP  # noqa: E402 (the settings' defaults too)
 
 
 class StrainLimiter:
@@ -230,7 +238,8 @@ class StrainLimiter:
                  mapping_delta=MAPPING_DELTA, mapping_iso=MAPPING_ISO, jacobi_omega=1.0,
                  active_margin=1e-2, inner_rtol=None,
                  adaptive_margin=False, stitches=None, coupling="projection",
-                 linear_solver="pcg", curvature="model"):
+                 linear_solver="pcg", curvature="model", stop=STOP,
+                 kkt_velocity=KKT_VELOCITY):
         if solver not in SOLVERS:
             raise StrainLimitError(f"unknown strain-limiting solver '{solver}': use one of "
                                    f"{', '.join(SOLVERS)}")
@@ -245,6 +254,12 @@ class StrainLimiter:
                                    f"{', '.join(CURVATURES)}")
         if not tol > 0:
             raise StrainLimitError(f"tol must be > 0 (got {tol}); 1e-4 is 0.01 % strain")
+        if stop not in STOPS:
+            raise StrainLimitError(f"unknown strain stop rule '{stop}': use one of "
+                                   f"{', '.join(STOPS)}")
+        if not kkt_velocity > 0:
+            raise StrainLimitError(f"kkt_velocity must be > 0 m/s (got {kkt_velocity}); "
+                                   f"{KKT_VELOCITY} is 1 cm/s")
         if max_iters is None:
             max_iters = AL_ROUNDS if solver == "al" else 2000
         for name, val in (("max_iters", max_iters),
@@ -276,10 +291,14 @@ class StrainLimiter:
         self._pc = None            # Factor- or MultigridPreconditioner of the implicit metric
         self._stubs = None         # placeholder arrays for the preconditioners not in use
         self.precondition = "auto"
+        self.precondition_contacts = False
         self.multigrid_cg = None       # None: the method's MULTIGRID_CG
         self.factor_cg = None          # None: from the mesh size (FACTOR_CG_WORK)
         self.factor_max_faces = None   # None: FACTOR_MAX_FACES (a probe's override)
         self.tol = float(tol)
+        self.stop = stop
+        self.kkt_velocity = float(kkt_velocity)
+        self.kkt_length = 0.0          # metres, this projection's stationarity tolerance
         self.max_iters = int(max_iters)
         self.max_newton = None if max_newton is None else int(max_newton)
         self.cg_rtol = cg_rtol
@@ -319,6 +338,7 @@ class StrainLimiter:
         self.last_iterations, self.last_violation_max = 0, 0.0
         self.last_converged, self.last_ms = True, 0.0
         self.last_newton = self.last_cg = self.last_factorizations = self.last_trials = 0
+        self.last_stationarity, self._kkt_h = 0.0, 1.0 / 30.0
         self.last_reverted, self.reverted_count = False, 0
 
     # ---- settings ------------------------------------------------------------------------
@@ -377,6 +397,7 @@ class StrainLimiter:
         params[buffers.P_SHEAR:buffers.P_SHEAR + 2] = self.shear_band()
         params[buffers.P_MARGIN] = self.active_margin
         params[buffers.P_INNER_RTOL] = self.inner_rtol
+        params[buffers.P_KKT_TOL] = self.kkt_length
         params[buffers.P_DELTA] = self.mapping_delta
         params[buffers.P_SVD_DELTA] = self.svd_delta
         params[buffers.P_ISO] = self.mapping_iso
@@ -550,6 +571,7 @@ class StrainLimiter:
             self.last_converged, self.last_ms = True, 0.0
             return
         self._sync_mesh()
+        self._set_kkt_length(h)
         ws, m = self._ws, self.model
         nv, nf = m.n_verts, m.n_faces
         mid, K = METHOD_IDS[self.method], N_CONSTRAINTS[self.method]
@@ -601,7 +623,22 @@ class StrainLimiter:
         self.last_converged = bool(converged)
         self.last_newton, self.last_cg = int(newton), int(stats[ST_CG])
         self.last_trials = int(stats[ST_TRIALS]) if self.solver == "al" else 0
+        # The stationarity reached, as a velocity (m/s): the Newton step at the answer over h
+        # (0 when nothing needed solving; NaN under the "violation" stop, which does not
+        # compute that step).
+        self.last_stationarity = float(stats[ST_KKT]) / self._kkt_h \
+            if self.solver == "al" and self.stop == "kkt" else \
+            (0.0 if rounds == 0 else float("nan"))
         self.last_ms = 1e3 * (time.perf_counter() - t0)
+
+    def _set_kkt_length(self, h):
+        """This projection's stationarity tolerance in metres: ``kkt_velocity`` x h (a
+        projection without a time step, h = 0, uses 1/30 s), or 0 under the old stop."""
+        self._kkt_h = h if h > 0 else 1.0 / 30.0
+        length = self.kkt_velocity * self._kkt_h if self.stop == "kkt" else 0.0
+        if length != self.kkt_length:
+            self.kkt_length = length
+            self._upload_params()
 
     def _assemble(self, mid, pos):
         ws = self._ws
@@ -672,7 +709,8 @@ class StrainLimiter:
         mu, mu_max = self.mu_scale * mean_mass, self.mu_max_scale * mean_mass
         # An inner loop stops once its steps are far below the tolerance (in metres).
         step_tol = 0.01 * self.tol * m.typical_edge()
-        pc = None if contacts else self._pcg_preconditioner(metric)
+        pc = None if contacts and not self.precondition_contacts else \
+            self._pcg_preconditioner(metric)
         pc_mode = pc.mode if pc is not None and pc.usable(m.pinned[: m.n_verts]) else PC_JACOBI
         if self._stubs is None:
             self._stubs = {PC_FACTOR: FactorStub(), PC_MULTIGRID: MultigridStub()}

@@ -1,0 +1,326 @@
+"""How far the strain-limited motion lands from exactly solved motion, per solve setting, with
+the cost of each (issue #32): speed against error on moving scenes.
+
+    python -m benchmarks.motion_error --out docs/speed            # every case (~1 h)
+    python -m benchmarks.motion_error --cases hanging25 --out /tmp/me   # one case
+
+Each case is a scene run from its start (one substep per frame). Each *solve* is a setting of
+the strain solve (``SOLVES``); every (case, solve) runs in its own process and records the
+positions at ``FRAMES_AT``, the strain-limiting time per frame and the kinetic energy. The
+error of a run is the RMS vertex distance to the *reference* run at the same frame, divided by
+the cloth's diagonal in material space. The reference takes exact Newton steps (sparse
+Cholesky) and stops only when the limits hold to 1e-7 and the Newton step at the answer moves
+no vertex by more than 1e-5 m/s x h. The *chaos floor* is how far the reference itself moves
+when its start is moved by 1 nm: past a buckling or a landing, no run can be nearer the
+reference than that, so an error within a few floors is as right as the reference.
+
+Drape is run from seven drop heights (``DROPS``; whether a sheet slides off the sphere's top
+is a bifurcation, so one drop tells little): per solve, how many drape (the lowest vertex at
+frame 30 below the sphere's equator), the lowest vertex against the reference's, and the
+kinetic energy kept through the landing, KE(frame 8) / KE(frame 6).
+
+Writes motion_error.md, motion_error.json and motion_error.png (ms a frame against the error
+at frame 10, per case) to --out; the runs are cached in --out/motion_error_runs/ (delete it,
+or pass --fresh, to measure again).
+"""
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+FRAMES = 30
+FRAMES_AT = (5, 10, 30)
+DROPS = (0.95, 0.951, 0.953, 0.957, 0.96, 0.965, 0.97)
+DRAPED_BELOW = 0.55          # the drape sphere's equator (m)
+
+# Cases: (scene, overrides). The drape runs from every height in DROPS.
+CASES = {
+    "hanging25": ("hanging", {"cloth": {"resolution": 25}, "strain": {"method": "mapping"}}),
+    "hanging25-svd": ("hanging", {"cloth": {"resolution": 25}, "strain": {"method": "svd"}}),
+    "hanging25-warp-weft": ("hanging", {"cloth": {"resolution": 25},
+                                        "strain": {"method": "warp-weft"}}),
+    "hanging46": ("hanging", {"cloth": {"resolution": 46}, "strain": {"method": "mapping"}}),
+    "pull": ("pull", {}),
+    "drape": ("drape", {}),
+    "tshirt": ("tshirt", {}),
+}
+# Solves: overrides of the strain settings. "reference" and "chaos" are the exact solve (chaos
+# with its start moved by 1 nm); the others are what a user can choose.
+REFERENCE = {"linear_solver": "cholesky", "tol": 1e-7, "kkt_velocity": 1e-5, "stop": "kkt"}
+SOLVES = {
+    "reference": REFERENCE,
+    "chaos": REFERENCE,
+    "default": {},
+    "kkt stop": {"stop": "kkt"},
+    "exact steps": {"linear_solver": "cholesky"},
+    "pcg steps": {"linear_solver": "pcg"},
+    "kkt stop 1 mm per s": {"stop": "kkt", "kkt_velocity": 1e-3},
+    "exact steps, kkt stop": {"linear_solver": "cholesky", "stop": "kkt"},
+}
+DRAPE_SOLVES = ("reference", "exact steps", "pcg steps")
+
+
+def child(case, solve, drop=None):
+    """One run: positions at FRAMES_AT, strain ms per frame, kinetic energy per frame."""
+    from cloth import backend
+    backend.init("cpu", "f64")
+    import numpy as np
+    from benchmarks.harness import configure
+    from cloth import metrics
+    from cloth.simulator import Simulator
+    scene, overrides = CASES[case]
+    overrides = json.loads(json.dumps(overrides))
+    settings = {k: v for k, v in SOLVES[solve].items() if not k.startswith("attr.")}
+    attrs = {k[5:]: v for k, v in SOLVES[solve].items() if k.startswith("attr.")}
+    overrides.setdefault("strain", {}).update(settings)
+    if drop is not None:
+        overrides.setdefault("cloth", {})["drop"] = drop
+    _, cfg, setup = configure(scene, overrides)
+    if solve == "chaos":
+        rng = np.random.default_rng(1)
+        free = ~setup.mesh.pinned
+        step = rng.normal(size=setup.mesh.x.shape)
+        step /= np.linalg.norm(step, axis=1, keepdims=True)
+        setup.mesh.x[free] += 1e-9 * step[free]
+    sim = Simulator(setup, cfg)
+    for key, value in attrs.items():
+        if not hasattr(sim.strain, key):
+            raise SystemExit(f"--extra: StrainLimiter has no setting '{key}'")
+        setattr(sim.strain, key, value)
+    sim.strain._upload_params()
+    out = {"x": {}, "ms": [], "ke": [], "converged": 0, "stationarity": []}
+    for frame in range(1, FRAMES + 1):
+        sim.step_frame()
+        out["ms"].append(sim.stage("strain_limit").ms)
+        out["ke"].append(metrics.kinetic_energy(sim.model.velocities(), sim.model.mass))
+        out["converged"] += int(sim.strain.last_converged)
+        out["stationarity"].append(sim.strain.last_stationarity)
+        if frame in FRAMES_AT:
+            out["x"][frame] = sim.model.positions().tolist()
+    out["lowest"] = float(sim.model.positions()[:, 1].min())
+    out["diagonal"] = float(np.linalg.norm(np.ptp(sim.model.uv, axis=0)))
+    out["faces"] = int(sim.model.n_faces)
+    return out
+
+
+def _run_file(folder, case, solve, drop):
+    tag = f"{case}__{solve.replace(' ', '_')}" + ("" if drop is None else f"__{drop}")
+    return os.path.join(folder, tag + ".json")
+
+
+def run_one(folder, case, solve, drop, fresh):
+    path = _run_file(folder, case, solve, drop)
+    if os.path.exists(path) and not fresh:
+        with open(path) as fh:
+            return json.load(fh)
+    t0 = time.time()
+    proc = subprocess.run([sys.executable, "-m", "benchmarks.motion_error", "--child",
+                           json.dumps([case, solve, drop, {solve: SOLVES[solve]}])],
+                          capture_output=True, text=True, cwd=ROOT)
+    if proc.returncode != 0:
+        result = {"error": proc.stderr[-600:]}
+    else:
+        result = json.loads(proc.stdout.strip().splitlines()[-1])
+        result["wall_s"] = time.time() - t0
+        with open(path, "w") as fh:
+            json.dump(result, fh)
+    print(f"  {case} / {solve}" + ("" if drop is None else f" / drop {drop}")
+          + (f": error {result['error'][-200:]}" if "error" in result else
+             f" ({result['wall_s']:.0f} s)"), file=sys.stderr, flush=True)
+    return result
+
+
+def rms(a, b, diagonal):
+    import numpy as np
+    a, b = np.asarray(a), np.asarray(b)
+    if a.shape != b.shape:
+        return float("nan")
+    return float(np.sqrt(np.mean(np.sum((a - b) ** 2, axis=1))) / diagonal)
+
+
+def summarize(runs):
+    """Rows per (case, solve): ms, errors at FRAMES_AT, the chaos floor."""
+    import numpy as np
+    rows = []
+    for case, by_solve in runs.items():
+        if case == "drape":
+            continue
+        ref, chaos = by_solve.get("reference"), by_solve.get("chaos")
+        if not ref or "error" in ref:
+            continue
+        diag = ref["diagonal"]
+        floor = {f: rms(chaos["x"][str(f)], ref["x"][str(f)], diag) if chaos and
+                 "error" not in chaos else float("nan") for f in FRAMES_AT}
+        for solve, run in by_solve.items():
+            if solve in ("reference", "chaos") or "error" in run:
+                continue
+            err = {f: rms(run["x"][str(f)], ref["x"][str(f)], diag) for f in FRAMES_AT}
+            rows.append(dict(case=case, solve=solve, faces=run["faces"],
+                             ms=float(np.median(run["ms"][4:])),
+                             ms_ref=float(np.median(ref["ms"][4:])),
+                             converged=run["converged"], error=err, floor=floor))
+    return rows
+
+
+def summarize_drape(drape):
+    """Per solve: drapes, lowest vertices, KE kept, ms; and per drop the distance of the
+    lowest vertex to the reference's."""
+    import numpy as np
+    out = []
+    ref = drape.get("reference", {})
+    for solve, by_drop in drape.items():
+        ok = [r for r in by_drop.values() if "error" not in r]
+        if not ok:
+            continue
+        low = [r["lowest"] for r in ok]
+        kept = [r["ke"][7] / r["ke"][5] for r in ok]
+        dlow = [abs(r["lowest"] - ref[d]["lowest"]) for d, r in by_drop.items()
+                if "error" not in r and d in ref and "error" not in ref[d]]
+        out.append(dict(solve=solve, draped=sum(v < DRAPED_BELOW for v in low), n=len(low),
+                        lowest=low, ke_kept=float(np.median(kept)),
+                        ke_kept_all=kept, lowest_vs_ref=float(max(dlow)) if dlow else None,
+                        ms=float(np.median([np.median(r["ms"][4:]) for r in ok]))))
+    return out
+
+
+def write_report(out, runs, drape, seconds):
+    import numpy as np
+    from benchmarks.harness import commit, machine
+    rows, drows = summarize(runs), summarize_drape(drape)
+    with open(os.path.join(out, "motion_error.json"), "w") as fh:
+        json.dump({"rows": rows, "drape": drows}, fh, indent=1)
+    L = ["# Motion error against exactly solved motion (issue #32)\n",
+         f"Command: `python -m benchmarks.motion_error --out {out}` ({seconds / 60:.0f} min "
+         f"of runs, two at a time). Commit {commit()}; {machine()}.\n",
+         "Each case runs from its start, one substep per frame. Error: RMS vertex distance to "
+         "the reference run at that frame over the cloth's diagonal. The reference takes "
+         "exact Newton steps (sparse Cholesky) and stops when the limits hold to 1e-7 and the "
+         "Newton step at the answer is below 1e-5 m/s x h; the chaos floor is how far the "
+         "reference moves when its start moves by 1 nm. ms: strain limiting per frame, median "
+         "of frames 5-30. conv: frames whose strain solve converged (of 30).\n",
+         "| case | faces | solve | ms | conv | error f5 | f10 | f30 | f10 / floor |",
+         "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for r in rows:
+        e, fl = r["error"], r["floor"]
+        L.append(f"| {r['case']} | {r['faces']} | {r['solve']} | {r['ms']:.1f} | "
+                 f"{r['converged']} | {e[5]:.1e} | {e[10]:.1e} | {e[30]:.1e} | "
+                 f"{e[10] / fl[10]:.1f} |" if fl[10] > 0 else
+                 f"| {r['case']} | {r['faces']} | {r['solve']} | {r['ms']:.1f} | "
+                 f"{r['converged']} | {e[5]:.1e} | {e[10]:.1e} | {e[30]:.1e} | - |")
+    L.append("")
+    L.append("Chaos floor (reference against the reference started 1 nm away) and the "
+             "reference's own cost:\n")
+    L.append("| case | floor f5 | f10 | f30 | reference ms |")
+    L.append("| --- | --- | --- | --- | --- |")
+    seen = set()
+    for r in rows:
+        if r["case"] in seen:
+            continue
+        seen.add(r["case"])
+        fl = r["floor"]
+        L.append(f"| {r['case']} | {fl[5]:.1e} | {fl[10]:.1e} | {fl[30]:.1e} | "
+                 f"{r['ms_ref']:.0f} |")
+    if drows:
+        L.append("")
+        L.append(f"Drape from {len(DROPS)} heights ({DROPS[0]}-{DROPS[-1]} m), 30 frames. "
+                 f"Draped: lowest vertex at frame 30 below the sphere's equator "
+                 f"({DRAPED_BELOW} m). KE kept: KE(frame 8) / KE(frame 6), median. Lowest vs "
+                 "reference: the largest difference over the drops (m).\n")
+        L.append("| solve | draped | lowest y per drop (m) | KE kept | lowest vs reference | "
+                 "ms |")
+        L.append("| --- | --- | --- | --- | --- | --- |")
+        for d in drows:
+            lv = "-" if d["lowest_vs_ref"] is None else f"{d['lowest_vs_ref']:.3f}"
+            L.append(f"| {d['solve']} | {d['draped']} of {d['n']} | "
+                     + ", ".join(f"{v:.2f}" for v in d["lowest"])
+                     + f" | {d['ke_kept']:.3f} | {lv} | {d['ms']:.0f} |")
+    L.append("")
+    L.append("![speed against error](motion_error.png)")
+    L.append("")
+    with open(os.path.join(out, "motion_error.md"), "w") as fh:
+        fh.write("\n".join(L))
+    plot(out, rows)
+
+
+def plot(out, rows):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    cases = sorted({r["case"] for r in rows})
+    fig, axes = plt.subplots(1, len(cases), figsize=(4.2 * len(cases), 3.8), squeeze=False)
+    for ax, case in zip(axes[0], cases):
+        sub = [r for r in rows if r["case"] == case]
+        for r in sub:
+            ax.loglog(r["ms"], max(r["error"][10], 1e-12), "o")
+            ax.annotate(r["solve"], (r["ms"], max(r["error"][10], 1e-12)), fontsize=7,
+                        xytext=(3, 3), textcoords="offset points")
+        floor = sub[0]["floor"][10]
+        if floor > 0:
+            ax.axhline(floor, color="grey", ls="--", lw=0.8)
+            ax.axhline(3 * floor, color="grey", ls=":", lw=0.8)
+        ax.set_title(f"{case} ({sub[0]['faces']} faces)", fontsize=9)
+        ax.set_xlabel("strain limiting, ms a frame")
+        ax.set_ylabel("RMS error / diagonal at frame 10")
+    fig.suptitle("speed against motion error (dashed: chaos floor, dotted: 3x floor)",
+                 fontsize=9)
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, "motion_error.png"), dpi=110)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default=os.path.join(ROOT, "docs", "speed"))
+    ap.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
+    ap.add_argument("--solves", nargs="+", default=list(SOLVES))
+    ap.add_argument("--extra", nargs="+", default=[], metavar="NAME=JSON",
+                    help="more solves: a name and strain settings (solver attributes "
+                         "prefixed with 'attr.'), e.g. 'mu10={\"attr.mu_scale\": 10}'")
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--fresh", action="store_true", help="measure again, ignoring cached runs")
+    ap.add_argument("--child")
+    a = ap.parse_args()
+    for item in a.extra:
+        name, _, value = item.partition("=")
+        SOLVES[name] = json.loads(value)
+        a.solves.append(name)
+    if a.child:
+        case, solve, drop, extra = json.loads(a.child)
+        SOLVES.update(extra)
+        print(json.dumps(child(case, solve, drop)))
+        return
+    folder = os.path.join(a.out, "motion_error_runs")
+    os.makedirs(folder, exist_ok=True)
+    plan = []
+    for case in a.cases:
+        if case == "drape":
+            plan += [(case, s, d) for s in DRAPE_SOLVES if s in a.solves for d in DROPS]
+            plan += [(case, s, None) for s in a.solves]
+        else:
+            plan += [(case, s, None) for s in a.solves]
+    print(f"{len(plan)} runs", file=sys.stderr)
+    t0 = time.time()
+    # Every case and solve of the last report are read back from the cache, so a report
+    # always covers what has been measured, not only this invocation's cases.
+    with ThreadPoolExecutor(max_workers=a.jobs) as pool:
+        results = list(pool.map(lambda p: run_one(folder, *p, a.fresh), plan))
+    runs, drape = {}, {}
+    for name in sorted(os.listdir(folder)):
+        parts = name[:-5].split("__")
+        with open(os.path.join(folder, name)) as fh:
+            run = json.load(fh)
+        case, solve = parts[0], parts[1].replace("_", " ")
+        if len(parts) == 3:
+            drape.setdefault(solve, {})[float(parts[2])] = run
+        else:
+            runs.setdefault(case, {})[solve] = run
+    del results
+    write_report(a.out, runs, drape, time.time() - t0)
+    print(f"wrote {os.path.join(a.out, 'motion_error.md')}")
+
+
+if __name__ == "__main__":
+    main()
