@@ -112,8 +112,9 @@ def probe(case, frames, resolution):
     wrap(module("cloth.model").ClothModel, "load", "load")
     # Every name a tree may build the bending matrix by (the rebuild, or the local update).
     bend = module("cloth.bending")
-    for name in ("isotropic_matrix", "update_matrix"):
-        wrap(bend, name, "bending")
+    wrap(bend, "isotropic_matrix", "bending")
+    if hasattr(bend, "IsotropicBending"):            # the per-face terms kept across remeshes
+        wrap(bend.IsotropicBending, "matrix", "bending")
     wrap(Simulator, "_mesh_changed", "mesh_changed")
     wrap(module("cloth.dynamics").ImplicitEuler, "on_mesh_changed", "mc_dynamics")
     solver = module("cloth.strain.solver")
@@ -128,9 +129,6 @@ def probe(case, frames, resolution):
     fp = module("cloth.strain.factor_precond")
     wrap(fp.FactorPreconditioner, "__init__", "factor")
     wrap(fp.FactorPreconditioner, "refresh", "factor")
-    if hasattr(fp, "FactorPreconditioner"):
-        # A tree that defers the symbolic analysis does it in ``analyse``.
-        wrap(fp.FactorPreconditioner, "analyse", "factor")
     mg = module("cloth.strain.multigrid")
     wrap(mg.MultigridPreconditioner, "__init__", "multigrid")
     wrap(mg.MultigridPreconditioner, "refresh", "multigrid")
