@@ -95,7 +95,9 @@ class RemeshParams:
         operations in most frames (docs/remesh/remesh_frame.md). Deferring them keeps the
         mesh, and everything built on it, for a few frames; the operations are not lost, the
         next remesh finds them again. Only the simulator reads these two (``remesh()`` always
-        returns its whole result).
+        returns its whole result). Measured on hanging at resolution 46 (mapping, ~900 faces,
+        median ms per frame over frames 10-60, single runs on a loaded machine): 0 54, 0.01
+        44 (62 % of the remeshes applied), 0.05 32.
     """
     size_min: float = 0.015
     size_max: float = 0.08
@@ -108,7 +110,7 @@ class RemeshParams:
     collapse_margin: float = 0.2
     collapse_rounds: int = 2
     warm_multipliers: bool = False
-    defer_ops: float = 0.01
+    defer_ops: float = 0.05
     defer_frames: int = 4
 
     def validate(self):
