@@ -233,6 +233,30 @@ def cell_areas(uv, faces):
     return share
 
 
+def outline_flux(fits, live):
+    """(F, 3, 6): each face's flux of grad X through the outline's edges it has, as rows of
+    its stencil (row r: the share of the face's vertex r, over the half edge next to it):
+    through a clamped edge the held face's slope, through a free edge the fit's slope across
+    it (linear along the edge). Zero for held faces and inner edges."""
+    flux = np.zeros((len(fits.sten), 3, 6))
+    for k in range(3):
+        ra, rb = (k + 1) % 3, (k + 2) % 3          # the ends of the edge opposite vertex k
+        cl = np.flatnonzero(live & (fits.kind[:, k] == CLAMPED_EDGE))
+        half = 0.5 * fits.edge_len[cl, k, None] * fits.held_slope[cl, k]
+        flux[cl, ra] += half
+        flux[cl, rb] += half
+        fr = np.flatnonzero(live & (fits.kind[:, k] == FREE_EDGE))
+        scale = fits.scale[fr, None]
+        nrm = fits.edge_normal[fr, k]
+        ga, gb = (np.einsum("fi,fij->fj", _slopes((e[fr, k] - fits.centre[fr]) / scale, nrm),
+                            fits.coef[fr]) / scale for e in (fits.edge_a, fits.edge_b))
+        el = fits.edge_len[fr, k, None]
+        # The half edge next to an end: the slope there is (3 g_end + g_other) / 4.
+        flux[fr, ra] += el * (3 * ga + gb) / 8
+        flux[fr, rb] += el * (ga + 3 * gb) / 8
+    return flux
+
+
 def _sparse(rows, cols, vals, n):
     return sp.csr_matrix((np.ravel(vals), (np.ravel(rows), np.ravel(cols))), (n, n))
 
@@ -245,22 +269,9 @@ def trace_rows(uv, faces, fits, live, n):
     across it (linear along the edge) over each end's half."""
     A = np.zeros(n)
     np.add.at(A, faces[live].ravel(), cell_areas(uv, faces[live]).ravel())
-    flux = [-cotan_laplacian(uv, faces[live])]
-    for k in range(3):
-        a_end, b_end = faces[:, (k + 1) % 3], faces[:, (k + 2) % 3]
-        cl = np.flatnonzero(live & (fits.kind[:, k] == CLAMPED_EDGE))
-        half = 0.5 * fits.edge_len[cl, k, None] * fits.held_slope[cl, k]
-        for end in (a_end, b_end):
-            flux.append(_sparse(np.repeat(end[cl, None], 6, 1), fits.sten[cl], half, n))
-        fr = np.flatnonzero(live & (fits.kind[:, k] == FREE_EDGE))
-        scale = fits.scale[fr, None]
-        nrm = fits.edge_normal[fr, k]
-        ga, gb = (np.einsum("fi,fij->fj", _slopes((e[fr, k] - fits.centre[fr]) / scale, nrm),
-                            fits.coef[fr]) / scale for e in (fits.edge_a, fits.edge_b))
-        el = fits.edge_len[fr, k, None]
-        # The half edge next to an end: the slope there is (3 g_end + g_other) / 4.
-        for end, g in ((a_end, (3 * ga + gb) / 8), (b_end, (ga + 3 * gb) / 8)):
-            flux.append(_sparse(np.repeat(end[fr, None], 6, 1), fits.sten[fr], el * g, n))
+    out = outline_flux(fits, live)
+    flux = [-cotan_laplacian(uv, faces[live]),
+            _sparse(np.repeat(faces, 6, axis=1), np.tile(fits.sten, (1, 3)), out, n)]
     inv = np.where(A > 0, 1.0 / np.where(A > 0, A, 1.0), 0.0)
     return sp.diags(inv) @ sum(flux[1:], flux[0]), A
 
@@ -346,22 +357,7 @@ def face_terms(uv, faces, edge_faces, edge_opp, area, held, subset=None):
         flux[:, j, j] -= w
         flux[:, i, j] += w
         flux[:, j, i] += w
-    # The outline's flux (trace_rows): clamped edges the held face's slope, free edges the
-    # fit's slope across them, over each end's half edge.
-    for k in range(3):
-        ra, rb = (k + 1) % 3, (k + 2) % 3
-        cl = np.flatnonzero(live & (fits.kind[:, k] == CLAMPED_EDGE))
-        half = 0.5 * fits.edge_len[cl, k, None] * fits.held_slope[cl, k]
-        flux[cl, ra] += half
-        flux[cl, rb] += half
-        fr = np.flatnonzero(live & (fits.kind[:, k] == FREE_EDGE))
-        scale = fits.scale[fr, None]
-        nrm = fits.edge_normal[fr, k]
-        ga, gb = (np.einsum("fi,fij->fj", _slopes((e[fr, k] - fits.centre[fr]) / scale, nrm),
-                            fits.coef[fr]) / scale for e in (fits.edge_a, fits.edge_b))
-        el = fits.edge_len[fr, k, None]
-        flux[fr, ra] += el * (3 * ga + gb) / 8
-        flux[fr, rb] += el * (ga + 3 * gb) / 8
+    flux += outline_flux(fits, live)                    # as in trace_rows
     cell = np.zeros((S, 3))
     cell[live] = cell_areas(uv, f[live])
     C = fits.coef[:, 3:6] / fits.scale[:, None, None] ** 2
