@@ -54,7 +54,7 @@ ROWS = [("frame", "**frame** (sum of stages)", 0),
         ("pattern", "block pattern (anywhere)", 0),
         ("factor", "factor: analysis and factorisations (anywhere)", 0),
         ("multigrid", "multigrid hierarchy (anywhere)", 0)]
-COUNTS = [("faces", "faces"), ("cg_iters", "dynamics CG iterations"),
+COUNTS = [("frame_mean", "frame, mean over frames (ms)"), ("faces", "faces"), ("cg_iters", "dynamics CG iterations"),
           ("cg_ms_per_iter", "dynamics ms per CG iteration"),
           ("ops", "remesh operations (split + flip + collapse)"),
           ("applied", "remeshes applied (share of frames)"),
@@ -184,6 +184,12 @@ def summarise(runs, skip):
     it = np.array([r.get("cg_iters", 0) for r in frames], float)
     ms = np.array([r.get("dyn_step", 0.0) for r in frames])
     out["cg_ms_per_iter"] = float(np.median(ms[it > 0] / it[it > 0])) if np.any(it > 0) else 0.0
+    out["frame_mean"] = float(np.mean([r["frame"] for r in frames]))
+    # A deferred remesh leaves most steps at zero, so the medians above describe deferred
+    # frames once most are: the same steps over the frames whose remesh was applied.
+    applied = [r for r in frames if r.get("applied", 1)]
+    out["when_applied"] = {k: float(np.median([r.get(k, 0.0) for r in applied]))
+                           for k in keys} if applied else {}
     return out
 
 
@@ -208,11 +214,24 @@ def write_report(path, results, trees, args, header):
                 cells.append("-")
             elif key == "viol":
                 cells.append(f"{v:.1e}")
+            elif key == "frame_mean":
+                cells.append(f"{v:.1f}")
             elif key in ("cg_ms_per_iter", "applied"):
                 cells.append(f"{v:.3f}" if key == "cg_ms_per_iter" else f"{100 * v:.0f} %")
             else:
                 cells.append(f"{v:.0f}")
         lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    lines += ["", "The same steps, medians over the frames whose remesh was applied only (a deferred "
+              "remesh sets off nothing):", "",
+              "| step (ms per frame, median over applied remeshes) | " +
+              " | ".join(f"{name} {case}" for case, name in cols) + " |",
+              "|---|" + "---|" * len(cols)]
+    for key, label, indent in ROWS:
+        cells = []
+        for case, name in cols:
+            v = results[case][name].get("when_applied", {}).get(key)
+            cells.append("-" if v is None else f"{v:.1f}")
+        lines.append("| " + "&nbsp;&nbsp;" * 2 * indent + label + " | " + " | ".join(cells) + " |")
     with open(path, "w") as fh:
         fh.write("\n".join(lines) + "\n")
     del np
@@ -254,7 +273,11 @@ def main():
     ap.add_argument("--resolution", type=int, default=46)
     ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--out", default=None, help="folder for remesh_frame.md/.json/.png")
+    ap.add_argument("--from-json", help="rewrite the report and plot from a saved "
+                    "remesh_frame.json (no runs)")
     args = ap.parse_args()
+    if args.from_json:
+        return _from_json(args)
     here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     trees = {args.name: here}
     if args.base:
@@ -293,7 +316,7 @@ def main():
         write_report(os.path.join(args.out, "remesh_frame.md"), results, list(trees), args,
                      header)
         with open(os.path.join(args.out, "remesh_frame.json"), "w") as fh:
-            json.dump({"results": results, "raw": raw, "command": cmd}, fh)
+            json.dump({"results": results, "raw": raw, "command": cmd, "header": header}, fh)
         plot(os.path.join(args.out, "remesh_frame.png"), results, list(trees), args.cases)
         print(f"wrote {args.out}/remesh_frame.md")
     else:
@@ -301,6 +324,21 @@ def main():
         path = os.path.join(tempfile.gettempdir(), "remesh_frame.md")
         write_report(path, results, list(trees), args, header)
         print(open(path).read())
+
+
+def _from_json(args):
+    """The report of a saved run, summarised again (its header lines are kept)."""
+    with open(args.from_json) as fh:
+        saved = json.load(fh)
+    raw, header = saved["raw"], saved["header"]
+    cases = list(raw)
+    trees = list(raw[cases[0]])
+    args.cases = cases
+    results = {c: {t: summarise(raw[c][t], args.skip) for t in trees} for c in cases}
+    out = args.out or os.path.dirname(args.from_json)
+    write_report(os.path.join(out, "remesh_frame.md"), results, trees, args, header)
+    plot(os.path.join(out, "remesh_frame.png"), results, trees, cases)
+    print(f"wrote {out}/remesh_frame.md")
 
 
 if __name__ == "__main__":
