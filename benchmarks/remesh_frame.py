@@ -193,6 +193,18 @@ def summarise(runs, skip):
     return out
 
 
+def _step_rows(cols, summary):
+    """The table rows of ROWS, one cell per (case, tree) from ``summary(case, tree)``."""
+    lines = []
+    for key, label, indent in ROWS:
+        cells = []
+        for case, name in cols:
+            v = summary(case, name).get(key)
+            cells.append("-" if v is None else f"{v:.1f}")
+        lines.append("| " + "&nbsp;&nbsp;" * 2 * indent + label + " | " + " | ".join(cells) + " |")
+    return lines
+
+
 def write_report(path, results, trees, args, header):
     import numpy as np
     cols = [(case, name) for case in args.cases for name in trees]
@@ -200,12 +212,7 @@ def write_report(path, results, trees, args, header):
                       "| step (ms per frame, median) | " +
                       " | ".join(f"{name} {case}" for case, name in cols) + " |",
                       "|---|" + "---|" * len(cols)]
-    for key, label, indent in ROWS:
-        cells = []
-        for case, name in cols:
-            v = results[case][name].get(key)
-            cells.append("-" if v is None else f"{v:.1f}")
-        lines.append("| " + "&nbsp;&nbsp;" * 2 * indent + label + " | " + " | ".join(cells) + " |")
+    lines += _step_rows(cols, lambda case, name: results[case][name])
     for key, label in COUNTS:
         cells = []
         for case, name in cols:
@@ -226,12 +233,7 @@ def write_report(path, results, trees, args, header):
               "| step (ms per frame, median over applied remeshes) | " +
               " | ".join(f"{name} {case}" for case, name in cols) + " |",
               "|---|" + "---|" * len(cols)]
-    for key, label, indent in ROWS:
-        cells = []
-        for case, name in cols:
-            v = results[case][name].get("when_applied", {}).get(key)
-            cells.append("-" if v is None else f"{v:.1f}")
-        lines.append("| " + "&nbsp;&nbsp;" * 2 * indent + label + " | " + " | ".join(cells) + " |")
+    lines += _step_rows(cols, lambda case, name: results[case][name].get("when_applied", {}))
     with open(path, "w") as fh:
         fh.write("\n".join(lines) + "\n")
     del np
