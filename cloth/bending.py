@@ -84,6 +84,13 @@ def held_faces(faces, pinned):
     return np.asarray(pinned, bool)[np.asarray(faces, np.int64)].all(axis=1)
 
 
+def held_vertices(faces, held, n):
+    """(n,) bool: the vertices of held faces (the clamp's)."""
+    out = np.zeros(n, bool)
+    out[np.asarray(faces, np.int64)[np.asarray(held, bool)].ravel()] = True
+    return out
+
+
 def _values(p):
     """(..., 6): the fit's monomials 1, u, v, u^2 / 2, v^2 / 2, u v at the points p (..., 2)."""
     u, v = p[..., 0], p[..., 1]
@@ -104,11 +111,18 @@ class FaceFits:
     ends (a, b), length and outward unit normal in material space. On a CLAMPED_EDGE,
     ``held_slope[f, k] @ x[sten[f]]`` is the held face's slope across the edge (grad X . n)."""
 
-    def __init__(self, uv, faces, edge_faces, edge_opp, area, held=None):
+    def __init__(self, uv, faces, edge_faces, edge_opp, area, held=None, subset=None):
         uv, faces = np.asarray(uv, np.float64), np.asarray(faces, np.int64)
-        nf = len(faces)
-        held = np.zeros(nf, bool) if held is None else np.asarray(held, bool)
+        held = np.zeros(len(faces), bool) if held is None else np.asarray(held, bool)
         sten = face_stencils(faces, edge_faces, edge_opp)
+        # The clamp: vertices of held faces (over the whole mesh, before ``subset``).
+        in_held = held_vertices(faces, held, len(uv))
+        if subset is not None:
+            # The fits of these faces only (a remesh's new faces: ``IsotropicBending``);
+            # every array below is then per face of the subset.
+            faces, sten, held = faces[subset], sten[subset], held[subset]
+            area = np.asarray(area)[subset]
+        nf = len(faces)
         tri = uv[faces]
         self.centre = tri.mean(axis=1)
         self.scale = np.sqrt(2.0 * np.asarray(area, np.float64))     # ~ the face's size
@@ -118,9 +132,8 @@ class FaceFits:
         self.edge_normal = np.stack([t[..., 1], -t[..., 0]], -1) / self.edge_len[..., None]
         # The across vertex's face is held when it and the edge's ends are all pinned.
         across_held = np.zeros((nf, 3), bool)
-        if held.any():
-            pinned = np.zeros(len(uv), bool)
-            pinned[faces[held].ravel()] = True
+        if in_held.any():
+            pinned = in_held
             for k in range(3):
                 across_held[:, k] = (sten[:, 3 + k] >= 0) & pinned[np.maximum(sten[:, 3 + k], 0)] \
                     & pinned[faces[:, (k + 1) % 3]] & pinned[faces[:, (k + 2) % 3]]
@@ -220,6 +233,30 @@ def cell_areas(uv, faces):
     return share
 
 
+def outline_flux(fits, live):
+    """(F, 3, 6): each face's flux of grad X through the outline's edges it has, as rows of
+    its stencil (row r: the share of the face's vertex r, over the half edge next to it):
+    through a clamped edge the held face's slope, through a free edge the fit's slope across
+    it (linear along the edge). Zero for held faces and inner edges."""
+    flux = np.zeros((len(fits.sten), 3, 6))
+    for k in range(3):
+        ra, rb = (k + 1) % 3, (k + 2) % 3          # the ends of the edge opposite vertex k
+        cl = np.flatnonzero(live & (fits.kind[:, k] == CLAMPED_EDGE))
+        half = 0.5 * fits.edge_len[cl, k, None] * fits.held_slope[cl, k]
+        flux[cl, ra] += half
+        flux[cl, rb] += half
+        fr = np.flatnonzero(live & (fits.kind[:, k] == FREE_EDGE))
+        scale = fits.scale[fr, None]
+        nrm = fits.edge_normal[fr, k]
+        ga, gb = (np.einsum("fi,fij->fj", _slopes((e[fr, k] - fits.centre[fr]) / scale, nrm),
+                            fits.coef[fr]) / scale for e in (fits.edge_a, fits.edge_b))
+        el = fits.edge_len[fr, k, None]
+        # The half edge next to an end: the slope there is (3 g_end + g_other) / 4.
+        flux[fr, ra] += el * (3 * ga + gb) / 8
+        flux[fr, rb] += el * (ga + 3 * gb) / 8
+    return flux
+
+
 def _sparse(rows, cols, vals, n):
     return sp.csr_matrix((np.ravel(vals), (np.ravel(rows), np.ravel(cols))), (n, n))
 
@@ -232,22 +269,9 @@ def trace_rows(uv, faces, fits, live, n):
     across it (linear along the edge) over each end's half."""
     A = np.zeros(n)
     np.add.at(A, faces[live].ravel(), cell_areas(uv, faces[live]).ravel())
-    flux = [-cotan_laplacian(uv, faces[live])]
-    for k in range(3):
-        a_end, b_end = faces[:, (k + 1) % 3], faces[:, (k + 2) % 3]
-        cl = np.flatnonzero(live & (fits.kind[:, k] == CLAMPED_EDGE))
-        half = 0.5 * fits.edge_len[cl, k, None] * fits.held_slope[cl, k]
-        for end in (a_end, b_end):
-            flux.append(_sparse(np.repeat(end[cl, None], 6, 1), fits.sten[cl], half, n))
-        fr = np.flatnonzero(live & (fits.kind[:, k] == FREE_EDGE))
-        scale = fits.scale[fr, None]
-        nrm = fits.edge_normal[fr, k]
-        ga, gb = (np.einsum("fi,fij->fj", _slopes((e[fr, k] - fits.centre[fr]) / scale, nrm),
-                            fits.coef[fr]) / scale for e in (fits.edge_a, fits.edge_b))
-        el = fits.edge_len[fr, k, None]
-        # The half edge next to an end: the slope there is (3 g_end + g_other) / 4.
-        for end, g in ((a_end, (3 * ga + gb) / 8), (b_end, (ga + 3 * gb) / 8)):
-            flux.append(_sparse(np.repeat(end[fr, None], 6, 1), fits.sten[fr], el * g, n))
+    out = outline_flux(fits, live)
+    flux = [-cotan_laplacian(uv, faces[live]),
+            _sparse(np.repeat(faces, 6, axis=1), np.tile(fits.sten, (1, 3)), out, n)]
     inv = np.where(A > 0, 1.0 / np.where(A > 0, A, 1.0), 0.0)
     return sp.diags(inv) @ sum(flux[1:], flux[0]), A
 
@@ -302,3 +326,143 @@ def rows_with_diagonal_first(Q):
     order = np.lexsort((not_diag, rows))     # by row, the diagonal first, then by column
     return (Q.indptr.astype(np.int32), Q.indices[order].astype(np.int32),
             Q.data[order].astype(np.float64))
+
+
+# ---------------------------------------------------------------------------------------------
+# The same matrix from per-face terms, reused across remeshes (issue #34)
+# ---------------------------------------------------------------------------------------------
+def face_terms(uv, faces, edge_faces, edge_opp, area, held, subset=None):
+    """Every face's share of Q, which depends on its stencil alone (its three vertices, the
+    three across its edges, and which of them belong to the clamp): a dict of
+    ``sten`` (S, 6) the stencil (free edges: a placeholder vertex with zero weights),
+    ``flux`` (S, 3, 6) its rows of the trace's flux (the cotangent Laplacian's part through
+    the cell sides inside the face, and the outline's part through its clamped or free
+    edges; row r is the face's vertex r), ``cell`` (S, 3) its share of its vertices' cells
+    and ``dev`` (S, 6, 6) its |dev II|^2 term. Held faces contribute nothing. ``subset``: of
+    these faces only (the others' terms come from an earlier mesh)."""
+    uv, faces = np.asarray(uv, np.float64), np.asarray(faces, np.int64)
+    idx = np.arange(len(faces)) if subset is None else np.asarray(subset, np.int64)
+    fits = FaceFits(uv, faces, edge_faces, edge_opp, area, held, subset=idx)
+    f = faces[idx]
+    live = ~np.asarray(held, bool)[idx]
+    S = len(idx)
+    flux = np.zeros((S, 3, 6))
+    # Minus the cotangent Laplacian (cotan_laplacian, face by face).
+    for k in range(3):
+        i, j, o = k, (k + 1) % 3, (k + 2) % 3
+        a, b = uv[f[:, i]] - uv[f[:, o]], uv[f[:, j]] - uv[f[:, o]]
+        w = np.where(live, 0.5 * (a * b).sum(1) / np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]),
+                     0.0)
+        flux[:, i, i] -= w
+        flux[:, j, j] -= w
+        flux[:, i, j] += w
+        flux[:, j, i] += w
+    flux += outline_flux(fits, live)                    # as in trace_rows
+    cell = np.zeros((S, 3))
+    cell[live] = cell_areas(uv, f[live])
+    C = fits.coef[:, 3:6] / fits.scale[:, None, None] ** 2
+    d = np.stack([(C[:, 0] - C[:, 1]) / np.sqrt(2.0), np.sqrt(2.0) * C[:, 2]], 1)   # (S, 2, 6)
+    w = np.where(live, np.asarray(area, np.float64)[idx], 0.0)
+    dev = np.einsum("s,ski,skj->sij", w, d, d)
+    return dict(sten=fits.sten, flux=flux, cell=cell, dev=dev)
+
+
+def assemble(terms, faces, n):
+    """Q (CSR) from the faces' terms (``face_terms``): (1/2) F^T diag(1/A) F with F the
+    summed flux rows and A the summed cells (T = diag(1/A) F is ``trace_rows``' operator),
+    plus the |dev II|^2 terms, symmetrised, rows made to sum to zero (``isotropic_matrix``)."""
+    faces = np.asarray(faces, np.int64)
+    sten, flux = terms["sten"], terms["flux"]
+    F = sp.csr_matrix((flux.ravel(), (np.repeat(faces, 6, axis=1).ravel(),
+                                      np.tile(sten, (1, 3)).ravel())), (n, n))
+    A = np.bincount(faces.ravel(), terms["cell"].ravel(), minlength=n)
+    inv = np.where(A > 0, 1.0 / np.where(A > 0, A, 1.0), 0.0)
+    dev = sp.csr_matrix((terms["dev"].ravel(), (np.repeat(sten, 6, axis=1).ravel(),
+                                                np.tile(sten, (1, 6)).ravel())), (n, n))
+    Q = 0.5 * (F.T @ sp.diags(inv) @ F) + dev
+    Q = (0.5 * (Q + Q.T)).tocsr()
+    Q = (Q - sp.diags(np.asarray(Q.sum(axis=1)).ravel())).tocsr()
+    Q.sum_duplicates()
+    Q.eliminate_zeros()
+    return Q
+
+
+class IsotropicBending:
+    """``isotropic_matrix`` for a mesh that changes by remeshing: each face's terms
+    (``face_terms``) are kept, and after a remesh only the faces whose stencil changed (new,
+    reshaped, beside one that was, or whose clamp flags changed) are computed again; the
+    others are carried over through the remesh's vertex map. The matrix is then assembled
+    from the terms as a rebuild would (``assemble``): the same to round-off
+    (tests/test_bending_update.py). ``last_reused``: how many faces' terms the last call
+    carried over."""
+
+    def __init__(self):
+        self._faces = self._key = self._terms = None
+        self.last_reused = 0
+
+    @staticmethod
+    def _face_key(faces, sten, held, in_held):
+        """Per face what its terms depend on besides the material coordinates (which never
+        change for a vertex): its vertices in order, its across vertices (-1: a free edge),
+        whether it is held and which stencil vertices belong to the clamp."""
+        s = np.where(sten >= 0, sten, -1)
+        return np.concatenate([faces, s[:, 3:], held[:, None],
+                               in_held[np.maximum(s, 0)] & (s >= 0)], axis=1).astype(np.int64)
+
+    def matrix(self, uv, faces, edge_faces, edge_opp, area, pinned=None, vertex_map=None):
+        """Q of the mesh (as ``isotropic_matrix``). ``vertex_map`` (old vertex -> new, -1
+        where removed; a remesh's ``stats["vertex_map"]``) says that this mesh is a remesh of
+        the previous call's; without it every face is computed."""
+        uv, faces = np.asarray(uv, np.float64), np.asarray(faces, np.int64)
+        n = len(uv)
+        held = held_faces(faces, pinned)
+        in_held = held_vertices(faces, held, n)
+        sten = face_stencils(faces, edge_faces, edge_opp)
+        key = self._face_key(faces, sten, held, in_held)
+        source = -np.ones(len(faces), np.int64)      # the old face whose terms fit, per face
+        if vertex_map is not None and self._key is not None:
+            source = self._match(key, np.asarray(vertex_map, np.int64), n)
+        fresh = np.flatnonzero(source < 0)
+        terms = {}
+        if len(fresh) < len(faces):
+            kept = np.flatnonzero(source >= 0)
+            vmap = np.asarray(vertex_map, np.int64)
+            new = face_terms(uv, faces, edge_faces, edge_opp, area, held, subset=fresh) \
+                if len(fresh) else None
+            for name, old in self._terms.items():
+                arr = np.empty((len(faces),) + old.shape[1:], old.dtype)
+                arr[kept] = old[source[kept]]
+                if new is not None:
+                    arr[fresh] = new[name]
+                terms[name] = arr
+            # Carried stencils are in the old numbering; free-edge placeholders are the
+            # face's own first vertex, which survives with the face.
+            terms["sten"][kept] = vmap[terms["sten"][kept]]
+        else:
+            terms = face_terms(uv, faces, edge_faces, edge_opp, area, held)
+        self.last_reused = len(faces) - len(fresh)
+        self._faces, self._key, self._terms = faces, key, terms
+        return assemble(terms, faces, n)
+
+    def _match(self, key, vmap, n):
+        """Per new face, the old face with the same key once the old one is renumbered by
+        ``vmap`` (-1: none). Candidates by the directed edge from vertex 0 to vertex 1 (one
+        face per directed edge in a manifold mesh), then every column compared."""
+        old = self._key.copy()
+        ok = np.ones(len(old), bool)
+        ids = np.r_[0:3, 3:6]                    # vertex columns (3-5: -1 on free edges)
+        for c in ids:
+            col = old[:, c]
+            mapped = np.where(col >= 0, vmap[np.maximum(col, 0)], -1)
+            ok &= (col < 0) | (mapped >= 0)
+            old[:, c] = mapped
+        old_code = old[:, 0] * n + old[:, 1]
+        new_code = key[:, 0] * n + key[:, 1]
+        cand = np.flatnonzero(ok)
+        order = cand[np.argsort(old_code[cand], kind="stable")]
+        pos = np.searchsorted(old_code[order], new_code)
+        pos = np.minimum(pos, max(len(order) - 1, 0))
+        src = order[pos] if len(order) else np.zeros(len(key), np.int64)
+        same = (len(order) > 0) & np.all(old[src] == key, axis=1) if len(order) else \
+            np.zeros(len(key), bool)
+        return np.where(same, src, -1)

@@ -127,6 +127,15 @@ class ImplicitEuler:
                                if len(self.stitches_np) else np.zeros((1, 2), np.int32))
         self.n_stitches = len(self.stitches_np)
 
+    def warm_start(self):
+        """The last step's velocity change per vertex (n_verts, 3): where the next step's CG
+        starts. A remesh carries it to the new mesh (``set_warm_start``)."""
+        return ndarrays.get_rows(self.dv, self.model.n_verts)
+
+    def set_warm_start(self, dv):
+        """Start the next step's CG from ``dv`` (n_verts, 3) instead of zero."""
+        ndarrays.put_rows(self.dv, np.asarray(dv, np.float64).reshape(self.model.n_verts, 3))
+
     def set_stitches(self, pairs):
         self.stitches_np = np.asarray(pairs, np.int32).reshape(-1, 2)
         self.on_mesh_changed()

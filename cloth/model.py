@@ -20,7 +20,7 @@ import numpy as np
 import taichi as ti
 from taichi.lang.util import to_numpy_type
 
-from . import bending as bending_energy, metrics
+from . import bending as bending_energy, metrics, ndarrays
 from .metrics import signed_material_areas  # noqa: F401 (the model's users import it here)
 
 
@@ -227,6 +227,7 @@ class ClothModel:
         self.material = material
         self.capacity_factor = capacity_factor
         self.v_cap = self.f_cap = self.e_cap = self.q_cap = 0
+        self._bending = bending_energy.IsotropicBending()   # per-face terms kept across loads
         self.n_verts = self.n_faces = self.n_edges = self.n_bend = 0
         self.load(mesh, rest_x=rest_x)
 
@@ -260,9 +261,12 @@ class ClothModel:
         return nv <= self.v_cap and nf <= self.f_cap and ne <= self.e_cap and nq <= self.q_cap
 
     # -- filling from numpy -------------------------------------------------------------------
-    def load(self, mesh: MeshArrays, rest_x=None):
+    def load(self, mesh: MeshArrays, rest_x=None, vertex_map=None):
         """(Re)fill every array from ``mesh`` within the allocated capacity; raises
-        CapacityExceeded when it does not fit (build a new ClothModel then)."""
+        CapacityExceeded when it does not fit (build a new ClothModel then). ``vertex_map``
+        (old vertex -> new, -1 where removed): ``mesh`` is a remesh of the loaded one, and
+        the bending matrix is updated where the remesh changed it instead of rebuilt
+        (``bending.IsotropicBending``; the same matrix to round-off)."""
         uv, faces = mesh.uv, mesh.faces
         if uv.ndim != 2 or uv.shape[1] != 2 or mesh.x.shape != (len(uv), 3):
             raise ModelError("mesh arrays have the wrong shape: uv must be (V,2) and x (V,3)")
@@ -285,7 +289,7 @@ class ClothModel:
         ev, ef, eo = build_edges(faces)
         nv, nf, ne = len(uv), len(faces), len(ev)
         if self.bending == "isotropic":
-            Q = bending_energy.isotropic_matrix(uv, faces, ev, ef, eo, area, mesh.pinned)
+            Q = self._bending.matrix(uv, faces, ef, eo, area, mesh.pinned, vertex_map)
             bend_ptr, bend_col, bend_val = bending_energy.rows_with_diagonal_first(Q)
         else:
             bend_ptr, bend_col, bend_val = np.zeros(nv + 1, np.int32), np.zeros(0, np.int32), \
@@ -299,6 +303,8 @@ class ClothModel:
                 raise CapacityExceeded(nv, nf, ne, (self.v_cap, self.f_cap, self.e_cap,
                                                     self.q_cap), nq)
             self._allocate(nv, nf, ne, nq)
+            # Fresh arrays: the first fill clears every row past the mesh.
+            self._filled = (self.v_cap, self.f_cap, self.e_cap, self.q_cap)
         self.n_verts, self.n_faces, self.n_edges, self.n_bend = nv, nf, ne, nq
 
         # Per-face rest quantities (METHOD.md section 2).
@@ -317,30 +323,35 @@ class ClothModel:
         rx = mesh.x if rest_x is None else np.asarray(rest_x, dtype=np.float64)
         rest_angle = dihedral_angles(rx, ev, eo) if rest_x is not None else np.zeros(ne)
 
-        self._fill_vec(self.vert_uv, uv, self.v_cap)
-        self._fill_vec(self.vert_mass, mass, self.v_cap)
-        self._fill_vec(self.vert_pinned, mesh.pinned.astype(np.int32), self.v_cap)
-        self._fill_vec(self.vert_pin_target, mesh.pin_target, self.v_cap)
-        self._fill_vec(self.face_verts, faces, self.f_cap)
-        self._fill_vec(self.face_Dm_inv, Dm_inv, self.f_cap)
-        self._fill_vec(self.face_rest_area, area, self.f_cap)
-        self._fill_vec(self.face_grain, grain, self.f_cap)
-        self._fill_vec(self.edge_verts, ev, self.e_cap)
-        self._fill_vec(self.edge_faces, ef, self.e_cap)
-        self._fill_vec(self.edge_opp, eo, self.e_cap)
-        self._fill_vec(self.edge_rest_angle, rest_angle, self.e_cap)
-        self._fill_vec(self.edge_bend_weight, weight, self.e_cap)
-        # Rows past n_verts stay empty: the padding repeats the last offset.
-        self.bend_ptr.from_numpy(np.r_[bend_ptr, np.full(self.v_cap - nv, bend_ptr[-1])]
-                                 .astype(np.int32))
-        self._fill_vec(self.bend_col, bend_col, self.q_cap)
-        self._fill_vec(self.bend_val, bend_val, self.q_cap)
-        self._fill_vec(self.state.x, mesh.x, self.v_cap)
-        self._fill_vec(self.state.v, mesh.v, self.v_cap)
+        # Active rows only, and zeros over the rows a longer earlier mesh left behind
+        # (ndarrays.put_rows: the capacity is sized for the finest mesh a remesh may make).
+        pv, pf, pe, pq = self._filled
+        put = ndarrays.put_rows
+        put(self.vert_uv, uv, pv)
+        put(self.vert_mass, mass, pv)
+        put(self.vert_pinned, mesh.pinned.astype(np.int32), pv)
+        put(self.vert_pin_target, mesh.pin_target, pv)
+        put(self.face_verts, faces, pf)
+        put(self.face_Dm_inv, Dm_inv, pf)
+        put(self.face_rest_area, area, pf)
+        put(self.face_grain, grain, pf)
+        put(self.edge_verts, ev, pe)
+        put(self.edge_faces, ef, pe)
+        put(self.edge_opp, eo, pe)
+        put(self.edge_rest_angle, rest_angle, pe)
+        put(self.edge_bend_weight, weight, pe)
+        # Rows past n_verts stay empty: the padding repeats the last offset (the kernels loop
+        # over every row of bend_ptr).
+        put(self.bend_ptr, np.r_[bend_ptr, np.full(self.v_cap - nv, bend_ptr[-1])])
+        put(self.bend_col, bend_col, pq)
+        put(self.bend_val, bend_val, pq)
+        put(self.state.x, mesh.x, pv)
+        put(self.state.v, mesh.v, pv)
+        self._filled = (nv, nf, ne, nq)
         self.state.n = nv
         self._np_cache = dict(faces=faces.copy(), uv=uv.copy(), area=area,
                               pinned=mesh.pinned.copy(),
-                              grain=grain, edges=ev, edge_faces=ef, mass=mass,
+                              grain=grain, edges=ev, edge_faces=ef, edge_opp=eo, mass=mass,
                               bend_rows=np.repeat(np.arange(nv), np.diff(bend_ptr)),
                               bend_cols=bend_col)
 
@@ -387,27 +398,23 @@ class ClothModel:
         return self._np_cache["bend_rows"], self._np_cache["bend_cols"]
 
     def positions(self):
-        return self.state.x.to_numpy()[: self.n_verts].astype(np.float64)
+        return ndarrays.get_rows(self.state.x, self.n_verts)
 
     def velocities(self):
-        return self.state.v.to_numpy()[: self.n_verts].astype(np.float64)
+        return ndarrays.get_rows(self.state.v, self.n_verts)
 
     def set_positions(self, x):
         """Overwrite the first n_verts positions (spare capacity keeps its values)."""
-        full = self.state.x.to_numpy()
-        full[: self.n_verts] = x
-        self.state.x.from_numpy(full)
+        ndarrays.put_rows(self.state.x, np.asarray(x).reshape(self.n_verts, 3))
 
     def set_velocities(self, v):
-        full = self.state.v.to_numpy()
-        full[: self.n_verts] = v
-        self.state.v.from_numpy(full)
+        ndarrays.put_rows(self.state.v, np.asarray(v).reshape(self.n_verts, 3))
 
     def mesh_arrays(self):
         """The current mesh and state as numpy arrays (the input a remesh needs)."""
         return MeshArrays(uv=self.uv, x=self.positions(), faces=self.faces, v=self.velocities(),
                           pinned=self.pinned,
-                          pin_target=self.vert_pin_target.to_numpy()[: self.n_verts],
+                          pin_target=ndarrays.get_rows(self.vert_pin_target, self.n_verts),
                           grain=self.grain)
 
     def all_finite(self, n):
@@ -428,9 +435,7 @@ class ClothModel:
             self.vert_pin_target[v] = [float(c) for c in target]
 
     def set_pin_targets(self, targets):
-        full = self.vert_pin_target.to_numpy()
-        full[: self.n_verts] = targets
-        self.vert_pin_target.from_numpy(full)
+        ndarrays.put_rows(self.vert_pin_target, np.asarray(targets).reshape(self.n_verts, 3))
 
 
 class ClothState:

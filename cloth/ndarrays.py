@@ -31,3 +31,105 @@ def zero(arr):
         _zero_elements(arr)
     else:
         arr.fill(0)
+
+
+# Rows in and out of ndarrays that have spare capacity (the model's, the solvers'). Taichi's
+# own from_numpy / to_numpy move the whole array, and with remeshing the arrays are sized for
+# the finest mesh the sizing allows (6x the faces of the hanging sheet, 24 bending entries per
+# vertex of that): refilling the model that way cost 7-8 ms per remesh at 900 faces, almost
+# all of it rows nobody reads. These move the active rows only (one serial launch each).
+@ti.kernel
+def _put_scalars(n: ti.i32, n_clear: ti.i32, src: A, dst: A):
+    ti.loop_config(serialize=True)
+    for i in range(ti.max(n, n_clear)):
+        if i < n:
+            dst[i] = src[i]
+        else:
+            dst[i] = 0
+
+
+@ti.kernel
+def _put_scalars_2d(n: ti.i32, n_clear: ti.i32, src: A, dst: A):
+    ti.loop_config(serialize=True)
+    for i in range(ti.max(n, n_clear)):
+        for j in range(dst.shape[1]):
+            if i < n:
+                dst[i, j] = src[i, j]
+            else:
+                dst[i, j] = 0
+
+
+@ti.kernel
+def _put_elements(n: ti.i32, n_clear: ti.i32, src: A, dst: A):
+    ti.loop_config(serialize=True)
+    for i in range(ti.max(n, n_clear)):
+        v = dst[i]
+        shape = ti.static(v.get_shape())
+        if ti.static(len(shape) == 1):
+            for c in ti.static(range(shape[0])):
+                v[c] = src[i, c] if i < n else 0
+        else:
+            for r in ti.static(range(shape[0])):
+                for c in ti.static(range(shape[1])):
+                    v[r, c] = src[i, r, c] if i < n else 0
+        dst[i] = v
+
+
+@ti.kernel
+def _get_scalars(n: ti.i32, src: A, out: A):
+    ti.loop_config(serialize=True)
+    for i in range(n):
+        out[i] = src[i]
+
+
+@ti.kernel
+def _get_elements(n: ti.i32, src: A, out: A):
+    ti.loop_config(serialize=True)
+    for i in range(n):
+        v = src[i]
+        shape = ti.static(v.get_shape())
+        if ti.static(len(shape) == 1):
+            for c in ti.static(range(shape[0])):
+                out[i, c] = v[c]
+        else:
+            for r in ti.static(range(shape[0])):
+                for c in ti.static(range(shape[1])):
+                    out[i, r, c] = v[r, c]
+
+
+def _is_elements(arr):
+    from taichi.lang.matrix import MatrixNdarray, VectorNdarray
+    return isinstance(arr, (VectorNdarray, MatrixNdarray))
+
+
+def put_rows(arr, values, n_clear=0):
+    """Write ``values`` (numpy, one row per element) into the first rows of the ndarray
+    ``arr`` (1-D, or 2-D of scalars) and zero its rows from there up to ``n_clear`` (the rows
+    an earlier, longer fill left behind); the rows beyond are not touched."""
+    import numpy as np
+    from taichi.lang.util import to_numpy_type
+    dtype = to_numpy_type(arr.dtype)
+    values = np.ascontiguousarray(values, dtype=dtype)
+    n = len(values)
+    if n > arr.shape[0] or n_clear > arr.shape[0]:
+        raise ValueError(f"{n} rows do not fit an ndarray of {arr.shape[0]}")
+    if n == 0:                      # a kernel needs a non-empty array to bind
+        values = np.zeros((1,) + values.shape[1:], dtype)
+    if _is_elements(arr):
+        _put_elements(n, int(n_clear), values, arr)
+    elif len(arr.shape) == 2:
+        _put_scalars_2d(n, int(n_clear), values.reshape(len(values), arr.shape[1]), arr)
+    else:
+        _put_scalars(n, int(n_clear), values, arr)
+
+
+def get_rows(arr, n):
+    """The first ``n`` rows of the 1-D ndarray ``arr`` as a numpy array (float64 for floats)."""
+    import numpy as np
+    from taichi.lang.util import to_numpy_type
+    dtype = to_numpy_type(arr.dtype)
+    shape = tuple(arr.element_shape) if _is_elements(arr) else ()
+    out = np.zeros((max(int(n), 1),) + shape, dtype)
+    (_get_elements if _is_elements(arr) else _get_scalars)(int(n), arr, out)
+    out = out[: int(n)]
+    return out.astype(np.float64) if np.issubdtype(dtype, np.floating) else out

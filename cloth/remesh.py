@@ -86,6 +86,18 @@ class RemeshParams:
         projected, so the substep's multipliers are the wrong start (as for the re-projection
         after collision_final). Warm multipliers do help warp-weft's next substep (16 against
         22 rounds); mapping's not (14 against 15).
+    defer_ops, defer_frames: a remesh whose operations (splits + flips + collapses) are at most
+        ``defer_ops`` times the face count is not applied (the simulator keeps the mesh it
+        has), for at most ``defer_frames`` frames in a row; 0 applies every remesh. Why: what
+        a new mesh sets off (the model's arrays, the bending matrix, the block pattern, a
+        preconditioner that needs two solves on one pattern before it exists) costs the same
+        for two flips as for two hundred, while a settling cloth asks for a handful of
+        operations in most frames (docs/remesh/remesh_frame.md). Deferring them keeps the
+        mesh, and everything built on it, for a few frames; the operations are not lost, the
+        next remesh finds them again. Only the simulator reads these two (``remesh()`` always
+        returns its whole result). Measured on hanging at resolution 46 (mapping, ~900 faces,
+        median ms per frame over frames 10-60, single runs on a loaded machine): 0 54, 0.01
+        44 (62 % of the remeshes applied), 0.05 32.
     """
     size_min: float = 0.015
     size_max: float = 0.08
@@ -98,6 +110,8 @@ class RemeshParams:
     collapse_margin: float = 0.2
     collapse_rounds: int = 2
     warm_multipliers: bool = False
+    defer_ops: float = 0.05
+    defer_frames: int = 4
 
     def validate(self):
         if not self.size_min > 0:
@@ -122,6 +136,11 @@ class RemeshParams:
                              f"{self.curvature_smoothing}); 0 uses each face's own curvature")
         if not self.collapse_rounds >= 0:
             raise ModelError("remesh collapse_rounds must be >= 0")
+        if not (self.defer_ops >= 0 and isinstance(self.defer_frames, int)
+                and self.defer_frames >= 0):
+            raise ModelError(f"remesh defer_ops must be >= 0 and defer_frames a whole number "
+                             f">= 0 (got {self.defer_ops}, {self.defer_frames}); 0 applies "
+                             "every remesh")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -310,6 +329,7 @@ class _Work:
         self.alive = [True] * len(self.uv)
         self.vf = _FacesAt(mesh.faces, len(self.uv))
         self.n_split = self.n_flip = self.n_collapse = 0
+        self.split_parents = []     # (a, b) of each vertex a split made, in order
         self.touched = set()        # vertices whose neighbourhood a collapse changed
         # numpy copies for the whole-mesh passes; per-vertex rows never change once made, so
         # they are only extended after splits (see snapshot()).
@@ -447,6 +467,7 @@ class _Work:
         vertex and the opposite vertices."""
         fs = self.edge_faces(a, b)
         m = len(self.uv)
+        self.split_parents.append((a, b))
         mid = lambda arr: [0.5 * (s + t) for s, t in zip(arr[a], arr[b])]
         self.uv.append(mid(self.uv))
         self.x.append(mid(self.x))
@@ -599,6 +620,9 @@ def _edge_len2(uv, M, a, b):
     Gathers from contiguous columns: several times faster than gathering (N, 2) rows."""
     u, v, m0, m1, m2 = (np.ascontiguousarray(c) for c in (uv[:, 0], uv[:, 1], M[:, 0],
                                                           M[:, 1], M[:, 2]))
+    # Native-width indices: ``take`` converts any other width on every call (ten times here;
+    # measured at 4k faces: 11 ms per call on the collapse candidates' 80k pairs from int32).
+    a, b = np.asarray(a, np.intp), np.asarray(b, np.intp)
     du, dv = u.take(b) - u.take(a), v.take(b) - v.take(a)
     return 0.5 * ((m0.take(a) + m0.take(b)) * du * du + 2 * (m1.take(a) + m1.take(b)) * du * dv
                   + (m2.take(a) + m2.take(b)) * dv * dv)
@@ -833,4 +857,24 @@ def remesh(mesh: MeshArrays, params: RemeshParams = None, obstacle_distance=None
     new_id = -np.ones(len(alive), dtype=np.int64)
     new_id[alive] = np.arange(alive.sum())
     stats["vertex_map"] = new_id[:nv]
+    # What ``transfer_vertex_data`` needs: the parents of every split vertex (indices into
+    # the input vertices followed by the split vertices in order) and, per output vertex, its
+    # index there.
+    stats["split_parents"] = np.array(w.split_parents, np.int64).reshape(-1, 2)
+    stats["vertex_source"] = np.flatnonzero(alive)
     return out, data, stats
+
+
+def transfer_vertex_data(values, stats):
+    """Per-vertex data of a remesh's input (V_in, ...) carried to its output the way x and v
+    are: unchanged on the vertices that survive, the mean of the edge's two ends at every
+    vertex a split made (exact for data linear in material space). ``stats``: the remesh's."""
+    values = np.asarray(values)
+    parents, n_in = stats["split_parents"], int(stats["verts_in"])
+    if len(values) != n_in:
+        raise ModelError(f"vertex data has {len(values)} rows, the remeshed mesh had {n_in}")
+    ext = np.empty((n_in + len(parents),) + values.shape[1:], np.result_type(values, 0.5))
+    ext[:n_in] = values
+    for k, (a, b) in enumerate(parents.tolist()):    # a split's ends may be earlier splits
+        ext[n_in + k] = 0.5 * (ext[a] + ext[b])
+    return ext[stats["vertex_source"]]

@@ -215,6 +215,9 @@ SCHEMA = {
         "collapse_margin": Key("", "hysteresis of edge collapses", lo=0, hi=0.999999),
         "collapse_rounds": Key("", "collapse passes per remesh", lo=0),
         "warm_multipliers": Key("", "carry the strain multipliers to the new faces"),
+        "defer_ops": Key("per face", "a remesh with at most this many operations per face "
+                         "is deferred (the mesh kept); 0 applies every remesh", lo=0),
+        "defer_frames": Key("frames", "most frames in a row a remesh is deferred", lo=0),
     },
     "output": {
         "images": Key("", "write frames/frame_NNNN.png"),

@@ -87,9 +87,10 @@ class FactorPreconditioner(RefreshedPreconditioner):
 
     def __init__(self, metric):
         super().__init__(metric)
-        self.chol = linalg.SparseCholesky(metric.ptr_np, metric.col_np, metric.n,
-                                          backend="cholmod", core=metric.core_np,
-                                          vertex_order=True)
+        # The symbolic analysis (ordering, lumped pattern) waits for the first ``refresh``:
+        # it costs ~6 ms at 900 faces, and on a mesh remeshed every frame the factor is never
+        # made (FIRST_AFTER), while this object is made for every new pattern.
+        self._chol = None
         n = metric.n
         self.perm = ti.ndarray(ti.i32, n)
         self.ptr = ti.ndarray(ti.i32, 2 * (n + 1))
@@ -98,6 +99,15 @@ class FactorPreconditioner(RefreshedPreconditioner):
         self.idx = ti.ndarray(ti.i32, 1)
         self.val = ti.ndarray(mat3, 1)
         self.blocks = 0                         # 3x3 blocks of L (the last factor)
+
+    @property
+    def chol(self):
+        """The SparseCholesky of the metric's pattern (made at first use)."""
+        if self._chol is None:
+            m = self.metric
+            self._chol = linalg.SparseCholesky(m.ptr_np, m.col_np, m.n, backend="cholmod",
+                                               core=m.core_np, vertex_order=True)
+        return self._chol
 
     def refresh(self, values, pinned=None):
         """Factorise the lumped matrix of these block values (the pattern's order, pinned
