@@ -22,6 +22,9 @@ step solved exactly (CHOLMOD), and these changes, as comma-separated words:
                  c_curvature data but made positive semi-definite on the host (the kernels'
                  own assembly of it is indefinite: docs/speed/motion.md)
   newton=N       Newton steps per round; rounds=N  AL rounds at most
+  inner=N        at most N PDAS solves per Newton step (default 10)
+  pcg=N          solve each Newton system by N PCG iterations preconditioned by W's exact
+                 factor (warm-started across the PDAS re-solves) instead of exactly
 Slow (numpy, a factorisation per step): a research tool, not a solver.
 """
 import argparse
@@ -30,9 +33,29 @@ import numpy as np
 import scipy.sparse as sp
 
 
-def _solve(A, b):
-    from sksparse.cholmod import cholesky
-    return cholesky(A.tocsc())(b)
+def _solve(A, b, pcg=None, x0=None):
+    """A^-1 b exactly (CHOLMOD), or by ``pcg`` = (iterations, preconditioner) from x0."""
+    if pcg is None:
+        from sksparse.cholmod import cholesky
+        return cholesky(A.tocsc())(b)
+    iters, precondition = pcg
+    x = np.zeros_like(b) if x0 is None else x0.copy()
+    r = b - A @ x
+    z = precondition(r)
+    p = z.copy()
+    rz = r @ z
+    for _ in range(iters):
+        Ap = A @ p
+        pAp = p @ Ap
+        if not pAp > 0:
+            break
+        a = rz / pAp
+        x += a * p
+        r -= a * Ap
+        z = precondition(r)
+        rz, rz_old = r @ z, rz
+        p = z + (rz / rz_old) * p
+    return x
 
 
 def _set_param(lim, index, value):
@@ -126,7 +149,7 @@ def _psd(M):
 
 
 def solve(step, margin=1e-2, mu=1.0, kkt=None, pdas=False, host_exact=False, newton=5,
-          rounds=100, tol=1e-4):
+          rounds=100, tol=1e-4, pcg=None, resolves=10):
     """One projection by the variant; returns (x, log)."""
     from cloth import ndarrays
     from cloth.strain import direct
@@ -144,6 +167,13 @@ def solve(step, margin=1e-2, mu=1.0, kkt=None, pdas=False, host_exact=False, new
     if ws.stats.to_numpy()[ST_START_VIOL] < tol:
         log["converged"] = True
         return step.positions(), log
+    solver = None
+    if pcg:
+        from sksparse.cholmod import cholesky
+        W = metric.to_scipy().tocsr()
+        free = np.repeat(~step.pinned, 3).astype(float)
+        Wp = (sp.diags(free) @ W @ sp.diags(free) + sp.diags(1.0 - free)).tocsc()
+        solver = (int(pcg), cholesky(Wp))
     viol = comp = np.inf
     while log["rounds"] < rounds and not log["converged"]:
         for inner in range(newton):
@@ -164,9 +194,9 @@ def solve(step, margin=1e-2, mu=1.0, kkt=None, pdas=False, host_exact=False, new
                 H = metric.to_scipy(ws.H)
             r = ws.r.to_numpy()[:nv].reshape(-1).astype(np.float64)
             if pdas:
-                d = _pdas_step(step, m, r, H, log)
+                d = _pdas_step(step, m, r, H, log, max_inner=resolves, pcg=solver)
             else:
-                d = _solve(H, r)
+                d = _solve(H, r, solver)
                 log["solves"] += 1
             log["newton"] += 1
             d_max = float(np.linalg.norm(d.reshape(-1, 3), axis=1).max())
@@ -204,7 +234,7 @@ def solve(step, margin=1e-2, mu=1.0, kkt=None, pdas=False, host_exact=False, new
     return step.positions(), log
 
 
-def _pdas_step(step, mu, r0, H0, log, max_inner=10):
+def _pdas_step(step, mu, r0, H0, log, max_inner=10, pcg=None):
     """The Newton step of the linearised constraints' piecewise-quadratic model, its active
     set predicted from t + J d > 0 and re-solved until it stops changing. H0 and r0 hold the
     constraints active at x (t > 0): they are taken out and the predicted set put in."""
@@ -213,9 +243,10 @@ def _pdas_step(step, mu, r0, H0, log, max_inner=10):
     JA = J[active]
     base = H0 - mu * (JA.T @ JA)
     r_base = r0 + mu * (JA.T @ t[active])
+    d = None
     for _ in range(max_inner):
         JA = J[active]
-        d = _solve(base + mu * (JA.T @ JA), r_base - mu * (JA.T @ t[active]))
+        d = _solve((base + mu * (JA.T @ JA)).tocsr(), r_base - mu * (JA.T @ t[active]), pcg, d)
         log["solves"] += 1
         predicted = t + J @ d > 0
         if np.array_equal(predicted, active):
@@ -230,8 +261,10 @@ def parse(spec):
         key, _, value = word.partition("=")
         if key in ("pdas", "host-exact"):
             kw[key.replace("-", "_")] = True
-        elif key in ("newton", "rounds"):
+        elif key in ("newton", "rounds", "pcg"):
             kw[key] = int(value)
+        elif key == "inner":
+            kw["resolves"] = int(value)
         elif key in ("margin", "mu", "kkt", "tol"):
             kw[key] = float(value)
         else:
