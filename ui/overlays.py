@@ -263,6 +263,8 @@ class TeachingLayer:
                 self._draw_selected(renderer, sim, x, i)
 
     def _draw_selected(self, renderer, sim, x, i):
+        if self.selected[1] >= sim.model.n_faces:       # remeshed since
+            return
         f = sim.model.faces[self.selected[1]]
         tri = x[f]
         pts = np.concatenate([tri, tri[[1, 2, 0]]], axis=1).reshape(-1, 3)
