@@ -198,13 +198,14 @@ def principal_stretches(F):
     return s, np.swapaxes(vt, 1, 2), u
 
 
-def mapping_factors(F, grain, iso=0.0):
+def mapping_factors(F, grain, iso=0.0, svd=None):
     """The inverse mapping's factors c~_ij (METHOD 3.3) as (n, 2, 2) [grain i (warp, weft),
     pair j (A, B)] with the principal stretches of the pairs (n, 2). A is the principal
     direction nearer the warp. ``iso`` is the solver's closure at isotropy
     (``strain.isotropy``; constraints.MAPPING_ISO): c~ = sqrt(w c^2 + (1 - w) / 2),
-    w = D^2 / (D^2 + iso^2), D = eta1^2 - eta2^2; iso = 0 is the paper's c = |e_i . v_j|."""
-    eta, V, _ = principal_stretches(F)
+    w = D^2 / (D^2 + iso^2), D = eta1^2 - eta2^2; iso = 0 is the paper's c = |e_i . v_j|.
+    ``svd``: ``principal_stretches(F)`` if already computed."""
+    eta, V, _ = principal_stretches(F) if svd is None else svd
     c = np.abs(np.einsum("nki,nkj->nij", np.asarray(grain, np.float64), V))
     swap = c[:, 0, 1] > c[:, 0, 0]
     c[swap] = c[swap][:, :, ::-1]
@@ -255,14 +256,15 @@ def strain_space(method, x, faces, Dm_inv, grain, bands, iso=0.0):
     (n, 2, 2): for the pairs A and B (axis 1) the mapped strains c~_warp,j (eta_j - 1) and
     c~_weft,j (eta_j - 1) (axis 2), the quantities its constraints bound."""
     F = deformation_gradients(x, faces, Dm_inv)
-    eta = principal_stretches(F)[0]
+    svd = principal_stretches(F)
+    eta = svd[0]
     Fg = F @ np.asarray(grain, np.float64)
     wu, wv = Fg[:, :, 0], Fg[:, :, 1]
     out = {"principal": eta - 1.0,
            "grain": np.stack([np.linalg.norm(wu, axis=1), np.linalg.norm(wv, axis=1)], 1) - 1.0,
            "bias": np.linalg.norm(wu + wv, axis=1) / np.sqrt(2.0) - 1.0}
     if method == "mapping":
-        c, eta_pair = mapping_factors(F, grain, iso)
+        c, eta_pair = mapping_factors(F, grain, iso, svd)
         out["mapped"] = np.swapaxes(c * (eta_pair[:, None, :] - 1.0), 1, 2)
     return out
 

@@ -33,13 +33,13 @@ from .render import ClothRenderer, draw_cloth, open_window
 from .state import AppState, readout_lines
 
 PANEL = (0.0, 0.0, 0.26, 1.0)            # controls: x, y (top-down), width, height
-VIEW = (0.74, 0.0, 0.26, 0.62)           # colour modes and read-outs, top right
+VIEW = (0.74, 0.0, 0.26, 0.68)           # colour modes and read-outs, top right
 LEGEND = (0.74, 0.875, 0.26, 0.125)      # the legend (numbers), bottom right
 BAR = (0.755, 0.14, 0.23, 0.022)         # its colour bar (x, y bottom-up, w, h)
 # The teaching view (x0, y0, x1, y1 bottom-up): the strain-space plot under the cloth, the
 # binding key in the right column below the read-outs; the cloth moves up while the plot shows.
 PLOT = (0.265, 0.005, 0.735, 0.41)
-KEY = (0.745, 0.01, 0.995, 0.37)
+KEY = (0.745, 0.01, 0.995, 0.31)
 VIEW_WITH_PLOT = ((0.30, 0.70), (0.44, 0.97))
 SHORT = {"dynamics": "dyn", "strain_limit": "limit", "collision": "coll", "remesh": "remesh"}
 COLOR_LABELS = {"shading": "shading", "warp-strain": "warp strain", "weft-strain": "weft strain",

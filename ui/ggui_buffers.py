@@ -94,10 +94,14 @@ def draw_particles(scene, buffers, key, centers, radius, color):
 
 
 def draw_circles_2d(canvas, buffers, key, xy, colors, radius):
-    """Canvas discs at ``xy`` (window coordinates 0..1, y up), one colour each; ``radius`` as
-    a fraction of the window's height."""
+    """Canvas discs at ``xy`` (window coordinates 0..1, y up), one colour each; ``radius``
+    (one, or one per disc) as a fraction of the window's height."""
     vbo = buffers.vertices(key, xy, colors=colors)
-    canvas.canvas.circles(get_field_info(vbo), True, False, (0.5, 0.5, 0.5), float(radius))
+    per_disc = np.ndim(radius) > 0
+    if per_disc:
+        vbo[:, RADIUS] = radius       # GGUI reads a disc's radius from the fourth slot
+    canvas.canvas.circles(get_field_info(vbo), True, per_disc, (0.5, 0.5, 0.5),
+                          float(np.max(radius)) if per_disc else float(radius))
 
 
 def draw_triangles_2d(canvas, buffers, key, xy, colors):

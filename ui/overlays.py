@@ -29,6 +29,9 @@ FAINT = np.array([0.30, 0.30, 0.36])       # thread strains behind the mapped on
 OVERLAYS = ("axes", "plot")
 
 
+_TEXT_TRIS = {}
+
+
 class Canvas2D:
     """Batches canvas triangles (rectangles, strokes, text) and discs in window coordinates
     (0..1, y up), drawn in two calls."""
@@ -70,18 +73,28 @@ class Canvas2D:
             self.segment(a, b, color, width_px)
 
     def text(self, s, x, y, color=INK, size=12, anchor="left"):
-        """Text with its top-left (or top-right, top-centre) corner at (x, y)."""
-        runs, (w, _) = teaching.text_runs(s, size)
-        if not len(runs):
+        """Text with its top-left (or top-right, top-centre) corner at (x, y); its triangles
+        are kept between frames (labels rarely change)."""
+        key = (s, round(x, 6), round(y, 6), tuple(np.round(color, 3)), size, anchor,
+               tuple(self.px))
+        hit = _TEXT_TRIS.get(key)
+        if hit is None:
+            runs, (w, _) = teaching.text_runs(s, size)
+            if anchor == "right":
+                x -= w * self.px[0]
+            elif anchor == "centre":
+                x -= 0.5 * w * self.px[0]
+            lo = np.c_[x + runs[:, 1] * self.px[0], y - (runs[:, 0] + 1) * self.px[1]]
+            hi = np.c_[x + runs[:, 2] * self.px[0], y - runs[:, 0] * self.px[1]]
+            n0 = len(self.tris)
+            self.rects(lo, hi, np.tile(color, (len(runs), 1)))
+            hit = (self.tris[n0:], self.cols[n0:])
+            if len(_TEXT_TRIS) > 4000:
+                _TEXT_TRIS.clear()
+            _TEXT_TRIS[key] = hit
             return
-        if anchor == "right":
-            x -= w * self.px[0]
-        elif anchor == "centre":
-            x -= 0.5 * w * self.px[0]
-        top = y
-        lo = np.c_[x + runs[:, 1] * self.px[0], top - (runs[:, 0] + 1) * self.px[1]]
-        hi = np.c_[x + runs[:, 2] * self.px[0], top - runs[:, 0] * self.px[1]]
-        self.rects(lo, hi, np.tile(color, (len(runs), 1)))
+        self.tris += hit[0]
+        self.cols += hit[1]
 
     def disc(self, xy, colors, radius_px):
         self.discs.append(np.asarray(xy, float).reshape(-1, 2))
@@ -93,10 +106,13 @@ class Canvas2D:
         if self.tris:
             draw_triangles_2d(r.canvas, r._buffers, key + ".tri", np.concatenate(self.tris),
                               np.concatenate(self.cols))
-        for k, (xy, c, rad) in enumerate(zip(self.discs, self.disc_cols, self.disc_r)):
-            if len(xy):
-                draw_circles_2d(r.canvas, r._buffers, f"{key}.disc{k}", xy, c,
-                                rad * self.px[1])
+        if self.discs:
+            # One call: GGUI's per-disc radius sits in the vertex's fourth slot.
+            xy = np.concatenate(self.discs)
+            rad = np.concatenate([np.full(len(d), rr * self.px[1])
+                                  for d, rr in zip(self.discs, self.disc_r)])
+            draw_circles_2d(r.canvas, r._buffers, key + ".disc", xy,
+                            np.concatenate(self.disc_cols), rad)
 
 
 def plot_frame(panel, box, px):
@@ -240,25 +256,25 @@ class TeachingLayer:
         """The principal-axes strokes (3-D, before the scene is rendered)."""
         if "axes" not in self.on:
             return
-        from .render import vertex_normals
         for i, sim in enumerate(sims):
             m = sim.model
             sites, size, Dm_inv = self._mesh_cache(i, sim)
             x = m.positions() + offsets[i]
             g = teaching.axis_glyphs(x, m.faces, Dm_inv, m.grain, sites, size, sim.bands())
-            f = m.faces[sites]
-            n = vertex_normals(x, m.faces)[f].mean(axis=1)
+            t = x[m.faces[sites]]
+            n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
             n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
-            lift = 0.06 * size * n
-            for side, sgn in (("front", 1.0), ("back", -1.0)):
-                off = (sgn * lift)[:, None, None, :]
-                thr = (g["grain"].reshape(-1, 2, 2, 3) + off).reshape(-1, 3)
-                draw_lines(renderer.scene, renderer._buffers, f"axes{i}.grain.{side}", thr,
-                           THREAD, width=1.0)
-                pr = (g["principal"].reshape(-1, 2, 2, 3) + 1.5 * off).reshape(-1, 3)
-                draw_lines(renderer.scene, renderer._buffers, f"axes{i}.pr.{side}", pr,
-                           (0, 0, 0), width=3.0,
-                           colors=np.repeat(g["principal_colors"], 2, axis=0))
+            # Lifted off both sides (seen from either), each kind in one draw call.
+            off = (0.06 * size * n)[:, None, None, :]
+            thr = g["grain"].reshape(-1, 2, 2, 3)
+            thr = np.concatenate([thr + off, thr - off]).reshape(-1, 3)
+            draw_lines(renderer.scene, renderer._buffers, f"axes{i}.grain", thr, THREAD,
+                       width=1.0)
+            pr = g["principal"].reshape(-1, 2, 2, 3)
+            pr = np.concatenate([pr + 1.5 * off, pr - 1.5 * off]).reshape(-1, 3)
+            col = np.repeat(g["principal_colors"], 2, axis=0)
+            draw_lines(renderer.scene, renderer._buffers, f"axes{i}.pr", pr, (0, 0, 0),
+                       width=3.0, colors=np.concatenate([col, col]))
             if self.selected is not None and self.selected[0] == i:
                 self._draw_selected(renderer, sim, x, i)
 
