@@ -309,22 +309,8 @@ def rendered():
 
 @pytest.mark.parametrize("mode", REFERENCE_MODES)
 def test_offscreen_frame_matches_the_reference_image(rendered, mode, tmp_path_factory):
-    import imageio.v2 as imageio
     images, _, _ = rendered
-    path = os.path.join(REFERENCE_DIR, f"hanging_{mode}.png")
-    ref = imageio.imread(path)[:, :, :3].astype(float) / 255
-    img = images[mode].astype(float) / 255
-    assert img.shape == ref.shape
-    diff = np.abs(img - ref).max(axis=2)
-    if not (diff.mean() < MEAN_TOL and (diff > 0.25).mean() < OUTLIER_TOL):
-        # Keep the picture: a failing image is read faster than a number.
-        out = os.path.join(tmp_path_factory.getbasetemp(), f"hanging_{mode}_rendered.png")
-        imageio.imwrite(out, images[mode])
-        print(f"rendered image kept at {out}")
-    assert diff.mean() < MEAN_TOL and (diff > 0.25).mean() < OUTLIER_TOL, (
-        f"{mode}: mean difference {diff.mean():.4f}, {100 * (diff > 0.25).mean():.2f} % of "
-        f"pixels far off; if the change is intended regenerate with "
-        f"'.venv/bin/python -m tests.test_app --regenerate'")
+    compare_with_reference(images[mode], f"hanging_{mode}.png", tmp_path_factory)
 
 
 # The teaching view (issue #36) on the mapping sheet, drawn by the same offscreen renderer.
@@ -360,8 +346,11 @@ def teaching_rendered(rendered):
 
 
 def compare_with_reference(img, name, tmp_path_factory):
+    """``img`` against reference_images/``name`` within MEAN_TOL and OUTLIER_TOL; a failing
+    image is kept (a picture is read faster than a number)."""
     import imageio.v2 as imageio
     ref = imageio.imread(os.path.join(REFERENCE_DIR, name))[:, :, :3].astype(float) / 255
+    assert img.shape == ref.shape
     diff = np.abs(img.astype(float) / 255 - ref).max(axis=2)
     ok = diff.mean() < MEAN_TOL and (diff > 0.25).mean() < OUTLIER_TOL
     if not ok:
