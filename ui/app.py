@@ -539,7 +539,7 @@ class TourApp(App):
         from . import tour
         self.tour = tour
         self.plan = [p for m in tour.METHODS for p in
-                     [("settle", m)] + [("pause", s) for s in tour.STEPS if s.method == m]]
+                     [("settle", m)] + [("pause", step) for step in tour.STEPS if step.method == m]]
         self.settle, self.phase, self.held = settle, -1, 0
         self.caption, self.facts = "", None
         super().__init__(state, **kw)

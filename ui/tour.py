@@ -227,7 +227,7 @@ class TourRecorder:
                                 "space, coloured by the constraint that binds it.")
                         self._emit(self._draw(text, f"{method}  settling"), writer)
                 fa = facts(st.sim)
-                for step in (s for s in STEPS if s.method == method):
+                for step in [one for one in STEPS if one.method == method]:
                     k += 1
                     _apply(st, step)
                     self.teach.on = set(st.overlays)
