@@ -67,7 +67,16 @@ def parse_args(argv):
     p.add_argument("--no-images", action="store_true", help="headless: skip PNG frames")
     p.add_argument("--video", action="store_true", help="headless: also write video.mp4")
     p.add_argument("--color", help="colour mode: shading, warp-strain, weft-strain, "
-                   "bias-strain, principal-strain, violation, size")
+                   "bias-strain, principal-strain, violation, size, binding")
+    p.add_argument("--overlay", action="append", default=[], metavar="NAME[,NAME]",
+                   help="teaching view, in the window and headless frames: 'axes' (principal "
+                   "stretch directions over the warp/weft threads), 'plot' (every triangle in "
+                   "strain space with the method's feasible box); with --color binding the "
+                   "cloth shows which constraint binds")
+    p.add_argument("--tour", action="store_true",
+                   help="guided demo: the paper's experiment with svd, warp-weft and mapping "
+                   "in turn, pausing at rest with the teaching view and a caption per step "
+                   "(a window; headless: PNGs and video.mp4 in --out, default out/tour)")
     p.add_argument("--method", help="strain limiting: svd, warp-weft, mapping or none")
     p.add_argument("--warp", type=band, help="warp strain band MIN,MAX (paper: vertical)")
     p.add_argument("--weft", type=band, help="weft strain band MIN,MAX (paper: horizontal)")
@@ -114,6 +123,17 @@ def flag_overrides(args, cfg_keys):
     return ov
 
 
+def overlay_names(args):
+    """The --overlay names, checked (comma-separated or repeated)."""
+    from ui.overlays import OVERLAYS
+    names = [n.strip() for item in args.overlay for n in item.split(",") if n.strip()]
+    bad = [n for n in names if n not in OVERLAYS]
+    if bad:
+        raise ValueError(f"unknown overlay '{bad[0]}': use {' or '.join(OVERLAYS)} "
+                         "(e.g. --overlay axes,plot)")
+    return tuple(dict.fromkeys(names))
+
+
 def has_display():
     return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
@@ -125,6 +145,13 @@ def fail(message, code=EXIT_BAD_INPUT):
 
 def main(argv=None):
     args = parse_args(sys.argv[1:] if argv is None else argv)
+    try:
+        overlays = overlay_names(args)
+    except ValueError as err:
+        return fail(str(err))
+    if args.tour and (args.scene or args.compare):
+        return fail("--tour runs its own scene (hanging, the three methods in turn): give no "
+                    "scene and no --compare")
     if not (args.list or args.show_config):
         # Taichi starts before any scene or cloth module is imported: their module-level
         # types (``ti.types.matrix(3, 3, float)``, kernel argument types) take the float
@@ -154,6 +181,9 @@ def main(argv=None):
                     print(f"  {os.path.relpath(os.path.join(examples, f))}")
         return 0
     name = args.scene or scenes.DEFAULT_SCENE
+    if args.tour and not (args.list or args.show_config):
+        from ui.tour import run_tour
+        return run_tour(args, headless=args.headless or not has_display())
     try:
         module = scenes.get(name)
         name = getattr(module, "NAME", name)      # a scene file: its file name without .toml
@@ -208,27 +238,27 @@ def main(argv=None):
         from ui.render import RenderUnavailable
         try:
             from ui.app import run_compare
-            return run_compare(cfg, module)
+            return run_compare(cfg, module, overlays)
         except RenderUnavailable as err:
             return fail(f"{err}", EXIT_NO_RENDER)
     if not headless:
         from ui.render import RenderUnavailable
         try:
             from ui.app import run_app
-            return run_app(sim, cfg, module)
+            return run_app(sim, cfg, module, overlays)
         except RenderUnavailable as err:
             return fail(f"{err}; or use --headless", EXIT_NO_RENDER)
-    return run_headless(sim, cfg, args, name)
+    return run_headless(sim, cfg, args, name, overlays)
 
 
-def run_headless(sim, cfg, args, name):
+def run_headless(sim, cfg, args, name, overlays=()):
     from ui.headless import HeadlessRun
     from ui.render import RenderUnavailable
     out = args.out or os.path.join("out", name)
     o = cfg["output"]
     run = HeadlessRun(sim, cfg, out, images=o["images"], video=o["video"], color=o["color"],
                       meshes=o["meshes"], every=o["every"], size=(o["width"], o["height"]),
-                      quiet=args.quiet)
+                      quiet=args.quiet, overlays=overlays)
     try:
         ok = run.run(int(cfg["sim"]["frames"]))
     except RenderUnavailable as err:

@@ -174,3 +174,122 @@ def energy_drift(total_energy, scale):
     if e.size == 0:
         return 0.0
     return float(np.max(e - np.minimum.accumulate(e)) / scale)
+
+
+# -- what each method limits: its constraints on the host (the teaching view, its tests) ------
+# The constraints of METHOD.md section 3 in strain units (g / sqrt(a), <= 0 where they hold), in
+# the order of cloth/strain/constraints.py (mapping: principal pairs ordered by alignment with
+# the warp, A the principal direction nearer it, as the solver orders them). The teaching
+# view's points, regions and binding map come from here; tests/test_teaching.py checks these
+# values against the solver's own (``StrainLimiter.constraint_values``).
+CONSTRAINT_NAMES = {
+    "svd": ("eta1 min", "eta1 max", "eta2 min", "eta2 max"),
+    "warp-weft": ("warp min", "warp max", "weft min", "weft max", "bias min", "bias max"),
+    "mapping": ("warp via A max", "warp via A min", "warp via B max", "warp via B min",
+                "weft via A max", "weft via A min", "weft via B max", "weft via B min"),
+}
+
+
+def principal_stretches(F):
+    """Thin SVD of F (n, 3, 2): ``eta`` (n, 2) descending, ``V`` (n, 2, 2) with columns the
+    principal directions in material space, ``U`` (n, 3, 2) with columns their world images
+    (METHOD 2)."""
+    u, s, vt = np.linalg.svd(np.asarray(F, np.float64), full_matrices=False)
+    return s, np.swapaxes(vt, 1, 2), u
+
+
+def mapping_factors(F, grain, iso=0.0, svd=None):
+    """The inverse mapping's factors c~_ij (METHOD 3.3) as (n, 2, 2) [grain i (warp, weft),
+    pair j (A, B)] with the principal stretches of the pairs (n, 2). A is the principal
+    direction nearer the warp. ``iso`` is the solver's closure at isotropy
+    (``strain.isotropy``; constraints.MAPPING_ISO): c~ = sqrt(w c^2 + (1 - w) / 2),
+    w = D^2 / (D^2 + iso^2), D = eta1^2 - eta2^2; iso = 0 is the paper's c = |e_i . v_j|.
+    ``svd``: ``principal_stretches(F)`` if already computed."""
+    eta, V, _ = principal_stretches(F) if svd is None else svd
+    c = np.abs(np.einsum("nki,nkj->nij", np.asarray(grain, np.float64), V))
+    swap = c[:, 0, 1] > c[:, 0, 0]
+    c[swap] = c[swap][:, :, ::-1]
+    eta_pair = np.where(swap[:, None], eta[:, ::-1], eta)
+    if iso > 0:
+        D = eta[:, 0] ** 2 - eta[:, 1] ** 2
+        w = (D * D / (D * D + iso * iso))[:, None, None]
+        c = np.sqrt(w * c * c + 0.5 * (1.0 - w))
+    return c, eta_pair
+
+
+def own_constraint_values(method, x, faces, Dm_inv, grain, bands, iso=0.0):
+    """(n, K) values of ``method``'s constraints in strain units (<= 0 where they hold), in
+    the order of ``CONSTRAINT_NAMES``; ``bands`` maps warp, weft and bias to (min, max) strain
+    bands (bias None or missing: ``default_bias_band``). The warp-weft bias constraint bounds
+    ||w_u + w_v|| = sqrt 2 (1 + bias strain), so its value is sqrt 2 x the bias strain's
+    distance past its band."""
+    warp, weft = tuple(bands["warp"]), tuple(bands["weft"])
+    F = deformation_gradients(x, faces, Dm_inv)
+    if method == "svd":
+        eta = principal_stretches(F)[0] - 1.0
+        cols = [warp[0] - eta[:, 0], eta[:, 0] - warp[1], weft[0] - eta[:, 1], eta[:, 1] - weft[1]]
+    elif method == "warp-weft":
+        bias = tuple(bands.get("bias") or default_bias_band(warp, weft))
+        Fg = F @ np.asarray(grain, np.float64)
+        wu, wv = Fg[:, :, 0], Fg[:, :, 1]
+        s_u, s_v = np.linalg.norm(wu, axis=1) - 1.0, np.linalg.norm(wv, axis=1) - 1.0
+        s_b = np.linalg.norm(wu + wv, axis=1) / np.sqrt(2.0) - 1.0
+        r2 = np.sqrt(2.0)
+        cols = [warp[0] - s_u, s_u - warp[1], weft[0] - s_v, s_v - weft[1],
+                r2 * (bias[0] - s_b), r2 * (s_b - bias[1])]
+    elif method == "mapping":
+        c, eta = mapping_factors(F, grain, iso)
+        s = c * (eta[:, None, :] - 1.0)                      # (n, grain i, pair j)
+        cols = []
+        for i, band in enumerate((warp, weft)):
+            for j in range(2):
+                cols += [s[:, i, j] - band[1], band[0] - s[:, i, j]]
+    else:
+        raise ValueError(f"unknown strain-limiting method '{method}'")
+    return np.stack(cols, axis=1)
+
+
+def strain_space(method, x, faces, Dm_inv, grain, bands, iso=0.0):
+    """The points of the teaching view's strain-space plot, per face, in strains:
+    ``principal`` (n, 2) the principal strains (eta1 - 1, eta2 - 1); ``grain`` (n, 2) the warp
+    and weft thread strains; ``bias`` (n,) the bias strain; under mapping also ``mapped``
+    (n, 2, 2): for the pairs A and B (axis 1) the mapped strains c~_warp,j (eta_j - 1) and
+    c~_weft,j (eta_j - 1) (axis 2), the quantities its constraints bound."""
+    F = deformation_gradients(x, faces, Dm_inv)
+    svd = principal_stretches(F)
+    eta = svd[0]
+    Fg = F @ np.asarray(grain, np.float64)
+    wu, wv = Fg[:, :, 0], Fg[:, :, 1]
+    out = {"principal": eta - 1.0,
+           "grain": np.stack([np.linalg.norm(wu, axis=1), np.linalg.norm(wv, axis=1)], 1) - 1.0,
+           "bias": np.linalg.norm(wu + wv, axis=1) / np.sqrt(2.0) - 1.0}
+    if method == "mapping":
+        c, eta_pair = mapping_factors(F, grain, iso, svd)
+        out["mapped"] = np.swapaxes(c * (eta_pair[:, None, :] - 1.0), 1, 2)
+    return out
+
+
+def feasible_region(method, plane, bands):
+    """The box a method's constraints carve out of a plane of ``strain_space``, as
+    ((x_min, x_max), (y_min, y_max)) in strains, or None where the method bounds nothing in
+    that plane. svd: the principal plane, eta1 - 1 in the warp band and eta2 - 1 in the weft
+    band (and eta2 <= eta1 by definition); warp-weft: the grain plane, warp x weft band (and
+    the bias strain in its band, ``feasible_region(.., "bias", ..)``, an interval); mapping:
+    the mapped plane, each pair's mapped warp x weft strain in warp x weft band."""
+    warp, weft = tuple(bands["warp"]), tuple(bands["weft"])
+    if (method, plane) in (("svd", "principal"), ("warp-weft", "grain"), ("mapping", "mapped")):
+        return warp, weft
+    if (method, plane) == ("warp-weft", "bias"):
+        return tuple(bands.get("bias") or default_bias_band(warp, weft))
+    return None
+
+
+def binding_constraints(lam, n_constraints):
+    """Per face, the index of the constraint that binds (the one with the largest positive
+    multiplier, the solver's force holding it at its bound), -1 where none does. ``lam``
+    (n, >= K) the multipliers of the method's ``n_constraints`` = K constraints: one with
+    lam > 0 is at its bound within the solver's tolerance once the solve has converged
+    (complementarity; tests/test_teaching.py checks it)."""
+    lam = np.asarray(lam, np.float64)[:, :n_constraints]
+    k = np.argmax(lam, axis=1)
+    return np.where(lam[np.arange(len(k)), k] > 0.0, k, -1)

@@ -117,7 +117,7 @@ COMMON_DEFAULTS = {
         "height": 480,
         # Frames (and the window) start coloured by warp strain with its band on the legend,
         # so the output shows what strain limiting does.
-        "color": "warp-strain",   # shading | warp-strain | weft-strain | bias-strain | principal-strain | violation | size
+        "color": "warp-strain",   # shading | warp-strain | weft-strain | bias-strain | principal-strain | violation | size | binding
     },
 }
 
@@ -228,7 +228,7 @@ SCHEMA = {
         "height": Key("px", "image height", lo=16),
         "color": Key("", "colour mode of frames and the window (with its legend)",
                      choices=("shading", "warp-strain", "weft-strain", "bias-strain",
-                              "principal-strain", "violation", "size")),
+                              "principal-strain", "violation", "size", "binding")),
     },
     # Built-in sheet scenes (hanging, pull, drape) and scene files share this section's name.
     "cloth": {

@@ -309,22 +309,80 @@ def rendered():
 
 @pytest.mark.parametrize("mode", REFERENCE_MODES)
 def test_offscreen_frame_matches_the_reference_image(rendered, mode, tmp_path_factory):
-    import imageio.v2 as imageio
     images, _, _ = rendered
-    path = os.path.join(REFERENCE_DIR, f"hanging_{mode}.png")
-    ref = imageio.imread(path)[:, :, :3].astype(float) / 255
-    img = images[mode].astype(float) / 255
+    compare_with_reference(images[mode], f"hanging_{mode}.png", tmp_path_factory)
+
+
+# The teaching view (issue #36) on the mapping sheet, drawn by the same offscreen renderer.
+TEACH_VIEWS = ("axes", "binding", "plot")
+
+
+def teaching_images(renderer):
+    """The hanging cloth with mapping (RESOLUTION^2 vertices) after REFERENCE_FRAMES frames:
+    principal axes, binding map with its key, and the strain-space plot over the window."""
+    from ui.overlays import Layout, TeachingLayer
+    from ui.render import draw_simulation
+    from ui.state import AppState
+    st = AppState.from_scene("hanging", [{"cloth": {"resolution": RESOLUTION}}])
+    assert st.sim.method == "mapping"
+    for _ in range(REFERENCE_FRAMES):
+        st.sim.step_frame()
+    out = {}
+    for view in TEACH_VIEWS:
+        if view == "plot":
+            layout, overlays = Layout(plot=[(0.0, 0.0, 1.0, 1.0)], key=None), ("plot",)
+        else:
+            layout = Layout(plot=[], key=(0.55, 0.6, 0.995, 0.995))
+            overlays = ("axes",) if view == "axes" else ()
+        draw_simulation(renderer, st.sim, "shading" if view == "axes" else "binding",
+                        teach=TeachingLayer(overlays), layout=layout)
+        out[view] = renderer.image()
+    return out
+
+
+@pytest.fixture(scope="module")
+def teaching_rendered(rendered):
+    return teaching_images(rendered[2])
+
+
+def compare_with_reference(img, name, tmp_path_factory):
+    """``img`` against reference_images/``name`` within MEAN_TOL and OUTLIER_TOL; a failing
+    image is kept (a picture is read faster than a number)."""
+    import imageio.v2 as imageio
+    ref = imageio.imread(os.path.join(REFERENCE_DIR, name))[:, :, :3].astype(float) / 255
     assert img.shape == ref.shape
-    diff = np.abs(img - ref).max(axis=2)
-    if not (diff.mean() < MEAN_TOL and (diff > 0.25).mean() < OUTLIER_TOL):
-        # Keep the picture: a failing image is read faster than a number.
-        out = os.path.join(tmp_path_factory.getbasetemp(), f"hanging_{mode}_rendered.png")
-        imageio.imwrite(out, images[mode])
+    diff = np.abs(img.astype(float) / 255 - ref).max(axis=2)
+    ok = diff.mean() < MEAN_TOL and (diff > 0.25).mean() < OUTLIER_TOL
+    if not ok:
+        out = os.path.join(tmp_path_factory.getbasetemp(), name.replace(".png", "_rendered.png"))
+        imageio.imwrite(out, img)
         print(f"rendered image kept at {out}")
-    assert diff.mean() < MEAN_TOL and (diff > 0.25).mean() < OUTLIER_TOL, (
-        f"{mode}: mean difference {diff.mean():.4f}, {100 * (diff > 0.25).mean():.2f} % of "
-        f"pixels far off; if the change is intended regenerate with "
-        f"'.venv/bin/python -m tests.test_app --regenerate'")
+    assert ok, (f"{name}: mean difference {diff.mean():.4f}, {100 * (diff > 0.25).mean():.2f} % "
+                "of pixels far off; if the change is intended regenerate with "
+                "'.venv/bin/python -m tests.test_app --regenerate'")
+
+
+@pytest.mark.parametrize("view", TEACH_VIEWS)
+def test_teaching_overlay_matches_the_reference_image(teaching_rendered, view, tmp_path_factory):
+    compare_with_reference(teaching_rendered[view], f"hanging_teach_{view}.png", tmp_path_factory)
+
+
+def test_teaching_overlays_draw_what_they_say(teaching_rendered, rendered):
+    """Not only stable but present: the axes add orange-red strokes to the plain cloth, the
+    binding map paints triangles in the key's colours, the plot fills the window with white
+    panels and a green feasible box."""
+    axes = teaching_rendered["axes"].astype(int)
+    stroke = (axes[..., 0] > 180) & (axes[..., 2] < 120)            # yellow-orange-red
+    assert stroke.mean() > 0.002
+    binding = teaching_rendered["binding"].astype(int)
+    red = (binding[..., 0] > 150) & (binding[..., 1] < 90) & (binding[..., 2] < 90)
+    pink = (binding[..., 0] > 170) & (binding[..., 2] > 120) & (binding[..., 1] < 140)
+    assert (red | pink).mean() > 0.005
+    plot = teaching_rendered["plot"].astype(int)
+    green = (plot[..., 1] > 200) & (plot[..., 0] < 235) & (plot[..., 2] < 235) & \
+        (plot[..., 1] - plot[..., 0] > 10)
+    white = (plot.min(axis=2) > 250)
+    assert green.mean() > 0.05 and white.mean() > 0.2
 
 
 def test_picking_matches_what_ggui_draws(rendered):
@@ -401,6 +459,61 @@ def test_window_app_runs_under_xvfb(tmp_path):
     assert len(list((tmp_path / "screenshots").iterdir())) == 1
 
 
+TEACH_DRIVER = """
+import sys
+sys.path.insert(0, {root!r})
+from cloth import backend
+backend.init("cpu", "f64")
+import numpy as np
+from ui.state import AppState
+from ui.app import App
+from ui.overlays import plot_frame, to_window
+st = AppState.from_scene("hanging", [{{"cloth": {{"resolution": 7}}}}])
+st.toggle_overlay("axes"); st.toggle_overlay("plot"); st.color = "binding"
+app = App(st, size=(1280, 800), out_dir={out!r})
+app.reset_view()
+for k in range(3):
+    app.frame()
+f = 40
+c = st.world_positions(0)[st.sim.model.faces[f]].mean(axis=0)
+(sx, sy), = app.renderer.orbit.project(c[None], app.renderer.aspect)[0]
+app.select_at((sx, sy))
+print("3d", st.selected)
+panels, boxes = app.teach.last_panels[0]
+p = panels[0]
+w = to_window(p, plot_frame(p, boxes[0], app.teach._px), p.points[[f]])[0]
+app.select_at((float(w[0]), float(w[1])))
+g = st.selected[1]
+print("plot", st.selected[0], float(np.abs(p.points[g] - p.points[f]).max() * 1e3))
+app.frame()
+app.select_at((0.5, 0.999))
+print("cleared", st.selected)
+"""
+
+
+@pytest.mark.slow
+def test_window_teaching_view_selects_a_triangle_in_both_views(tmp_path):
+    """In the real window (Xvfb): with the axes and the plot on, a click on a cloth face
+    selects that face; a click on its point in the plot selects a face at that point (faces
+    mirrored about the middle share it); a click on empty background clears it."""
+    import shutil
+    import subprocess
+    if shutil.which("xvfb-run") is None:
+        pytest.skip("xvfb-run is not installed (apt-get install xvfb)")
+    code = TEACH_DRIVER.format(root=ROOT, out=str(tmp_path))
+    proc = subprocess.run(["xvfb-run", "-a", "-s", "-screen 0 1280x800x24", sys.executable,
+                           "-c", code], capture_output=True, text=True, timeout=300)
+    if "cannot open" in proc.stderr and "Vulkan" in proc.stderr:
+        pytest.skip("no Vulkan device for a window")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    lines = dict(line.split(" ", 1) for line in proc.stdout.splitlines()
+                 if line.split(" ")[0] in ("3d", "plot", "cleared"))
+    assert lines["3d"] == "(0, 40)"
+    sim_index, dist = lines["plot"].split()
+    assert sim_index == "0" and float(dist) < 0.05        # the same point within 0.05 per mille
+    assert lines["cleared"] == "None"
+
+
 @pytest.mark.slow
 def test_comparison_view_is_reached_from_the_panel_and_left_again():
     """The panel's "compare the three methods" button: AppState.set_compare builds the three
@@ -434,9 +547,13 @@ def regenerate():
     from cloth import backend
     backend.init("cpu", "f64")
     os.makedirs(REFERENCE_DIR, exist_ok=True)
-    images, _, _ = reference_images(fresh_state())
+    images, _, renderer = reference_images(fresh_state())
     for mode, img in images.items():
         path = os.path.join(REFERENCE_DIR, f"hanging_{mode}.png")
+        imageio.imwrite(path, img)
+        print(f"wrote {path}")
+    for view, img in teaching_images(renderer).items():
+        path = os.path.join(REFERENCE_DIR, f"hanging_teach_{view}.png")
         imageio.imwrite(path, img)
         print(f"wrote {path}")
 

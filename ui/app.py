@@ -5,10 +5,12 @@ draws (through ``ui.render``, the same code as headless frames).
 Mouse (outside the panel):
     right drag          orbit around the target        shift + right drag / middle drag: pan
     ctrl + right drag   zoom (up: closer)               ctrl or shift + left drag: grab cloth
+    left click          select a triangle (on the cloth or its point in the strain-space
+                        plot): highlighted in both; a click on nothing clears it
 Keys:
     space pause/run   n single step   r reset simulation   v reset view   z / x zoom in / out
     w wireframe   s smooth/flat   c next colour mode   m next method   p screenshot
-    o record on/off   1..7 colour modes   esc quit
+    o record on/off   1..8 colour modes   a principal axes   g strain-space plot   esc quit
 
 Environment: LOOM_APP_FRAMES=N quits after N window frames and prints frame-time statistics
 (used for measurements and smoke tests); LOOM_APP_NO_VSYNC=1 disables vsync.
@@ -26,17 +28,24 @@ import taichi as ti
 from cloth.simulator import STRAIN_METHODS
 
 from .colormap import COLOR_MODES
+from .overlays import Layout, TeachingLayer, pick_face
 from .render import ClothRenderer, draw_cloth, open_window
 from .state import AppState, readout_lines
 
 PANEL = (0.0, 0.0, 0.26, 1.0)            # controls: x, y (top-down), width, height
-VIEW = (0.74, 0.0, 0.26, 0.62)           # colour modes and read-outs, top right
+VIEW = (0.74, 0.0, 0.26, 0.68)           # colour modes and read-outs, top right
 LEGEND = (0.74, 0.875, 0.26, 0.125)      # the legend (numbers), bottom right
 BAR = (0.755, 0.14, 0.23, 0.022)         # its colour bar (x, y bottom-up, w, h)
+# The teaching view (x0, y0, x1, y1 bottom-up): the strain-space plot under the cloth, the
+# binding key in the right column below the read-outs; the cloth moves up while the plot shows.
+PLOT = (0.265, 0.005, 0.735, 0.41)
+KEY = (0.745, 0.01, 0.995, 0.31)
+VIEW_WITH_PLOT = ((0.30, 0.70), (0.44, 0.97))
 SHORT = {"dynamics": "dyn", "strain_limit": "limit", "collision": "coll", "remesh": "remesh"}
 COLOR_LABELS = {"shading": "shading", "warp-strain": "warp strain", "weft-strain": "weft strain",
                 "bias-strain": "bias strain", "principal-strain": "max principal strain",
-                "violation": "own-limit violation", "size": "triangle size"}
+                "violation": "own-limit violation", "size": "triangle size",
+                "binding": "binding constraint"}
 
 
 def moved(new, old):
@@ -86,13 +95,35 @@ class App:
         self.sim_times = []        # ms of simulation per window frame
         self.frames_shown = 0
         self._last = time.perf_counter()
+        self.teach = TeachingLayer(state.overlays)
         self.reset_view()
 
     # -- view ---------------------------------------------------------------------------------
+    def layout(self):
+        """Where the plot panels (one pair per simulator, side by side under the cloths) and
+        the binding key go."""
+        n = len(self.state.sims)
+        x0, y0, x1, y1 = PLOT
+        w = (x1 - x0) / n
+        boxes = [(x0 + k * w + 0.002, y0, x0 + (k + 1) * w - 0.002, y1) for k in range(n)]
+        return Layout(plot=boxes, key=KEY, bar=BAR)
+
+    def toggle_overlay(self, name):
+        self.state.toggle_overlay(name)
+        self.teach.on = set(self.state.overlays)
+        if name == "plot":
+            self.reset_view()
+
     def reset_view(self):
         r = self.renderer
         r.set_camera_cfg(self.state.sim.setup.camera)
-        if len(self.state.sims) > 1:
+        if "plot" in self.state.overlays:
+            # The cloth(s) above the plot, between the panels.
+            pts = np.concatenate([self.state.world_positions(i)
+                                  for i in range(len(self.state.sims))])
+            r.orbit.fit(pts, r.aspect, *VIEW_WITH_PLOT)
+            r.orbit.home = (r.orbit.position.copy(), r.orbit.target.copy(), r.orbit.fov)
+        elif len(self.state.sims) > 1:
             # Fit the three cloths between the panels, looking from the scene's direction.
             pts = np.concatenate([self.state.world_positions(i)
                                   for i in range(len(self.state.sims))])
@@ -114,10 +145,15 @@ class App:
         for e in w.get_events(ti.ui.PRESS):
             key = e.key
             if key in (ti.ui.LMB, ti.ui.RMB, ti.ui.MMB):
+                if key == ti.ui.LMB and self.teach.in_plot(pos):
+                    self.select_at(pos)
+                    continue
                 if self.in_panel(pos):
                     continue
                 mod_ctrl, mod_shift = w.is_pressed(ti.ui.CTRL), w.is_pressed(ti.ui.SHIFT)
-                if key == ti.ui.LMB and (mod_ctrl or mod_shift):
+                if key == ti.ui.LMB and not (mod_ctrl or mod_shift):
+                    self.select_at(pos)
+                elif key == ti.ui.LMB and (mod_ctrl or mod_shift):
                     o, d = self.renderer.orbit.ray(*pos, self.renderer.aspect)
                     hit = st.pick_ray(o, d)
                     if hit is not None:
@@ -138,6 +174,10 @@ class App:
                 self.reset_sim()
             elif key == "v":
                 self.renderer.reset_camera()
+            elif key == "a":
+                self.toggle_overlay("axes")
+            elif key == "g":
+                self.toggle_overlay("plot")
             elif key == "z":
                 self.renderer.orbit.zoom(0.85)
             elif key == "x":
@@ -155,7 +195,7 @@ class App:
                 self.screenshot()
             elif key == "o":
                 self.toggle_record()
-            elif isinstance(key, str) and key in "1234567" and len(key) == 1:
+            elif isinstance(key, str) and key in "12345678" and len(key) == 1:
                 st.color = COLOR_MODES[int(key) - 1]
         for e in w.get_events(ti.ui.RELEASE):
             if e.key in (ti.ui.LMB, ti.ui.RMB, ti.ui.MMB) and self.mouse is not None:
@@ -183,6 +223,24 @@ class App:
 
     def reset_sim(self):
         self.state.reset()
+
+    def select_at(self, pos):
+        """Select the triangle under the cursor: its point in the strain-space plot, else the
+        cloth face the view ray hits first; nothing there clears the selection."""
+        hit = self.teach.pick_plot(pos)
+        if hit is None and not self.teach.in_plot(pos):
+            o, d = self.renderer.orbit.ray(*pos, self.renderer.aspect)
+            best = None
+            for i in range(len(self.state.sims)):
+                x = self.state.world_positions(i)
+                f = pick_face(x, self.state.sims[i].model.faces, o, d)
+                if f is not None:
+                    depth = np.linalg.norm(x[self.state.sims[i].model.faces[f]].mean(0) - o)
+                    if best is None or depth < best[0]:
+                        best = (depth, i, f)
+            hit = None if best is None else best[1:]
+        self.state.select(hit)
+        self.teach.selected = self.state.selected
 
     # -- panel --------------------------------------------------------------------------------
     def panel(self):
@@ -266,10 +324,13 @@ class App:
                     st.set_self_collision(on)
 
         with g.sub_window("view", *VIEW):
-            g.text("colour (keys 1-7)")
+            g.text("colour (keys 1-8)")
             for m in COLOR_MODES:
                 if g.checkbox(COLOR_LABELS[m], st.color == m):
                     st.color = m
+            for name, label in (("axes", "principal axes (a)"), ("plot", "strain-space plot (g)")):
+                if g.checkbox(label, name in st.overlays) != (name in st.overlays):
+                    self.toggle_overlay(name)
             st.wireframe = g.checkbox("wireframe (w)", st.wireframe)
             st.smooth = g.checkbox("smooth shading (s)", st.smooth)
             g.text("")
@@ -328,16 +389,21 @@ class App:
         r.begin()
         legend = None
         for i, s in enumerate(st.sims):
-            strains = st.strains(i) if st.color not in ("shading", "size") else None
+            strains = st.strains(i) if st.color not in ("shading", "size", "binding") else None
             lg = draw_cloth(r, s, f"cloth{i}", st.color, wireframe=st.wireframe,
-                            smooth=st.smooth, offset=st.offsets[i], strains=strains)
+                            smooth=st.smooth, offset=st.offsets[i], strains=strains,
+                            plain="axes" in st.overlays)
             legend = legend or lg
+        self.teach.selected = st.selected
+        self.teach.draw_scene(r, st.sims, st.offsets)
+        self.teach.draw_selection(r, st.sims, st.offsets)
         if st.grab is not None:
             i, v = st.grab[:2]
             x = st.world_positions(i)[v]
             size = np.ptp(st.world_positions(i), axis=0).max()
             r.add_points("grab", np.stack([x, st.grab_target]), 0.02 * size, (0.1, 0.75, 0.25))
         r.finish(legend, BAR)
+        self.teach.draw_frame(r, st.sims, st.labels, st.color, self.layout())
         return legend
 
     def screenshot(self, path=None):
@@ -428,9 +494,9 @@ class App:
                 "fps": 1000.0 / float(ft.mean()) if ft.size else 0.0}
 
 
-def _run(state):
+def _run(state, make=None):
     max_frames = os.environ.get("LOOM_APP_FRAMES")
-    app = App(state)
+    app = App(state) if make is None else make(state)
     code = app.run(int(max_frames) if max_frames else None)
     if max_frames:
         s = app.stats()
@@ -443,13 +509,99 @@ def _run(state):
     return code
 
 
-def run_app(sim, cfg, module):
-    """The interactive window for one simulator. Raises ``RenderUnavailable`` (with a
-    message that names the fix) when no window can be opened. Returns the exit code."""
-    return _run(AppState(sim, cfg, module))
+def _with_overlays(state, overlays):
+    for name in overlays:
+        state.toggle_overlay(name)
+    return state
 
 
-def run_compare(cfg, module):
-    """The teaching view: the same scene with svd, warp-weft and mapping side by side in one
-    window, labelled, sharing every control."""
-    return _run(AppState(None, cfg, module, compare=True))
+def run_app(sim, cfg, module, overlays=()):
+    """The interactive window for one simulator (``overlays``: the teaching view's "axes",
+    "plot" on from the start). Raises ``RenderUnavailable`` (with a message that names the
+    fix) when no window can be opened. Returns the exit code."""
+    return _run(_with_overlays(AppState(sim, cfg, module), overlays))
+
+
+def run_compare(cfg, module, overlays=()):
+    """The comparison view: the same scene with svd, warp-weft and mapping side by side in
+    one window, labelled, sharing every control."""
+    return _run(_with_overlays(AppState(None, cfg, module, compare=True), overlays))
+
+
+class TourApp(App):
+    """The guided demo in the window (``ui/tour.py``): per method the sheet settles, then
+    the tour pauses on each of its views with a caption until "next step" (key ``t``).
+    Under ``LOOM_APP_FRAMES`` each pause lasts ``AUTO_HOLD`` window frames."""
+    AUTO_HOLD = 15
+    CAPTION = (PLOT[0], 0.86, PLOT[2], 1.0)
+
+    def __init__(self, state, settle, **kw):
+        from . import tour
+        self.tour = tour
+        self.plan = [p for m in tour.METHODS for p in
+                     [("settle", m)] + [("pause", step) for step in tour.STEPS if step.method == m]]
+        self.settle, self.phase, self.held = settle, -1, 0
+        self.caption, self.facts = "", None
+        super().__init__(state, **kw)
+        self.advance()
+
+    def advance(self):
+        st = self.state
+        self.phase = min(self.phase + 1, len(self.plan) - 1)
+        kind, what = self.plan[self.phase]
+        self.held = 0
+        if kind == "settle":
+            st.switch_method(what)
+            st.reset()
+            st.resume()
+            st.color, st.overlays = "binding", {"plot"}
+            self.caption = (f"{what}: the sheet settles from the start; each triangle is a "
+                            "point in strain space, coloured by the constraint that binds it.")
+        else:
+            st.pause()
+            if self.facts is None or self.facts[0] != st.sim.frame:
+                self.facts = (st.sim.frame, self.tour.facts(st.sim))
+            self.tour._apply(st, what)
+            n = sum(1 for k, _ in self.plan[:self.phase + 1] if k == "pause")
+            self.caption = f"[{n}/{len(self.tour.STEPS)}] " + self.tour.caption(what,
+                                                                             self.facts[1])
+        self.teach.on = set(st.overlays)
+        self.reset_view()
+
+    def reset_view(self):
+        super().reset_view()
+        r = self.renderer
+        pts = np.concatenate([self.state.world_positions(i) for i in range(len(self.state.sims))])
+        r.orbit.fit(pts, r.aspect, VIEW_WITH_PLOT[0], (0.44, 0.84))
+
+    def handle_events(self):
+        if self.window.is_pressed("t") and not getattr(self, "_t_down", False):
+            self.advance()
+        self._t_down = self.window.is_pressed("t")
+        super().handle_events()
+
+    def frame(self):
+        kind, _ = self.plan[self.phase]
+        if kind == "settle" and self.state.sim.frame >= self.settle:
+            self.advance()
+        elif kind == "pause" and os.environ.get("LOOM_APP_FRAMES"):
+            self.held += 1
+            if self.held >= self.AUTO_HOLD:
+                self.advance()
+        super().frame()
+
+    def draw(self):
+        legend = super().draw()
+        self.tour.draw_caption(self.renderer, self.caption, self.CAPTION)
+        return legend
+
+    def panel(self):
+        super().panel()
+        with self.gui.sub_window("tour", PLOT[0], 0.145, 0.16, 0.06):
+            if self.gui.button("next step (t)"):
+                self.advance()
+
+
+def run_tour_window(state, settle):
+    """The guided demo in a window (``python main.py --tour``)."""
+    return _run(state, lambda st: TourApp(st, settle))

@@ -71,7 +71,7 @@ class OrbitCamera:
             s, _ = self.project(pts, aspect)
             mid = 0.5 * (s.min(axis=0) + s.max(axis=0))
             goal = np.array([np.mean(x_range), np.mean(y_range)])
-            self.pan(-(goal - mid)[0], -(goal - mid)[1], aspect)
+            self.pan((goal - mid)[0], (goal - mid)[1], aspect)
 
     # -- GGUI and geometry ----------------------------------------------------------------------
     def apply(self, camera):

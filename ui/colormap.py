@@ -14,9 +14,10 @@ import numpy as np
 from cloth import metrics
 
 COLOR_MODES = ("shading", "warp-strain", "weft-strain", "bias-strain", "principal-strain",
-               "violation", "size")
+               "violation", "size", "binding")
 CLOTH_FRONT = np.array([0.80, 0.45, 0.30])
 OBSTACLE = np.array([0.62, 0.66, 0.72])
+PLAIN = np.array([0.86, 0.86, 0.84])      # the cloth under the principal-axes strokes
 GROUND = np.array([0.55, 0.57, 0.60])
 BACKGROUND = (0.96, 0.96, 0.97)
 WIRE = (0.15, 0.15, 0.18)
@@ -33,6 +34,21 @@ SEQ = [(0.0, np.array([0.99, 0.93, 0.55])), (0.5, np.array([0.93, 0.45, 0.15])),
 SEQ_SIZE = [(0.0, np.array([0.23, 0.30, 0.75])), (0.5, np.array([0.55, 0.80, 0.60])),
             (1.0, np.array([0.98, 0.85, 0.25]))]
 INSIDE = np.array([0.82, 0.86, 0.88])     # violation mode: faces inside every band
+# The binding map (issue #36): which of the method's constraints binds, by name
+# (``metrics.CONSTRAINT_NAMES``): upper bounds warm (stretch held), lower bounds cool
+# (compression held), grey where none binds.
+FREE = np.array([0.70, 0.72, 0.75])
+BINDING_COLORS = {
+    "eta1 max": (0.84, 0.15, 0.12), "eta1 min": (0.15, 0.35, 0.85),
+    "eta2 max": (0.96, 0.60, 0.10), "eta2 min": (0.10, 0.65, 0.70),
+    "warp max": (0.84, 0.15, 0.12), "warp min": (0.15, 0.35, 0.85),
+    "weft max": (0.96, 0.60, 0.10), "weft min": (0.10, 0.65, 0.70),
+    "bias max": (0.55, 0.20, 0.70), "bias min": (0.25, 0.65, 0.25),
+    "warp via A max": (0.84, 0.15, 0.12), "warp via A min": (0.15, 0.35, 0.85),
+    "warp via B max": (0.90, 0.35, 0.65), "warp via B min": (0.45, 0.65, 0.95),
+    "weft via A max": (0.96, 0.60, 0.10), "weft via A min": (0.10, 0.65, 0.70),
+    "weft via B max": (0.62, 0.45, 0.15), "weft via B min": (0.25, 0.65, 0.25),
+}
 
 
 def diverging(values, scale):
@@ -123,6 +139,11 @@ def face_colors_legend(mode, x, uv, faces, grain, bands=None, rest_area=None,
             lo, hi = lo - 0.5, hi + 0.5
         colors = lambda v: _ramp((np.asarray(v) - lo) / (hi - lo), SEQ_SIZE)  # noqa: E731
         return colors(edge), Legend("triangle size (rest edge)", lo, hi, colors, unit="mm")
+    if mode == "binding":
+        # Which constraint binds (``strains["binding"]`` = (method, per-face index), from
+        # ``ui.teaching.binding``); the key is drawn by the teaching layer, not a colour bar.
+        method, idx = (strains or {}).get("binding", (None, None))
+        return binding_colors(method, idx, len(faces))[0], None
     st = strains if strains is not None else metrics.face_strains(x, uv, faces, grain)
     warp, weft, bias = strain_bands(bands)
     if mode == "violation":
@@ -156,3 +177,20 @@ def face_colors(mode, x, uv, faces, grain, bands=None, rest_area=None):
     """Per-face RGB for a colour mode and the legend as one line of text."""
     rgb, legend = face_colors_legend(mode, x, uv, faces, grain, bands, rest_area)
     return rgb, (legend.text if legend else "")
+
+
+def binding_colors(method, idx, n_faces):
+    """Per-face RGB of the binding map and its key: [(label, rgb, faces)] for the
+    constraints that bind somewhere, then the free faces."""
+    rgb = np.tile(FREE, (n_faces, 1))
+    if idx is None or method not in metrics.CONSTRAINT_NAMES:
+        return rgb, [("no strain limiting", FREE, n_faces)]
+    names = metrics.CONSTRAINT_NAMES[method]
+    key = []
+    for k, name in enumerate(names):
+        sel = idx == k
+        rgb[sel] = BINDING_COLORS[name]
+        if sel.any():
+            key.append((name, np.array(BINDING_COLORS[name]), int(sel.sum())))
+    key.append(("free (no limit binds)", FREE, int((idx < 0).sum())))
+    return rgb, key

@@ -73,23 +73,35 @@ def draw_mesh(scene, buffers, key, corners, normals, colors, two_sided=True):
                      two_sided, n, 0, n, 0, False)
 
 
-def draw_lines(scene, buffers, key, points, color, width=1.0, indices=None):
-    """Line segments: consecutive point pairs, or pairs of ``indices``."""
-    vbo = buffers.vertices(key, points)
+def draw_lines(scene, buffers, key, points, color, width=1.0, indices=None, colors=None):
+    """Line segments: consecutive point pairs, or pairs of ``indices``; one ``color``, or
+    per-point ``colors`` (N, 3)."""
+    vbo = buffers.vertices(key, points, colors=colors)
     n = len(vbo) - len(vbo) % 2
     if indices is None:
         info, count = get_field_info(None), n
     else:
         ind = buffers.indices(key + ".indices", indices)
         info, count = get_field_info(ind), len(ind)
-    scene.scene.lines(get_field_info(vbo), info, False, _color(color), float(width), count, 0,
-                      n, 0)
+    scene.scene.lines(get_field_info(vbo), info, colors is not None, _color(color), float(width),
+                      count, 0, n, 0)
 
 
 def draw_particles(scene, buffers, key, centers, radius, color):
     vbo = buffers.vertices(key, centers)
     scene.scene.particles(get_field_info(vbo), False, False, _color(color), float(radius),
                           len(vbo), 0)
+
+
+def draw_circles_2d(canvas, buffers, key, xy, colors, radius):
+    """Canvas discs at ``xy`` (window coordinates 0..1, y up), one colour each; ``radius``
+    (one, or one per disc) as a fraction of the window's height."""
+    vbo = buffers.vertices(key, xy, colors=colors)
+    per_disc = np.ndim(radius) > 0
+    if per_disc:
+        vbo[:, RADIUS] = radius       # GGUI reads a disc's radius from the fourth slot
+    canvas.canvas.circles(get_field_info(vbo), True, per_disc, (0.5, 0.5, 0.5),
+                          float(np.max(radius)) if per_disc else float(radius))
 
 
 def draw_triangles_2d(canvas, buffers, key, xy, colors):

@@ -21,10 +21,17 @@ from .progress import Progress
 
 class HeadlessRun:
     def __init__(self, sim, cfg, out_dir, images=True, video=False, color="shading",
-                 meshes=True, every=1, size=(640, 480), quiet=False):
+                 meshes=True, every=1, size=(640, 480), quiet=False, overlays=()):
+        from .overlays import TeachingLayer, frame_layout
         self.sim, self.cfg, self.out = sim, cfg, out_dir
         self.images, self.video, self.meshes = images or video, video, meshes
         self.color, self.every, self.size, self.quiet = color, max(1, int(every)), size, quiet
+        # The teaching view (principal axes, strain-space plot, binding key), drawn into
+        # every frame; the plot needs room, so a frame of the default size grows to 1280 x 720.
+        self.teach = TeachingLayer(overlays)
+        self.layout = frame_layout(self.teach.on)
+        if "plot" in self.teach.on and tuple(size) == (640, 480):
+            self.size = (1280, 720)
         self.renderer = None
         self._video_writer = None
         self.diverged = None
@@ -37,6 +44,10 @@ class HeadlessRun:
             from .render import ClothRenderer, open_window
             window = open_window("Loom (offscreen)", self.size, show_window=False)
             self.renderer = ClothRenderer(window, self.sim.setup.camera)
+            if "plot" in self.teach.on:
+                r = self.renderer
+                r.orbit.fit(self.sim.model.positions(), r.aspect, self.layout.view_x,
+                            self.layout.view_y)
         from scenes.schema import commented_toml
         config_text = commented_toml(self.sim.settings.to_dict())
         os.makedirs(self.out, exist_ok=True)
@@ -78,7 +89,8 @@ class HeadlessRun:
             self._write_obstacles(f)
         if self.renderer is not None:
             from .render import draw_simulation
-            draw_simulation(self.renderer, sim, self.color)
+            draw_simulation(self.renderer, sim, self.color, teach=self.teach,
+                            layout=self.layout)
             img = self.renderer.image()
             if self.images:
                 import imageio.v2 as imageio

@@ -11,7 +11,7 @@ import numpy as np
 import taichi as ti
 
 from .camera import OrbitCamera
-from .colormap import BACKGROUND, GROUND, OBSTACLE, WIRE, face_colors_legend
+from .colormap import BACKGROUND, GROUND, OBSTACLE, PLAIN, WIRE, face_colors_legend
 from .ggui_buffers import (VertexBuffers, draw_lines, draw_mesh, draw_particles,
                            draw_triangles_2d)
 
@@ -246,17 +246,23 @@ def label_colorbar(img, legend, rect):
 
 
 def draw_cloth(renderer, sim, key="cloth", color="shading", wireframe=False, smooth=True,
-               offset=None, strains=None):
+               offset=None, strains=None, plain=False):
     """Draw one simulator's cloth and obstacles (after ``renderer.begin()``); returns the
-    colour mode's ``Legend`` (None for shading)."""
+    colour mode's ``Legend`` (None for shading and the binding map). ``plain``: under
+    shading, a light grey cloth (the principal-axes strokes read better on it)."""
     m = sim.model
     x = m.positions()
-    if strains is None and color not in ("shading", "size"):
+    if color == "binding":
+        from .teaching import binding
+        strains = {"binding": (sim.method, binding(sim))}
+    elif strains is None and color not in ("shading", "size"):
         strains = sim.face_strains()
     if color == "violation":
         strains = dict(strains, own=sim.own_violation(), own_tol=sim.settings.strain.tol)
     rgb, legend = face_colors_legend(color, x, m.uv, m.faces, m.grain, sim.bands(), m.rest_area,
                                      strains=strains)
+    if plain and color == "shading":
+        rgb = np.tile(PLAIN, (len(m.faces), 1))
     renderer.add_mesh(key, x, m.faces, rgb, wireframe=wireframe, smooth=smooth, offset=offset)
     for k, o in enumerate(sim.setup.obstacles):
         v, f = o.mesh_at(sim.time)
@@ -267,12 +273,21 @@ def draw_cloth(renderer, sim, key="cloth", color="shading", wireframe=False, smo
 
 
 def draw_simulation(renderer, sim, color="shading", wireframe=False, extra_cloths=(),
-                    smooth=True, legend=True):
+                    smooth=True, legend=True, teach=None, layout=None):
     """Draw a simulator's cloth (and obstacles) in one colour mode, ready for capture. The
-    window app and headless frames both come through here (or ``draw_cloth``)."""
+    window app and headless frames both come through here (or ``draw_cloth``). ``teach``: a
+    ``ui.overlays.TeachingLayer`` (principal axes, strain-space plot, binding key) placed by
+    ``layout`` (``ui.overlays.Layout``)."""
     renderer.begin()
-    lg = draw_cloth(renderer, sim, "cloth", color, wireframe=wireframe, smooth=smooth)
+    plain = teach is not None and "axes" in teach.on
+    lg = draw_cloth(renderer, sim, "cloth", color, wireframe=wireframe, smooth=smooth,
+                    plain=plain)
     for k, (x, faces, rgb) in enumerate(extra_cloths):
         renderer.add_mesh(f"extra{k}", x, faces, rgb, smooth=smooth)
-    renderer.finish(lg if legend else None)
+    if teach is not None:
+        teach.draw_scene(renderer, [sim], [np.zeros(3)])
+        teach.draw_selection(renderer, [sim], [np.zeros(3)])
+    renderer.finish(lg if legend else None, *(() if layout is None else (layout.bar,)))
+    if teach is not None:
+        teach.draw_frame(renderer, [sim], [sim.method], color, layout)
     return lg

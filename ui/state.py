@@ -77,6 +77,8 @@ class AppState:
         self._defer_tick = False    # skip one tick: the panel shows a compile notice first
         self.render_ms = 0.0
         self.fps = 0.0
+        self.overlays = set()       # the teaching view's "axes" and "plot" (ui/overlays.py)
+        self.selected = None        # (sim index, face) picked in the teaching view
         self.grab = None            # (sim index, vertex) while a vertex is held
         self.grab_target = None
         self._strain_cache = {}
@@ -109,6 +111,7 @@ class AppState:
             self.labels = [self.sims[0].method]
         self.offsets = self._layout()
         self.grab = None
+        self.selected = None
         self._strain_cache.clear()
 
     def _layout(self):
@@ -357,6 +360,23 @@ class AppState:
             self.message = "this scene has no self-collision"
             return False
         return self._each(lambda s: s.set_self_collision(on))
+
+    # -- teaching view ------------------------------------------------------------------------
+    def toggle_overlay(self, name):
+        """Switch the principal-axes strokes ("axes") or the strain-space plot ("plot")."""
+        from .overlays import OVERLAYS
+        if name not in OVERLAYS:
+            raise ValueError(f"overlay must be one of {OVERLAYS}")
+        self.overlays.symmetric_difference_update({name})
+
+    def select(self, hit):
+        """Select a triangle ``(sim index, face)`` to highlight in both views; None clears."""
+        if hit is not None:
+            i, f = int(hit[0]), int(hit[1])
+            if not (0 <= i < len(self.sims) and 0 <= f < self.sims[i].model.n_faces):
+                raise ValueError(f"no face {f} in simulator {i}")
+            hit = (i, f)
+        self.selected = hit
 
     # -- picking and dragging -----------------------------------------------------------------
     def world_positions(self, i):
