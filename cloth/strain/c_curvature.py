@@ -180,10 +180,15 @@ def face_c_curvature(method: ti.template(), K, f, x: ti.template(), face_verts: 
             Hc[i, j] = (d[0] - d[1] - d[2] + d[3]) / (4.0 * h * h)
             Hc[j, i] = Hc[i, j]
         T = clamp_psd2(ti.Matrix([[2.0 * grad[0], grad[1]], [grad[1], 2.0 * grad[2]]]))
-        Hc = clamp_psd3(Hc)
+        # A new name for the clamped matrix: in Taichi 1.7.4 ``Hc = clamp_psd3(Hc)`` left Hc
+        # as it was (the clamp's result was lost; tests/test_exact_curvature.py), and the
+        # Newton matrix built from the unclamped Hc was indefinite (smallest eigenvalue -2.0
+        # on hanging at resolution 9, docs/speed/motion.md).
+        Hc_psd = clamp_psd3(Hc)
         curv[f, 0] = ti.Vector([Mr[0, 0], Mr[0, 1], Mr[1, 0], Mr[1, 1], Mr[2, 0], Mr[2, 1],
                                 T[0, 0], T[0, 1], T[1, 1]])
-        curv[f, 1] = ti.Vector([Hc[0, 0], Hc[0, 1], Hc[0, 2], Hc[1, 1], Hc[1, 2], Hc[2, 2],
+        curv[f, 1] = ti.Vector([Hc_psd[0, 0], Hc_psd[0, 1], Hc_psd[0, 2], Hc_psd[1, 1],
+                                Hc_psd[1, 2], Hc_psd[2, 2],
                                 1.0, 0.0, 0.0])
         curv[f, 2] = ti.Vector([w0[0], w0[1], w0[2], w1[0], w1[1], w1[2], 0.0, 0.0, 0.0])
 

@@ -1,0 +1,67 @@
+"""Run by tests/test_exact_curvature.py in a subprocess with full optimisation (the suite
+compiles fast, and the bug this guards against appeared only with Taichi's optimiser): fills
+the kernels' exact curvature (c_curvature.face_c_curvature) for random triangles with every
+upper mapping constraint active and prints the smallest eigenvalue of the stored 3x3 blocks
+Hc over their largest entry."""
+import os
+import sys
+
+import numpy as np
+import taichi as ti
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from cloth import backend  # noqa: E402
+
+backend.init("cpu", "f64")
+from cloth.strain.buffers import N_PARAMS, P_C_STEP, P_ISO  # noqa: E402
+from cloth.strain.c_curvature import C_STEP_F64, face_c_curvature  # noqa: E402
+from cloth.strain.constraints import MAPPING_ISO, METHOD_IDS  # noqa: E402
+from tests.test_constraints import random_triangles  # noqa: E402
+
+A = ti.types.ndarray()
+
+
+@ti.kernel
+def fill(method: ti.template(), K: int, nf: int, x: A, face_verts: A, Dm_inv: A, grain: A,
+         rest_area: A, params: A, lam: A, g: A, mu: float, curv: A):
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        params_w = ti.Vector([params[k] for k in ti.static(range(6))])
+        for f in range(nf):
+            face_c_curvature(method, K, f, x, face_verts, Dm_inv, grain, rest_area, params_w,
+                             params[P_ISO], params[P_C_STEP], lam, g, mu, curv)
+
+
+def main():
+    cases = random_triangles(np.random.default_rng(3), 20)
+    X, Dm, area, grain = (np.array([c[k] for c in cases]) for k in range(4))
+    n = len(X)
+    vec3, mat2 = ti.types.vector(3, float), ti.types.matrix(2, 2, float)
+    x = ti.ndarray(vec3, 3 * n)
+    x.from_numpy(X.reshape(-1, 3))
+    fv = ti.ndarray(ti.types.vector(3, ti.i32), n)
+    fv.from_numpy(np.arange(3 * n, dtype=np.int32).reshape(n, 3))
+    dm, gr, ra = ti.ndarray(mat2, n), ti.ndarray(mat2, n), ti.ndarray(float, n)
+    dm.from_numpy(Dm)
+    gr.from_numpy(grain)
+    ra.from_numpy(area)
+    params = np.zeros(N_PARAMS)
+    params[0:6] = (-0.01, 0.01, -0.05, 0.05, 1.37, 1.46)
+    params[P_ISO], params[P_C_STEP] = MAPPING_ISO, C_STEP_F64
+    pa = ti.ndarray(float, N_PARAMS)
+    pa.from_numpy(params)
+    # Upper bounds active (lam > 0), lower ones not: the weighted strain is then curved.
+    lam_np = np.zeros((n, 8))
+    lam_np[:, 0::2] = 1.0
+    lam, g = ti.ndarray(float, (n, 8)), ti.ndarray(float, (n, 8))
+    lam.from_numpy(lam_np)
+    g.from_numpy(np.zeros((n, 8)))
+    curv = ti.ndarray(ti.types.vector(9, float), (n, 3))
+    fill(METHOD_IDS["mapping"], 8, n, x, fv, dm, gr, ra, pa, lam, g, 1.0, curv)
+    c = curv.to_numpy()
+    Hc = c[:, 1][:, [0, 1, 2, 1, 3, 4, 2, 4, 5]].reshape(-1, 3, 3)
+    print(np.linalg.eigvalsh(Hc).min() / np.abs(Hc).max())
+
+
+if __name__ == "__main__":
+    main()
