@@ -251,8 +251,14 @@ def plot(out, rows):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     cases = sorted({r["case"] for r in rows})
-    fig, axes = plt.subplots(1, len(cases), figsize=(4.2 * len(cases), 3.8), squeeze=False)
-    for ax, case in zip(axes[0], cases):
+    if not cases:
+        return
+    cols = min(3, len(cases))
+    nrows = (len(cases) + cols - 1) // cols
+    fig, axes = plt.subplots(nrows, cols, figsize=(4.6 * cols, 3.8 * nrows), squeeze=False)
+    for ax in axes.ravel()[len(cases):]:
+        ax.set_visible(False)
+    for ax, case in zip(axes.ravel(), cases):
         sub = [r for r in rows if r["case"] == case]
         for r in sub:
             ax.loglog(r["ms"], max(r["error"][10], 1e-12), "o")
