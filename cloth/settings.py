@@ -101,6 +101,11 @@ COMMON_DEFAULTS = {
         # "kkt" by default: cloth/strain/defaults.py.
         "stop": STOP,
         "kkt_velocity": KKT_VELOCITY,
+        # The AL's Newton model: "margin" (constraints within 1e-2 strain of their band already
+        # in the matrix; the fast PCG kernels) or "active-set" (the merit's Hessian with the
+        # step's active set predicted and re-solved: converges to the minimiser; host loop with
+        # exact solves). Why not the default: docs/speed/motion.md.
+        "newton_model": "margin",
         # mapping only: width (in eta1^2 - eta2^2) of the closure of its feasible set at
         # isotropy, where the paper's constraint depends on an arbitrary principal frame;
         # 0 = the paper's constraint exactly (see constraints.MAPPING_ISO).
@@ -194,6 +199,11 @@ SCHEMA = {
                     choices=("violation", "kkt")),
         "kkt_velocity": Key("m/s", "stationarity tolerance of the kkt stop, as a velocity",
                             lo=0, lo_open=True),
+        "newton_model": Key("", "the AL's Newton model: margin (constraints near their band "
+                            "enter the matrix early; fast, stops short of the minimiser) or "
+                            "active-set (the Hessian with the step's predicted active set; "
+                            "converges, slower: host loop with sparse Cholesky)",
+                            choices=("margin", "active-set")),
         "isotropy": Key("", "mapping only: width of the closure of its feasible set at "
                         "isotropy; 0 = the paper's constraint exactly", lo=0),
     },

@@ -203,7 +203,7 @@ class Simulator:
             bias=tuple(st.bias) if st.bias else None, solver=st.solver, tol=st.tol,
             max_iters=st.iters, mapping_iso=st.isotropy, stitches=self.dynamics.stitches_np,
             coupling=st.coupling, linear_solver=st.linear_solver, curvature=st.curvature,
-            stop=st.stop, kkt_velocity=st.kkt_velocity)
+            stop=st.stop, kkt_velocity=st.kkt_velocity, newton_model=st.newton_model)
         self.strain.precondition = st.precondition
         self._enable_strain_limit(method != "none")
 

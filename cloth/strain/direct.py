@@ -28,7 +28,8 @@ import numpy as np
 import taichi as ti
 
 from .. import ndarrays
-from . import exact_curvature
+from . import active_set, exact_curvature
+from . import al
 from .al import (assemble_all, choose_start, fill_c_curvature, merit, metric_gradient,
                  newton_matrix, residual, update_multipliers, vertex_violation, violation_of)
 from .buffers import (P_CONTACT_SCALE, P_CURVATURE, P_MARGIN, P_SVD_DELTA,
@@ -37,6 +38,13 @@ from .buffers import (P_CONTACT_SCALE, P_CURVATURE, P_MARGIN, P_SVD_DELTA,
 
 # LOOM_DEBUG_DIRECT=1 prints every Newton step (residual, step, line-search alpha).
 _DEBUG = bool(os.environ.get("LOOM_DEBUG_DIRECT"))
+# The active-set model raises the penalty only in a round whose violation did not fall below
+# this fraction of the last round's.
+STALL = 0.25
+INNER_FRACTION = 0.1
+# Rounds the active-set model gets before ``solve`` falls back on the margin model (converged
+# projections took 2-8 rounds on hanging at resolutions 9 and 25, svd and warp-weft).
+ACTIVE_SET_ROUNDS = 30
 # Indices into the direct solver's ``info`` array.
 I_SLOPE, I_STEP, I_VIOL, I_COMP, I_ALPHA = range(5)
 
@@ -154,11 +162,46 @@ def fill_newton_system(lim, mid, K, mu, metric):
                   ws.newton_matrix(metric.nnz), ws.r, ws.Wdx)
 
 
-def solve(lim, mid, K, metric, chol, mu, mu_max, step_tol):
+def solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, margin_mu=None):
     """The AL loop of ``al.solve_al`` with exact Newton steps, for the StrainLimiter
     ``lim`` (its work arrays, settings and model). ``metric``: a BlockMatrix holding every face
     and seam pair; ``chol``: a ``linalg.SparseCholesky`` for that pattern. Returns (rounds,
-    Newton steps, converged) and fills ``ws.stats`` like ``solve_al``."""
+    Newton steps, converged) and fills ``ws.stats`` like ``solve_al``.
+
+    With ``lim.newton_model == "active-set"`` a projection that has not converged in
+    ``ACTIVE_SET_ROUNDS`` rounds is solved again from its start with the margin model (initial
+    penalty ``margin_mu``; ``lim.last_fallback`` says so). Why: the mapping family's
+    constraints are not smooth (near isotropy its principal frame turns; measured on hanging
+    at resolution 25, the merit rose by 4.9e-7 J over a 18 micrometre step where its quadratic
+    model predicted -2.9e-8 J), Newton steps stall there, the penalty grows, and without the
+    fallback the solve diverged (the sheet flew up)."""
+    lim.last_fallback = False
+    if lim.newton_model != "active-set":
+        return _solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, False, lim.max_iters)
+    ws = lim._ws
+    multipliers_in = [a.to_numpy() for a in (ws.lam, ws.lam_c, ws.lam_s, ws.lam_t)]
+    out = _solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, True,
+                 min(ACTIVE_SET_ROUNDS, lim.max_iters))
+    if out[2] or margin_mu is None:
+        return out
+    lim.last_fallback = True
+    al.copy_vectors(lim.model.n_verts, ws.x_start, ws.x)
+    for a, val in zip((ws.lam, ws.lam_c, ws.lam_s, ws.lam_t), multipliers_in):
+        a.from_numpy(val)
+    params = ws.params.to_numpy()
+    params[P_MARGIN] = lim.active_margin
+    ws.params.from_numpy(params)
+    try:
+        rounds, newton, converged = _solve(lim, mid, K, metric, chol, margin_mu, mu_max,
+                                           step_tol, False, lim.max_iters)
+    finally:
+        params[P_MARGIN] = 0.0
+        ws.params.from_numpy(params)
+    return out[0] + rounds, out[1] + newton, converged
+
+
+def _solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, active_set_model, max_rounds):
+    """``solve``'s AL loop with one Newton model, at most ``max_rounds`` rounds."""
     ws, m = lim._ws, lim.model
     nv, nf, ns = m.n_verts, m.n_faces, len(lim._stitches)
     info = ws.info
@@ -173,7 +216,11 @@ def solve(lim, mid, K, metric, chol, mu, mu_max, step_tol):
         stats[ST_CONVERGED], stats[ST_VIOL] = 1, stats[ST_START_VIOL]
         ws.stats.from_numpy(stats)
         return 0, 0, True
-    rounds = newton = cg_total = factorizations = 0
+    rounds = newton = cg_total = factorizations = solves = 0
+    last_viol = np.inf
+    if active_set_model:
+        face_slot = metric.face_slot.to_numpy()[:nf]
+        w_diag = metric.diag.to_numpy()[:nv]
     converged = False
     viol = comp = 0.0
     n3 = 3 * nv
@@ -181,7 +228,13 @@ def solve(lim, mid, K, metric, chol, mu, mu_max, step_tol):
     # round's first Newton step must then move no vertex further than kkt_tol.
     kkt_tol = lim.kkt_length
     proposed, kkt = False, 0.0
-    while rounds < lim.max_iters and not converged:
+    # A round's Newton loop ends when its step is below inner_tol: the kkt tolerance, or with
+    # the active-set model a tenth of it, so each round's minimisation is finished before its
+    # multiplier update (with the kkt tolerance itself the rounds ended after one Newton
+    # step, the violation fell too slowly and the penalty grew until the line search stalled;
+    # hanging at resolution 25, svd).
+    inner_tol = kkt_tol * (INNER_FRACTION if active_set_model else 1.0)
+    while rounds < max_rounds and not converged:
         for inner in range(lim.newton_budget(PC_JACOBI)):
             if lim.exact_curvature:
                 ndarrays.zero(ws.kappa)      # the model's curvature off: the exact one is added
@@ -190,12 +243,26 @@ def solve(lim, mid, K, metric, chol, mu, mu_max, step_tol):
             if lim.exact_curvature:
                 exact_curvature.add_to_newton_matrix(lim, lim.method, K, mu, metric,
                                                      lim.exact_curvature)
-            rhs = ws.r.to_numpy()[:nv].reshape(n3)
-            sol, iters, fresh = chol.solve_reusing(ws.H.to_numpy()[: metric.nnz], rhs)
-            cg_total += iters
-            factorizations += int(fresh)
+            r0 = ws.r.to_numpy()[:nv]
+            H0 = ws.H.to_numpy()[: metric.nnz]
+
+            def solve_values(val, rhs):
+                nonlocal cg_total, factorizations
+                sol, iters, fresh = chol.solve_reusing(val, rhs.reshape(n3))
+                cg_total += iters
+                factorizations += int(fresh)
+                return sol.reshape(nv, 3)
+
+            if active_set_model:
+                lc = active_set.LinearisedConstraints(lim, K, mu)
+                d, resolves, _settled = active_set.step(lc, H0, r0, solve_values, face_slot,
+                                                        w_diag)
+                solves += resolves
+            else:
+                d = solve_values(H0, r0)
+                solves += 1
             step = np.zeros((ws.d.shape[0], 3))
-            step[:nv] = sol.reshape(nv, 3)
+            step[:nv] = d
             newton += 1
             d_max = float(np.linalg.norm(step[:nv], axis=1).max()) if nv else 0.0
             if inner == 0:
@@ -212,10 +279,10 @@ def solve(lim, mid, K, metric, chol, mu, mu_max, step_tol):
                         ws.stitch, ws.lam_s, ws.fric, ws.lam_t, info)
             out = info.to_numpy()
             if _DEBUG:
-                print(f"  round {rounds} newton {newton}: |r| {np.linalg.norm(rhs):.3e} alpha "
+                print(f"  round {rounds} newton {newton}: |r| {np.linalg.norm(r0):.3e} alpha "
                       f"{out[I_ALPHA]:.3g} step {out[I_STEP]:.3e} slope {out[I_SLOPE]:.3e} mu {mu:.3g}")
             if out[I_ALPHA] == 0.0 or out[I_STEP] < step_tol or (kkt_tol > 0 and
-                                                                  d_max <= kkt_tol):
+                                                                  d_max <= inner_tol):
                 break
         if converged:
             break
@@ -224,17 +291,29 @@ def solve(lim, mid, K, metric, chol, mu, mu_max, step_tol):
         out = info.to_numpy()
         viol, comp = float(out[I_VIOL]), float(out[I_COMP])
         rounds += 1
+        if _DEBUG:
+            print(f" round {rounds - 1} ends: violation {viol:.3e} complementarity {comp:.3e}")
         feasible = viol < lim.tol and comp < lim.tol
         if kkt_tol > 0:
             proposed = feasible
         else:
             converged = feasible
-        if not (kkt_tol > 0 and viol < lim.tol):
+        if active_set_model:
+            # The penalty grows only when the violation stalled (the textbook AL's rule:
+            # multiplier updates alone converge while it falls by a factor each round). Grown
+            # every round, as the margin model's is, it reached 1e4-1e5 x its start within a
+            # projection on hanging at resolution 25, where the merit is so curved along the
+            # Newton steps that the line search cut them to 1/256 and the solve diverged.
+            if not viol < lim.tol and not viol <= STALL * last_viol:
+                mu = min(mu * lim.mu_grow, mu_max)
+            last_viol = viol
+        elif not (kkt_tol > 0 and viol < lim.tol):
             mu = min(mu * lim.mu_grow, mu_max)
     stats[ST_ITERS], stats[ST_VIOL], stats[ST_COMP] = rounds, viol, comp
     stats[ST_CONVERGED], stats[ST_NEWTON] = float(converged), newton
     stats[ST_CG] = cg_total
     stats[ST_KKT] = kkt
     lim.last_factorizations = factorizations
+    lim.last_solves = solves
     ws.stats.from_numpy(stats)
     return rounds, newton, converged

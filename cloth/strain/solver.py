@@ -54,6 +54,16 @@ STOPS = ("kkt", "violation")
 # 4e-8 J. svd and warp-weft rest at 1e2-1e3 m. The split projection keeps 1e2 x the mass.
 MU_SCALE = {"implicit": 1e3, "projection": 1e2}
 LINEAR_SOLVERS = ("cholesky", "pcg")
+# The AL's Newton model (settings strain.newton_model): "margin" puts every constraint within
+# ``active_margin`` of its band into the Newton matrix (the PCG kernels' model); "active-set"
+# predicts the step's active set primal-dual style and solves again until it settles
+# (active_set.py; the host loop of direct.py with exact solves, whatever linear_solver says).
+NEWTON_MODELS = ("margin", "active-set")
+# The active-set model's initial penalty relative to MU_SCALE: with the Hessian as its matrix
+# it needs no stiff penalty to keep steps short, and a soft one lets the line search cross a
+# constraint's kink at less cost (10 x the implicit metric's mean diagonal: the prototype's
+# best in docs/speed/motion.md).
+ACTIVE_SET_MU = 1e-2
 # The constraints' curvature in the Newton matrix (c_curvature.py): "exact" through
 # C = F^T F, or "model", the curvature of ||F e|| with e frozen (constraints.py).
 CURVATURES = ("exact", "model")
@@ -149,6 +159,13 @@ def _note_no_pyamg():
               file=sys.stderr)
 
 
+def _default_mu_scale(coupling, newton_model):
+    """The initial penalty's scale for a coupling and Newton model (``MU_SCALE``,
+    ``ACTIVE_SET_MU``)."""
+    scale = MU_SCALE.get(coupling, 1e2)
+    return scale * ACTIVE_SET_MU if newton_model == "active-set" else scale
+
+
 def _host_loop_only():
     """On Vulkan and Metal the one-launch PCG solve is replaced by the Cholesky path, whose AL
     loop runs on the host (``backend.HOST_LOOP_AL``); said once per process."""
@@ -239,7 +256,7 @@ class StrainLimiter:
                  active_margin=1e-2, inner_rtol=None,
                  adaptive_margin=False, stitches=None, coupling="projection",
                  linear_solver="pcg", curvature="model", stop=STOP,
-                 kkt_velocity=KKT_VELOCITY):
+                 kkt_velocity=KKT_VELOCITY, newton_model="margin"):
         if solver not in SOLVERS:
             raise StrainLimitError(f"unknown strain-limiting solver '{solver}': use one of "
                                    f"{', '.join(SOLVERS)}")
@@ -257,6 +274,9 @@ class StrainLimiter:
         if stop not in STOPS:
             raise StrainLimitError(f"unknown strain stop rule '{stop}': use one of "
                                    f"{', '.join(STOPS)}")
+        if newton_model not in NEWTON_MODELS:
+            raise StrainLimitError(f"unknown strain newton_model '{newton_model}': use one of "
+                                   f"{', '.join(NEWTON_MODELS)}")
         if not kkt_velocity > 0:
             raise StrainLimitError(f"kkt_velocity must be > 0 m/s (got {kkt_velocity}); "
                                    f"{KKT_VELOCITY} is 1 cm/s")
@@ -268,7 +288,7 @@ class StrainLimiter:
             if int(val) < 1:
                 raise StrainLimitError(f"{name} must be >= 1 (got {val})")
         if mu_scale is None:
-            mu_scale = MU_SCALE[coupling] if coupling in MU_SCALE else 1e2
+            mu_scale = _default_mu_scale(coupling, newton_model)
         if not (mu_scale > 0 and mu_grow >= 1 and mu_max_scale >= mu_scale):
             raise StrainLimitError("penalty settings need mu_scale > 0, mu_grow >= 1 and "
                                    "mu_max_scale >= mu_scale")
@@ -284,6 +304,7 @@ class StrainLimiter:
         self.solver = solver
         self.coupling = coupling
         self.linear_solver = linear_solver
+        self.newton_model = newton_model
         self._full_mass = None     # M in the full block pattern (the paper's projection metric)
         self._chol = None          # SparseCholesky of this mesh's block pattern
         self._system = None        # the implicit step's matrix (coupling "implicit")
@@ -340,6 +361,8 @@ class StrainLimiter:
         self.last_iterations, self.last_violation_max = 0, 0.0
         self.last_converged, self.last_ms = True, 0.0
         self.last_newton = self.last_cg = self.last_factorizations = self.last_trials = 0
+        self.last_solves = 0          # linear solves (active-set: several per Newton step)
+        self.last_fallback = False    # active-set: solved again with the margin model
         self.last_stationarity, self._kkt_h = 0.0, 1.0 / 30.0
         self.last_reverted, self.reverted_count = False, 0
 
@@ -361,10 +384,20 @@ class StrainLimiter:
             raise StrainLimitError(f"unknown strain coupling '{coupling}': use one of "
                                    f"{', '.join(COUPLINGS)}")
         self.coupling = coupling
-        self.mu_scale = MU_SCALE[coupling]
+        self.mu_scale = _default_mu_scale(coupling, self.newton_model)
         self.inner_rtol = INNER_RTOL[coupling]
         self._upload_params()
         self._system_ready = False
+
+    def set_newton_model(self, name):
+        """Switch the AL's Newton model (live); the initial penalty follows
+        (``ACTIVE_SET_MU``)."""
+        if name not in NEWTON_MODELS:
+            raise StrainLimitError(f"unknown strain newton_model '{name}': use one of "
+                                   f"{', '.join(NEWTON_MODELS)}")
+        self.newton_model = name
+        self.mu_scale = _default_mu_scale(self.coupling, name)
+        self._upload_params()
 
     def set_bands(self, warp=None, weft=None, bias=None):
         """Change the warp / weft / bias bands (strains). Without an explicit bias band (or
@@ -397,7 +430,9 @@ class StrainLimiter:
         params[buffers.P_WARP:buffers.P_WARP + 2] = self.warp
         params[buffers.P_WEFT:buffers.P_WEFT + 2] = self.weft
         params[buffers.P_SHEAR:buffers.P_SHEAR + 2] = self.shear_band()
-        params[buffers.P_MARGIN] = self.active_margin
+        # The active-set model's matrix is the Hessian: no constraint enters it early.
+        params[buffers.P_MARGIN] = 0.0 if self.newton_model == "active-set" else \
+            self.active_margin
         params[buffers.P_INNER_RTOL] = self.inner_rtol
         params[buffers.P_KKT_TOL] = self.kkt_length
         params[buffers.P_DELTA] = self.mapping_delta
@@ -626,7 +661,8 @@ class StrainLimiter:
                 for a in (ws.lam, ws.lam_c, ws.lam_s, ws.lam_t):
                     ndarrays.zero(a)
             use_system = self.coupling == "implicit" and h > 0 and self._system_ready
-            if self.linear_solver == "cholesky" or _host_loop_only():
+            if self.linear_solver == "cholesky" or self.newton_model == "active-set" or \
+                    _host_loop_only():
                 rounds, newton, converged = self._solve_direct(mid, K, use_system)
                 stats = ws.stats.to_numpy()
             else:
@@ -692,7 +728,8 @@ class StrainLimiter:
         mean_mass = self._mean_mass(metric)
         mu, mu_max = self.mu_scale * mean_mass, self.mu_max_scale * mean_mass
         step_tol = 0.01 * self.tol * m.typical_edge()
-        return direct.solve(self, mid, K, metric, chol, mu, mu_max, step_tol)
+        return direct.solve(self, mid, K, metric, chol, mu, mu_max, step_tol,
+                            margin_mu=mu / ACTIVE_SET_MU)
 
     def newton_budget(self, pc_mode):
         """Newton steps per AL round: ``max_newton``, or when that is None FACTOR_NEWTON
