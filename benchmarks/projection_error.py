@@ -32,6 +32,7 @@ SETTINGS = {
     "default": {},
     "active-set, kkt stop, exact curvature": ACTIVE_SET,
     "active-set, kkt 1 mm/s": dict(ACTIVE_SET, kkt_velocity=1e-3),
+    "active-set, tol 1e-5": dict(ACTIVE_SET, tol=1e-5),
     "exact steps (cholesky)": dict(linear_solver="cholesky"),
     "inner_rtol 0 (every round runs max_newton steps)": dict(inner_rtol=0.0),
     "cg_rtol 0.01": dict(cg_rtol=0.01),
@@ -77,6 +78,9 @@ def measure(method, resolution, frames):
         substep()
         if name != "exact":
             substep()                       # timed without the first call's compile
+        elif not lim.last_converged or lim.last_fallback:
+            raise SystemExit(f"{method}: the reference did not converge ({lim.last_iterations} "
+                             f"rounds, fallback {lim.last_fallback}): no distance to measure")
         results[name] = (sim.model.positions(), lim.last_violation_max, lim.last_iterations,
                          lim.last_newton, lim.last_ms)
     exact = results.pop("exact")[0]
