@@ -2,7 +2,7 @@
 
 Cold, on a 2-core machine, full optimisation compiles the strain solve (strain/al.py
 ``solve_al``) in about 2 minutes per method; fast compilation (Taichi's advanced
-optimisation off) in about 12 s, and the solve then runs about 1.4x slower. So main.py's
+optimisation off) in about 4-12 s, and the solve then runs up to 1.4x slower. So main.py's
 first run on a machine (no marker below for this code) compiles fast and starts this module
 as a detached, low-priority process:
 
@@ -151,7 +151,7 @@ def first_run_line(reason, started, log_path):
                        "(LOOM_FAST_COMPILE=0 builds them in this run)",
              "off": "are not built in the background (LOOM_BACKGROUND_COMPILE=0)"}[started]
     tail = f" (log: {log_path})" if started in ("started", "running") else ""
-    return (f"loom: {why}: kernels compiled quickly (about 1.4x slower); optimised ones "
+    return (f"loom: {why}: kernels compiled quickly (up to 1.4x slower); optimised ones "
             f"{where}{tail}")
 
 

@@ -41,7 +41,7 @@ def test_the_environment_forces_either_way(tmp_path, monkeypatch):
 
 def test_the_first_run_line():
     line = warm.first_run_line("first run", "started", "/c/loom_warm.log")
-    assert line == ("loom: first run on this machine: kernels compiled quickly (about 1.4x "
+    assert line == ("loom: first run on this machine: kernels compiled quickly (up to 1.4x "
                     "slower); optimised ones are being built in the background for the next "
                     "run (log: /c/loom_warm.log)")
     assert "the code changed" in warm.first_run_line("code changed", "running", "x")
