@@ -6,7 +6,7 @@ optimisation off) in about 4-12 s, and the solve then runs up to 1.4x slower. So
 first run on a machine (no marker below for this code) compiles fast and starts this module
 as a detached, low-priority process:
 
-    python -m cloth.warm --arch cpu --precision f64
+    python -m scenes.warm --arch cpu --precision f64     (scenes/warm.py: it runs scenes)
 
 It compiles, with full optimisation, what the scenes use: a small hanging sheet per strain
 method (mapping, svd, warp-weft) and a frame of each other built-in scene (dynamics, obstacles,
@@ -113,7 +113,7 @@ def allowed(env=None):
 
 
 def command(arch, precision, plan=None, resolution=None):
-    cmd = [sys.executable, "-m", "cloth.warm", "--arch", arch, "--precision", precision]
+    cmd = [sys.executable, "-m", "scenes.warm", "--arch", arch, "--precision", precision]
     if plan:
         cmd += ["--plan", ",".join(f"{s}:{m or ''}" for s, m in plan)]
     if resolution:
@@ -166,75 +166,3 @@ def after_init():
     cache = backend.cache_dir()
     started = (start(cache, backend.arch(), backend.precision()) if allowed() else "off")
     return first_run_line(reason, started, os.path.join(cache, LOG_NAME))
-
-
-def warm(plan, resolution, log=print):
-    """Run one frame of each (scene, method) in ``plan``: every kernel they use compiles (or
-    loads) under this process's compile configuration."""
-    import scenes
-    from scenes.common import resolve
-    from cloth.simulator import Simulator
-    for scene, method in plan:
-        t0 = time.perf_counter()
-        module = scenes.get(scene)
-        over = {"sim": {"frames": 1}}
-        if method:
-            over["strain"] = {"method": method}
-        if "resolution" in module.DEFAULTS.get("cloth", {}):
-            over["cloth"] = {"resolution": resolution}
-        cfg = resolve(module.DEFAULTS, [over])
-        sim = Simulator(module.build(cfg), cfg)
-        sim.step_frame()
-        log(f"{time.strftime('%H:%M:%S')} {scene} {method or ''}: "
-            f"{time.perf_counter() - t0:.1f} s", flush=True)
-
-
-def main(argv=None):
-    p = argparse.ArgumentParser(prog="python -m cloth.warm", description=__doc__.split("\n")[0])
-    p.add_argument("--arch", default="cpu")
-    p.add_argument("--precision", default="f64")
-    p.add_argument("--plan", help="scene:method pairs, comma-separated (default: all)")
-    p.add_argument("--resolution", type=int, default=7)
-    a = p.parse_args(argv)
-    plan = PLAN if not a.plan else [tuple((x.split(":") + [""])[:2]) for x in a.plan.split(",")]
-    plan = [(s, m or None) for s, m in plan]
-    try:
-        os.nice(19)
-    except OSError:
-        pass
-    from . import backend
-    cache = backend.cache_dir()
-    os.makedirs(cache, exist_ok=True)
-    if not _take_lock(cache):
-        print(f"{time.strftime('%F %T')} another warmer holds the lock; exiting", flush=True)
-        return 0
-    try:
-        t0 = time.perf_counter()
-        backend.init(a.arch, a.precision)
-        from . import compile_notice
-        done = compile_notice.fingerprint()
-        print(f"{time.strftime('%F %T')} warming {cache} for {done} "
-              f"({'fast' if backend.fast_compile() else 'optimised'})", flush=True)
-        warm(plan, a.resolution)
-        import taichi as ti
-        ti.reset()               # writes the compiled kernels into the offline cache
-        path = os.path.join(cache, MARKER_NAME)
-        data = _read(path)
-        data[done] = {"date": time.strftime("%F %T"),
-                      "seconds": round(time.perf_counter() - t0, 1),
-                      "plan": [f"{s}:{m or ''}" for s, m in plan]}
-        tmp = f"{path}.{os.getpid()}.tmp"
-        with open(tmp, "w") as fh:
-            json.dump(data, fh, indent=1, sort_keys=True)
-        os.replace(tmp, path)
-        print(f"{time.strftime('%F %T')} done in {time.perf_counter() - t0:.0f} s", flush=True)
-    finally:
-        try:
-            os.remove(os.path.join(cache, LOCK_NAME))
-        except OSError:
-            pass
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())
