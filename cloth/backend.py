@@ -17,7 +17,7 @@ F32_ONLY = ("vulkan", "metal")
 # (Taichi's other SPIR-V back end) was not available to test and is treated the same way.
 HOST_LOOP_AL = ("vulkan", "metal")
 
-_state = {"arch": None, "precision": None}
+_state = {"arch": None, "precision": None, "fast": None, "reason": None}
 
 
 class BackendError(RuntimeError):
@@ -33,9 +33,54 @@ class BackendError(RuntimeError):
 FAST_COMPILE_ENV = "LOOM_FAST_COMPILE"
 
 
-def fast_compile():
+# LOOM_FAST_COMPILE=1 forces fast compilation and =0 full optimisation. Unset, library
+# callers (benchmarks, tests) get full optimisation, and main.py asks for the first-run choice
+# (``init(..., first_run_fast=True)``): fast while this machine's offline cache has no
+# optimised kernels of this code (cloth/warm.py builds them in the background and leaves a
+# marker), optimised once it has. Measured cold on 2 cores (hanging, mapping): the strain
+# solve compiles in ~2 min optimised against ~12 s fast.
+
+
+def forced_compile_mode():
+    """'fast', 'optimised' or None (LOOM_FAST_COMPILE unset or empty: not forced)."""
     import os
-    return os.environ.get(FAST_COMPILE_ENV, "") not in ("", "0")
+    value = os.environ.get(FAST_COMPILE_ENV, "").strip()
+    if value == "":
+        return None
+    return "optimised" if value == "0" else "fast"
+
+
+def fast_compile():
+    """Whether this process compiles fast (after init: what init chose)."""
+    if _state.get("fast") is not None:
+        return _state["fast"]
+    return forced_compile_mode() == "fast"
+
+
+def cache_dir():
+    """Taichi's offline cache folder, known before ti.init (TI_OFFLINE_CACHE_FILE_PATH, else
+    Taichi's default, ~/.cache/taichi/ticache)."""
+    import os
+    path = os.environ.get("TI_OFFLINE_CACHE_FILE_PATH", "")
+    if path:
+        return path
+    from taichi.lang import impl
+    return impl.default_cfg().offline_cache_file_path
+
+
+def choose_compile_mode(arch, precision, first_run_fast):
+    """(fast, reason): reason is 'forced', 'library', 'warmed' (optimised kernels built for
+    this code), 'first run' (none built yet) or 'code changed' (built for other code)."""
+    forced = forced_compile_mode()
+    if forced is not None:
+        return forced == "fast", "forced"
+    if not first_run_fast:
+        return False, "library"
+    from . import warm
+    state = warm.marker_state(cache_dir(), arch, precision)
+    if state == "done":
+        return False, "warmed"
+    return True, ("code changed" if state == "other code" else "first run")
 
 
 # Taichi 1.7's front end formats a source excerpt (the code line re-wrapped by textwrap, with a
@@ -78,10 +123,11 @@ def default_precision(arch):
     return "f32" if arch in F32_ONLY else "f64"
 
 
-def init(arch="cpu", precision=None, debug=False):
+def init(arch="cpu", precision=None, debug=False, first_run_fast=False):
     """Start Taichi once per process. Calling again with the same settings is a no-op;
     with different settings Taichi is reset (all fields are lost). ``precision`` None: f64,
-    or f32 on Vulkan and Metal (``F32_ONLY``)."""
+    or f32 on Vulkan and Metal (``F32_ONLY``). ``first_run_fast``: compile fast while the
+    offline cache has no optimised kernels of this code (``choose_compile_mode``)."""
     if arch not in ARCHES:
         raise BackendError(f"unknown --arch '{arch}': use one of {', '.join(ARCHES)}")
     if precision is None:
@@ -99,10 +145,11 @@ def init(arch="cpu", precision=None, debug=False):
         ti.reset()
     fp = ti.f64 if precision == "f64" else ti.f32
     _use_plain_debug_info()
+    fast, reason = choose_compile_mode(arch, precision, first_run_fast)
     ti.init(arch=getattr(ti, ARCHES[arch]), default_fp=fp, log_level=ti.ERROR,
             debug=debug, offline_cache=True, offline_cache_max_size_of_files=CACHE_BYTES,
-            advanced_optimization=not fast_compile())
-    _state.update(arch=arch, precision=precision)
+            advanced_optimization=not fast)
+    _state.update(arch=arch, precision=precision, fast=fast, reason=reason)
 
 
 def _float_types(value):
@@ -150,6 +197,11 @@ def precision():
 
 def arch():
     return _state["arch"]
+
+
+def compile_reason():
+    """Why init chose its compile mode (``choose_compile_mode``), None before init."""
+    return _state["reason"]
 
 
 def is_initialised():

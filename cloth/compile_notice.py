@@ -74,18 +74,13 @@ def _write(path, data):
         pass
 
 
-def fingerprint():
-    """What decides whether Taichi's cache holds a kernel: Taichi's version, the arch,
-    precision and optimisation level, and the source of every module of the cloth package
-    (a change anywhere counts as new code; the cache may still hold it, and then the notice
-    was one line too many)."""
-    global _fingerprint
-    if _fingerprint is None:
-        import taichi as ti
-        from . import backend
+_source_hash = None
+
+
+def _source():
+    global _source_hash
+    if _source_hash is None:
         h = hashlib.sha1()
-        h.update(repr((ti.__version__, backend.arch(), backend.precision(),
-                       backend.fast_compile())).encode())
         root = os.path.dirname(os.path.abspath(__file__))
         for folder, dirs, files in sorted(os.walk(root)):
             dirs.sort()
@@ -93,8 +88,27 @@ def fingerprint():
                 if name.endswith(".py"):
                     with open(os.path.join(folder, name), "rb") as fh:
                         h.update(name.encode() + fh.read())
-        _fingerprint = h.hexdigest()[:16]
-    return _fingerprint
+        _source_hash = h.hexdigest()
+    return _source_hash
+
+
+def fingerprint(arch=None, precision=None, fast=None):
+    """What decides whether Taichi's cache holds a kernel: Taichi's version, the arch,
+    precision and optimisation level, and the source of every module of the cloth package
+    (a change anywhere counts as new code; the cache may still hold it, and then the notice
+    was one line too many). Without arguments: this process's (after backend.init)."""
+    global _fingerprint
+    import taichi as ti
+    from . import backend
+    if arch is None and precision is None and fast is None:
+        if _fingerprint is None:
+            _fingerprint = fingerprint(backend.arch(), backend.precision(),
+                                       backend.fast_compile())
+        return _fingerprint
+    h = hashlib.sha1()
+    h.update(repr((ti.__version__, arch, precision, bool(fast))).encode())
+    h.update(_source().encode())
+    return h.hexdigest()[:16]
 
 
 def will_compile(key):

@@ -523,7 +523,7 @@ class Simulator:
             method = self.strain.method
             key = f"strain solver:{method}:{st.solver}:{st.linear_solver}:{st.curvature}"
             fast_path = st.solver == "al" and st.linear_solver == "pcg"
-            return (f"the strain solver for {method}", key, (120, 12) if fast_path else None)
+            return (f"the strain solver for {method}", key, (120, 5) if fast_path else None)
         if stage == "dynamics":
             return ("the dynamics step", f"dynamics:{self.settings.sim.linear_solver}",
                     (8, None))
