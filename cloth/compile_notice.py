@@ -111,6 +111,11 @@ def fingerprint(arch=None, precision=None, fast=None):
     return h.hexdigest()[:16]
 
 
+def used(key):
+    """True once ``key``'s first use in this process is over (its kernels are loaded)."""
+    return key in _used
+
+
 def will_compile(key):
     """True when the first use of ``key`` in this process will (probably) compile: not used
     yet here, and this machine's record has no compile of the same code."""

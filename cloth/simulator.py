@@ -233,7 +233,7 @@ class Simulator:
             self.collider.contact_planes(t, self.strain.contact_planes,
                                          reach=0.5 * self.model.typical_edge(),
                                          mu_out=self.strain.contact_friction)
-        with compile_notice.first_use(*self._compile_work("strain_limit")):
+        with compile_notice.first_use(*self.compile_work("strain_limit")):
             self.strain.project(h, contacts=with_contacts, warm=warm)
 
     def _make_collider(self):
@@ -513,17 +513,17 @@ class Simulator:
         self.frame += 1
         self.last_good = self.model.mesh_arrays()
 
-    def _compile_work(self, stage):
+    def compile_work(self, stage, method=None):
         """(what, key, estimate in s) of the kernels a stage compiles at its first call: the
         key names the template variant, so a method switch announces its own compile
         (cloth/compile_notice.py; estimates measured cold on 2 cores, full optimisation and
         LOOM_FAST_COMPILE)."""
         if stage == "strain_limit":
             st = self.settings.strain
-            method = self.strain.method
-            key = f"strain solver:{method}:{st.solver}:{st.linear_solver}:{st.curvature}"
+            method = self.strain.method if method is None else method
             fast_path = st.solver == "al" and st.linear_solver == "pcg"
-            return (f"the strain solver for {method}", key, (120, 5) if fast_path else None)
+            return (f"the strain solver for {method}", self.strain_solver_key(method),
+                    (120, 5) if fast_path else None)
         if stage == "dynamics":
             return ("the dynamics step", f"dynamics:{self.settings.sim.linear_solver}",
                     (8, None))
@@ -531,19 +531,25 @@ class Simulator:
             return ("the collision pass", "collision", (6, None))
         return None
 
+    def strain_solver_key(self, method):
+        """The compile key of the strain solver's kernels for ``method`` under this
+        simulator's strain settings (the template variant: cloth/compile_notice.py)."""
+        st = self.settings.strain
+        return f"strain solver:{method}:{st.solver}:{st.linear_solver}:{st.curvature}"
+
     def compile_pending(self):
         """The notice line when the next frame's strain solve will compile its kernels (a
         method switched to for the first time on this machine), else None: the window shows
         it before the step that compiles."""
         if self.strain is None or not self.stage("strain_limit").enabled:
             return None
-        return compile_notice.notice(*self._compile_work("strain_limit"))
+        return compile_notice.notice(*self.compile_work("strain_limit"))
 
     def _run_stage(self, s):
         t0 = time.perf_counter()
         if s.name in self._untried:       # its first run: it may compile (strain: per call)
             self._untried.discard(s.name)
-            with compile_notice.first_use(*self._compile_work(s.name)):
+            with compile_notice.first_use(*self.compile_work(s.name)):
                 s.run()
         else:
             s.run()

@@ -425,6 +425,9 @@ from ui.state import AppState
 from ui.app import App
 st = AppState.from_scene("hanging", [{{"cloth": {{"resolution": 7}}}}])
 app = App(st, size=(640, 400), out_dir={out!r})
+for k in range(6):      # the initial state, the first step, two frames per other method
+    app.frame()
+print("prepared at frame", st.sim.frame, "left", st.methods_to_prepare())
 for k in range(3):
     app.frame()
 app.toggle_record()
@@ -452,7 +455,9 @@ def test_window_app_runs_under_xvfb(tmp_path):
     if "cannot open" in proc.stderr and "Vulkan" in proc.stderr:
         pytest.skip("no Vulkan device for a window")
     assert proc.returncode == 0, proc.stderr[-2000:]
-    assert "frame 6 message screenshot:" in proc.stdout      # the first window frame does not step
+    # The first window frame does not step; the next four prepare svd and warp-weft.
+    assert "prepared at frame 1 left []" in proc.stdout
+    assert "frame 8 message screenshot:" in proc.stdout
     rec = next((tmp_path / "recordings").iterdir())
     assert sorted(p.name for p in rec.iterdir()) == ["frame_0000.png", "frame_0001.png",
                                                       "frame_0002.png", "video.mp4"]

@@ -2,6 +2,8 @@
 time the last one took on this machine; nothing when the record says it is cached."""
 import io
 
+import numpy as np
+
 import pytest
 
 from cloth import compile_notice as cn
@@ -82,3 +84,36 @@ def test_window_shows_the_notice_before_the_step_that_compiles(monkeypatch):
     assert st.sim.frame == frame and st.message.startswith("compiling")
     st.tick()
     assert st.sim.frame == frame + 1 and st.message == ""
+
+
+def test_window_prepares_the_other_methods_without_touching_the_simulation(monkeypatch):
+    """After the first step the window compiles the other methods' strain solvers, one per
+    two window frames (the panel names each before it waits), on a throwaway sheet: the
+    simulation is bit for bit what it was, and a switch afterwards has nothing to compile."""
+    from ui.state import AppState
+    monkeypatch.delenv("LOOM_PREPARE_METHODS", raising=False)
+    st = AppState.from_scene("hanging", [{"cloth": {"resolution": 5}}])
+    st.tick()
+    x, frame = st.sim.model.positions().copy(), st.sim.frame
+    announced, calls = [], 0
+    while st.prepare_step():
+        calls += 1
+        name = st.message.split()[1] if st.message.startswith("preparing") else None
+        if name and announced[-1:] != [name]:
+            announced.append(name)
+        assert calls < 10
+    assert announced == ["svd", "warp-weft"] and calls == 4
+    assert st.message == "" and st.methods_to_prepare() == []
+    assert st.sim.frame == frame and np.array_equal(st.sim.model.positions(), x)
+    for m in ("svd", "warp-weft"):
+        assert cn.used(st.sim.strain_solver_key(m))
+        assert st.switch_method(m) and st.sim.compile_pending() is None
+    st.tick()
+    assert st.sim.frame == frame + 1 and st.sim.method == "warp-weft"
+
+
+def test_preparing_can_be_turned_off(monkeypatch):
+    from ui.state import AppState
+    monkeypatch.setenv("LOOM_PREPARE_METHODS", "0")
+    st = AppState.from_scene("hanging", [{"cloth": {"resolution": 5}}])
+    assert st.methods_to_prepare() == [] and not st.prepare_step()
