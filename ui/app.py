@@ -20,6 +20,7 @@ controls do is in ``state.py``, drawing in ``render.py``, colours in ``colormap.
 """
 import os
 import sys
+import textwrap
 import time
 
 import numpy as np
@@ -268,7 +269,9 @@ class App:
             if g.button("screenshot"):
                 self.screenshot()
             if st.message:
-                g.text(st.message[:200], color=(0.8, 0.1, 0.1))
+                # Wrapped to the panel's width (GGUI clips a long line).
+                for line in textwrap.wrap(st.message[:300], 42):
+                    g.text(line, color=(0.8, 0.1, 0.1))
 
             # Strain limiting.
             g.text("")

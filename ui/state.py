@@ -294,7 +294,7 @@ class AppState:
             line = compile_notice.notice(what, key, seconds)
             how = (line.replace("loom: compiling ", "compiling ") if line else
                    f"loading {what} from the cache")
-            self.message = f"preparing {method} so that a switch to it does not wait: {how}"
+            self.message = f"preparing {method}, so that a switch to it is quick: {how}"
             return True
         self._prepared.add(method)
         try:
