@@ -98,7 +98,7 @@ def test_window_prepares_the_other_methods_without_touching_the_simulation(monke
     announced, calls = [], 0
     while st.prepare_step():
         calls += 1
-        name = st.message.split()[1] if st.message.startswith("preparing") else None
+        name = st.message.split()[1].strip(",") if st.message.startswith("preparing") else None
         if name and announced[-1:] != [name]:
             announced.append(name)
         assert calls < 10
