@@ -92,6 +92,7 @@ def test_window_prepares_the_other_methods_without_touching_the_simulation(monke
     simulation is bit for bit what it was, and a switch afterwards has nothing to compile."""
     from ui.state import AppState
     monkeypatch.delenv("LOOM_PREPARE_METHODS", raising=False)
+    monkeypatch.setattr(cn, "_used", set())     # as in a new process (xdist workers share one)
     st = AppState.from_scene("hanging", [{"cloth": {"resolution": 5}}])
     st.tick()
     x, frame = st.sim.model.positions().copy(), st.sim.frame
