@@ -200,14 +200,15 @@ def principal_stretches(F):
 
 def mapping_factors(F, grain, iso=0.0, svd=None):
     """The inverse mapping's factors c~_ij (METHOD 3.3) as (n, 2, 2) [grain i (warp, weft),
-    pair j (A, B)] with the principal stretches of the pairs (n, 2). A is the principal
-    direction nearer the warp. ``iso`` is the solver's closure at isotropy
+    pair j (A, B)] with the principal stretches of the pairs (n, 2). A is the major principal
+    direction (eta1; the one nearer the warp under strain.families.MAPPING_PAIRS_BY_ALIGNMENT). ``iso`` is the solver's closure at isotropy
     (``strain.isotropy``; constraints.MAPPING_ISO): c~ = sqrt(w c^2 + (1 - w) / 2),
     w = D^2 / (D^2 + iso^2), D = eta1^2 - eta2^2; iso = 0 is the paper's c = |e_i . v_j|.
     ``svd``: ``principal_stretches(F)`` if already computed."""
     eta, V, _ = principal_stretches(F) if svd is None else svd
     c = np.abs(np.einsum("nki,nkj->nij", np.asarray(grain, np.float64), V))
-    swap = c[:, 0, 1] > c[:, 0, 0]
+    from .strain.families import MAPPING_PAIRS_BY_ALIGNMENT
+    swap = (c[:, 0, 1] > c[:, 0, 0]) & MAPPING_PAIRS_BY_ALIGNMENT
     c[swap] = c[swap][:, :, ::-1]
     eta_pair = np.where(swap[:, None], eta[:, ::-1], eta)
     if iso > 0:

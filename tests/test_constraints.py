@@ -297,3 +297,38 @@ def test_hard_triangles_stay_finite():
         for name, x in shapes.items():
             g, grad = evaluate_one(method, x, Dm_inv, area, *bands)
             assert np.all(np.isfinite(g)) and np.all(np.isfinite(grad)), (method, name)
+
+
+@pytest.mark.parametrize("path", ["axes turn through 45 degrees", "eta1 and eta2 cross"])
+def test_mapping_values_in_the_solvers_order_are_continuous(path):
+    """Each mapping constraint, in the order the solver keeps multipliers in, is a continuous
+    function of the positions: along a path of deformations, consecutive values differ by
+    O(step). Ordered by alignment with the warp, pairs swap where the principal axes cross 45
+    degrees and the values jump by c (eta1 - eta2) (~1.4e-2 here): the AL merit then jumps
+    and Newton stalls (docs/speed/motion.md section 7). Ordered by magnitude they swap where
+    eta1 = eta2, and the isotropy closure makes both pairs equal there."""
+    uv = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    Dm_inv, area = triangle_arrays(uv, np.c_[uv, np.zeros(3)])
+    bands = ((-0.01, 0.01), (-0.05, 0.05), (-1.0, 1.0))
+
+    def values(order, n=401):
+        out = []
+        for s in np.linspace(-1.0, 1.0, n):
+            if path.startswith("axes"):
+                th = np.pi / 4 + 0.2 * s
+                R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+                F2 = R @ np.diag([1.03, 1.01]) @ R.T
+            else:
+                th = 0.3
+                R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+                F2 = R @ np.diag([1.02 + 0.01 * s, 1.02 - 0.01 * s]) @ R.T
+            x = np.c_[uv @ F2.T, np.zeros(3)]
+            g, _ = evaluate_one("mapping", x, Dm_inv, area, *bands, by_alignment=order,
+                                iso=C.MAPPING_ISO)
+            out.append(g)
+        return np.array(out)
+
+    jump = np.abs(np.diff(values(C.MAPPING_PAIRS_BY_ALIGNMENT), axis=0)).max()
+    assert jump < 1e-3, jump                 # steps of 1e-3 (angle) / 5e-5 (stretch)
+    if path.startswith("axes"):              # the other order fails the same check
+        assert np.abs(np.diff(values(True), axis=0)).max() > 5e-3

@@ -21,7 +21,7 @@ def _triangles(rng, n=30):
 @pytest.mark.parametrize("method, iso", CASES)
 def test_strains_through_c_are_the_kernels_values(method, iso, rng):
     X, Dm_inv, area, grain = _triangles(rng)
-    g, _ = C.evaluate(method, X, Dm_inv, grain, area, *BANDS, by_alignment=True, iso=iso)
+    g, _ = C.evaluate(method, X, Dm_inv, grain, area, *BANDS, by_alignment=C.MAPPING_PAIRS_BY_ALIGNMENT, iso=iso)
     Cc, _, _ = ec.c_and_jacobian(X, Dm_inv)
     mine = ec.strains_of_c(method, Cc, grain, BANDS, iso) * np.sqrt(area)[:, None]
     assert mine.shape == g.shape

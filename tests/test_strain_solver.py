@@ -55,7 +55,8 @@ def kkt_residuals(model, limiter, x_hat):
     faces, K = model.faces, C.N_CONSTRAINTS[limiter.method]
     Dm_inv = model.face_Dm_inv.to_numpy()[: model.n_faces]
     g, grad = C.evaluate(limiter.method, x[faces], Dm_inv, model.grain, model.rest_area,
-                         limiter.warp, limiter.weft, limiter.shear_band(), by_alignment=True,
+                         limiter.warp, limiter.weft, limiter.shear_band(),
+                         by_alignment=C.MAPPING_PAIRS_BY_ALIGNMENT,
                          iso=limiter.mapping_iso)
     lam = limiter._ws.lam.to_numpy()[: model.n_faces, :K]
     force = model.mass[:, None] * (x - x_hat)

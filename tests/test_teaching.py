@@ -111,17 +111,18 @@ def test_binding_picks_the_largest_positive_multiplier():
     assert list(metrics.binding_constraints(lam, 3)) == [-1, 1, 2]
 
 
-def test_mapping_factors_pair_a_is_the_axis_nearer_the_warp():
-    """Stretch 3 % along the weft only: the major axis is the weft, so pair A (nearer the
-    warp) has eta = 1 and c = 1 along the warp; the mapped weft strain of pair B is 3 %."""
+def test_mapping_factors_pair_a_is_the_major_axis():
+    """Stretch 3 % along the weft only: the major axis (pair A, the solver's order) is the
+    weft, so A maps 3 % onto the weft and nothing onto the warp; pair B (the warp, unstretched)
+    maps nothing."""
     from cloth.sheet import make_sheet
     uv, faces = make_sheet(1, 1, 3, 3)
     x = np.c_[uv[:, 0], 1.03 * uv[:, 1], np.zeros(len(uv))]
     grain = np.tile(np.eye(2), (len(faces), 1, 1))
     sp = metrics.strain_space("mapping", x, faces, metrics.material_Dm_inv(uv, faces), grain,
                               {"warp": (-0.01, 0.01), "weft": (-0.05, 0.05)})
-    assert np.allclose(sp["mapped"][:, 0], 0.0, atol=1e-12)            # pair A: no stretch
-    assert np.allclose(sp["mapped"][:, 1], [0.0, 0.03], atol=1e-12)    # pair B: weft 3 %
+    assert np.allclose(sp["mapped"][:, 0], [0.0, 0.03], atol=1e-12)    # pair A: weft 3 %
+    assert np.allclose(sp["mapped"][:, 1], 0.0, atol=1e-12)            # pair B: no stretch
     assert np.allclose(sp["principal"], [0.03, 0.0], atol=1e-12)
 
 

@@ -29,7 +29,7 @@ GLYPH_COMPRESSION = [(0.0, np.array([0.70, 0.85, 0.98])), (1.0, np.array([0.05, 
 WHAT_BINDS = {
     "svd": "eta1 = the larger principal stretch (warp band), eta2 the smaller (weft band)",
     "warp-weft": "stretch along the warp and weft threads, and the bias (45 deg) shear",
-    "mapping": "principal stretch mapped onto warp / weft; A = principal axis nearer the warp",
+    "mapping": "principal stretch mapped onto warp / weft; A = the major principal axis (eta1), B the minor",
 }
 
 

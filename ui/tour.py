@@ -98,8 +98,8 @@ def caption(step, f):
                 f"average); weft max {f['weft']:+.2f} %.")
     elif step.view == "binding":
         body = ("mapping bounds each principal strain mapped onto warp and weft, "
-                "c (eta - 1) with c = |e . v|, by that thread's band (A: the principal axis "
-                f"nearer the warp). Binding: {_counts(f)}. Right: the mapped points stay in "
+                "c (eta - 1) with c = |e . v|, by that thread's band (A: the major principal "
+                f"axis, B: the minor). Binding: {_counts(f)}. Right: the mapped points stay in "
                 f"the box; the thread strains (dark) pass it: warp max {f['warp']:+.2f} % = "
                 f"{f['ratio']:.2f} x the band (the bound is sqrt 2 = 1.41 at 45 deg).")
     else:

@@ -13,15 +13,15 @@ from .buffers import (CONTACT_SLOTS, N_STATS, NO_CONTACT, P_C_STEP, P_CONTACT_SC
                       ST_ITERS, ST_NEWTON, ST_START_VIOL, ST_TRIALS, ST_VIOL, A, T)
 from . import multigrid
 from .c_curvature import c_curvature_block, face_c_curvature
-from .constraints import face_constraints
+from .constraints import MAPPING_PAIRS_BY_ALIGNMENT, face_constraints
 
 
 # ---- constraint evaluation ---------------------------------------------------------------------
 @ti.func
 def eval_face(method: ti.template(), f, pos: T, face_verts: T, Dm_inv: T, grain: T,
               rest_area: T, params: T):
-    """All constraints of face f at positions ``pos``; mapping pairs ordered by alignment with
-    the warp so that multipliers do not jump when eta1 and eta2 cross (METHOD 3.3)."""
+    """All constraints of face f at positions ``pos`` (mapping pairs ordered as
+    families.MAPPING_PAIRS_BY_ALIGNMENT says)."""
     ids = face_verts[f]
     warp = ti.Vector([params[P_WARP], params[P_WARP + 1]])
     weft = ti.Vector([params[P_WEFT], params[P_WEFT + 1]])
@@ -29,7 +29,7 @@ def eval_face(method: ti.template(), f, pos: T, face_verts: T, Dm_inv: T, grain:
     delta = params[P_SVD_DELTA] if ti.static(method == 0) else params[P_DELTA]
     return face_constraints(method, pos[ids[0]], pos[ids[1]], pos[ids[2]], Dm_inv[f],
                             grain[f], ti.sqrt(rest_area[f]), warp, weft, shear, delta,
-                            params[P_ISO], True)
+                            params[P_ISO], MAPPING_PAIRS_BY_ALIGNMENT)
 
 
 @ti.func

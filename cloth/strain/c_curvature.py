@@ -20,7 +20,7 @@ w_u = F e_u and w_v = F e_v at the iterate.
 """
 import taichi as ti
 
-from .constraints import sym_eig2, shape_rows
+from .constraints import MAPPING_PAIRS_BY_ALIGNMENT, sym_eig2, shape_rows
 
 # Central-difference step in C (C ~ 1). f64: the mapping closure's curvature ~1/iso^2 = 1e4
 # then has ~1e-5 relative error. f32 cannot resolve it; the step there keeps the round-off
@@ -56,7 +56,8 @@ def _stretch_along(p, q, r, e):
 @ti.func
 def weighted_strain(method: ti.template(), p, q, r, grain, params_w, weights, sigma_a, iso):
     """phi(C) = sum_c weights[c] G_c(C), G_c the constraint values / sqrt(a) in the solver's
-    order (constraints.py; mapping pairs by alignment, pair A frozen as ``sigma_a``).
+    order (constraints.py; mapping pair A is eta1, or frozen as ``sigma_a`` when pairs go by
+    alignment: families.MAPPING_PAIRS_BY_ALIGNMENT).
     params_w = (warp lo, hi, weft lo, hi, shear lo, hi); a band's lower and upper constraints
     are lo - strain and strain - hi."""
     total = 0.0
@@ -149,10 +150,13 @@ def face_c_curvature(method: ti.template(), K, f, x: ti.template(), face_verts: 
         w1 = Mr[0, 1] * x[ids[0]] + Mr[1, 1] * x[ids[1]] + Mr[2, 1] * x[ids[2]]
         p, q, r = w0.dot(w0), w0.dot(w1), w1.dot(w1)
         G = grain[f]
-        # Pair A of the mapping family (the principal direction closer to the warp), frozen.
-        t_warp = 0.5 * (p - r) * (G[0, 0] * G[0, 0] - G[1, 0] * G[1, 0]) \
-            + 2.0 * q * G[0, 0] * G[1, 0]
-        sigma_a = -1.0 if t_warp < 0.0 else 1.0
+        # Pair A of the mapping family (eta1, or the principal direction closer to the warp
+        # under MAPPING_PAIRS_BY_ALIGNMENT), frozen.
+        sigma_a = 1.0
+        if ti.static(MAPPING_PAIRS_BY_ALIGNMENT):
+            t_warp = 0.5 * (p - r) * (G[0, 0] * G[0, 0] - G[1, 0] * G[1, 0]) \
+                + 2.0 * q * G[0, 0] * G[1, 0]
+            sigma_a = -1.0 if t_warp < 0.0 else 1.0
         # Central differences of phi in (p, q, r): gradient and Hessian.
         h = step
         phi0 = weighted_strain(method, p, q, r, G, params_w, weights, sigma_a, iso)

@@ -24,8 +24,9 @@ Families and their order (the order of ``testdata/constraint_vectors.json``):
                  (weft, v1) upper/lower, (weft, v2) upper/lower               (eqs. 15, 23)
 The mapping family can instead order its principal pairs by alignment with the warp
 (``by_alignment=True``): pair "A" is the principal direction closer to the warp. The set of 8
-constraints is the same, but indices no longer swap when eta1 and eta2 cross, so per-constraint
-multipliers (warm starts) do not jump (METHOD 3.3).
+constraints is the same, but indices no longer swap when eta1 and eta2 cross (METHOD 3.3); they
+swap at 45 degrees instead, where the values jump, so the solver orders by magnitude
+(families.MAPPING_PAIRS_BY_ALIGNMENT).
 
 Bands are passed as 2-vectors (min, max) of strains; the shear band of warp-weft is in
 ||w_s|| units (sqrt 2 at rest), see ``StrainLimiter`` for the conversion from bias strain.
@@ -33,7 +34,8 @@ Bands are passed as 2-vectors (min, max) of strains; the shear band of warp-weft
 import numpy as np
 import taichi as ti
 
-from .families import K_MAX, METHOD_IDS, METHODS, N_CONSTRAINTS  # noqa: F401
+from .families import (K_MAX, MAPPING_PAIRS_BY_ALIGNMENT, METHOD_IDS, METHODS,  # noqa: F401
+                       N_CONSTRAINTS)
 
 # Regularisation of 1/(eta1 - eta2) in the svd family's principal-frame curvature (a Newton
 # model term only: values and gradients do not depend on it). See svd_constraints.

@@ -38,9 +38,9 @@ def face_hessians(method, X, Dm_inv, grain, area, weights, bands, delta, iso, st
         plus[:, k // 3, k % 3] += step
         minus[:, k // 3, k % 3] -= step
         _, g_plus = constraints.evaluate(method, plus, Dm_inv, grain, area, warp, weft, shear,
-                                         delta=delta, by_alignment=True, iso=iso)
+                                         delta=delta, by_alignment=constraints.MAPPING_PAIRS_BY_ALIGNMENT, iso=iso)
         _, g_minus = constraints.evaluate(method, minus, Dm_inv, grain, area, warp, weft,
-                                          shear, delta=delta, by_alignment=True, iso=iso)
+                                          shear, delta=delta, by_alignment=constraints.MAPPING_PAIRS_BY_ALIGNMENT, iso=iso)
         out[:, :, k] = np.einsum("nc,ncm->nm", weights, (g_plus - g_minus) / (2.0 * step))
     return 0.5 * (out + out.transpose(0, 2, 1))
 
@@ -144,7 +144,7 @@ def strains_of_c(method, C, grain, bands, iso, C_pairs=None):
         Cp = C if C_pairs is None else C_pairs
         t_warp = 0.5 * (Cp[..., 0] - Cp[..., 2]) * (e_warp[..., 0] ** 2 - e_warp[..., 1] ** 2) \
             + Cp[..., 1] * 2.0 * e_warp[..., 0] * e_warp[..., 1]
-        sigma_a = np.where(t_warp < 0.0, -1.0, 1.0)
+        sigma_a = np.where((t_warp < 0.0) & constraints.MAPPING_PAIRS_BY_ALIGNMENT, -1.0, 1.0)
         for e, lo_hi in ((e_warp, warp), (e_weft, weft)):
             for sigma in (sigma_a, -sigma_a):
                 s = mapping_strain_of_c(p, q, r, e, sigma, iso)
