@@ -83,6 +83,23 @@ def material_areas(uv, faces):
     return np.abs(signed_material_areas(uv, faces))
 
 
+def dihedral_angles(x, edge_verts, edge_opp):
+    """Signed dihedral angle per interior edge (0 where flat, 0 for boundary edges), with the
+    same convention as the bending kernel in dynamics.py."""
+    theta = np.zeros(len(edge_verts))
+    inner = edge_opp[:, 1] >= 0
+    x0, x1 = x[edge_verts[inner, 0]], x[edge_verts[inner, 1]]
+    x2, x3 = x[edge_opp[inner, 0]], x[edge_opp[inner, 1]]
+    e = x1 - x0
+    n1 = np.cross(e, x2 - x0)
+    n2 = np.cross(x3 - x0, e)
+    el = np.linalg.norm(e, axis=1)
+    sin = np.einsum("ij,ij->i", np.cross(n1, n2), e) / el
+    cos = np.einsum("ij,ij->i", n1, n2)
+    theta[inner] = np.arctan2(sin, cos)
+    return theta
+
+
 def wrinkle_measures(x, faces, edges, edge_faces, edge_opp, uv):
     """Fold measures over interior edges (flat cloth gives 0):
     ``mean_abs_dihedral``, the mean |dihedral angle| (rad) weighted by material edge length;
@@ -90,7 +107,6 @@ def wrinkle_measures(x, faces, edges, edge_faces, edge_opp, uv):
     kept as the wrinkle measure of the Table 1/2 documents, whatever bending energy the
     model uses: under ``bending = "hinge"`` the model's energy is k_bend / 2 times this sum
     scaled by model.BEND_CONSTANT / 3)."""
-    from .model import dihedral_angles
     theta = dihedral_angles(np.asarray(x, np.float64), edges, edge_opp)
     inner = edge_faces[:, 1] >= 0
     elen = np.linalg.norm(uv[edges[:, 1]] - uv[edges[:, 0]], axis=1)[inner]

@@ -21,7 +21,7 @@ import taichi as ti
 from taichi.lang.util import to_numpy_type
 
 from . import bending as bending_energy, metrics, ndarrays
-from .metrics import signed_material_areas  # noqa: F401 (the model's users import it here)
+from .metrics import dihedral_angles, signed_material_areas  # noqa: F401 (re-exported)
 
 
 class ModelError(ValueError):
@@ -166,23 +166,6 @@ def build_edges(faces):
                          "same direction; orient all faces counter-clockwise in material space")
     edge_faces[two, 1], edge_opp[two, 1] = fid[h1], opp[h1]
     return edge_verts, edge_faces, edge_opp
-
-
-def dihedral_angles(x, edge_verts, edge_opp):
-    """Signed dihedral angle per interior edge (0 where flat, 0 for boundary edges), with the
-    same convention as the bending kernel in dynamics.py."""
-    theta = np.zeros(len(edge_verts))
-    inner = edge_opp[:, 1] >= 0
-    x0, x1 = x[edge_verts[inner, 0]], x[edge_verts[inner, 1]]
-    x2, x3 = x[edge_opp[inner, 0]], x[edge_opp[inner, 1]]
-    e = x1 - x0
-    n1 = np.cross(e, x2 - x0)
-    n2 = np.cross(x3 - x0, e)
-    el = np.linalg.norm(e, axis=1)
-    sin = np.einsum("ij,ij->i", np.cross(n1, n2), e) / el
-    cos = np.einsum("ij,ij->i", n1, n2)
-    theta[inner] = np.arctan2(sin, cos)
-    return theta
 
 
 class ClothModel:

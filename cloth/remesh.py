@@ -21,11 +21,10 @@ Host-side numpy/Python: ``remesh(mesh, params)`` returns a new ``MeshArrays``. O
 The mutable mesh during the operations is plain Python lists (faces and a vertex -> faces
 index); numpy does everything that touches the whole mesh at once (sizing, candidate lists).
 
-Why one module of ~800 lines: sizing, split, flip and collapse are one algorithm working on one
+Why one long module: sizing, split, flip and collapse are one algorithm working on one
 private structure (``_Work``), and each operation relies on invariants the others keep; split
 up, those invariants would have to become a public interface.
 """
-from dataclasses import dataclass
 import heapq
 import math
 import time
@@ -34,6 +33,7 @@ import numpy as np
 
 from cloth.model import MeshArrays, ModelError, build_edges, dihedral_angles, \
     signed_material_areas
+from cloth.remesh_params import RemeshParams  # noqa: F401 (re-exported)
 
 # A triangle counts as degenerate when twice its area is below this fraction of its longest
 # edge squared (relative, so it works at any mesh scale).
@@ -49,98 +49,6 @@ _FLIP_EPS = 1e-6
 # t-shirt (mapping): ordinary splits never made one below 0.14 (1st percentile 0.21-0.29);
 # the chains of splits toward a seam that made slivers go down to 0.
 _SPLIT_QUALITY = 0.5
-
-
-@dataclass
-class RemeshParams:
-    """Remeshing settings. Lengths in metres of material space.
-
-    size_min, size_max: bounds on edge length the sizing field may ask for.
-    aspect_min: smallest allowed ratio of short to long axis of the sizing ellipse (caps the
-        anisotropy) and the lowest triangle quality (1 = equilateral in the metric) a collapse
-        may create.
-    refine_angle: rad, largest turning of the surface normal across one edge (curvature).
-    refine_velocity: m/s, largest velocity difference across one edge.
-    refine_compression: compressive strain at which a region is refined to ``size_min``
-        (finer target length ``size_min * sqrt(refine_compression / compression)``), so
-        regions about to buckle are refined before the wrinkles form.
-    refine_obstacle: largest change of obstacle distance across an edge, as a fraction of the
-        distance (plus ``size_min``): refines where the cloth approaches or leaves an obstacle.
-    curvature_smoothing: rounds of face -> vertex -> face averaging of the signed shape operator
-        before the curvature term squares it. Creases that zigzag one triangle wide (a
-        strain-limited soft sheet crumples at the scale of its triangles) cancel, so refining
-        does not find new ones at every size; a fold or a wrinkle a few triangles wide keeps
-        its sign and survives. Measured (hanging, mapping, default sizes, faces at frame 10):
-        0 rounds 6948 and still growing (5.7 s per frame), 1 round 3490, 2 rounds 2404
-        (about 3k by frame 40, as many as hanging settles at without strain limiting).
-    collapse_margin: hysteresis, so a just-split edge is not collapsed again next frame: a
-        collapse may create edges up to ``1 - collapse_margin`` in metric length; an edge
-        shorter than ``(1 - collapse_margin) / 2`` (it cannot be half of a recent split) may
-        create edges up to 1, the split threshold (``_collapse_limit``).
-    warm_multipliers: carry the strain solver's per-face multipliers to the faces a remesh
-        makes (``face_data``, scaled by sqrt of the area ratio) so the projection after the
-        remesh starts warm. Off: measured on hanging (docs/remesh/remesh_ops.md section 3, 30
-        frames), the warm re-projection took 8 / 9.4 / 23 AL rounds (median / mean / max)
-        against 6 / 6.4 / 8 from zero multipliers with mapping (8 / 8.9 / 14 against 5 / 5.2 /
-        7 with warp-weft). That projection is the substep's second, on cloth already
-        projected, so the substep's multipliers are the wrong start (as for the re-projection
-        after collision_final). Warm multipliers do help warp-weft's next substep (16 against
-        22 rounds); mapping's not (14 against 15).
-    defer_ops, defer_frames: a remesh whose operations (splits + flips + collapses) are at most
-        ``defer_ops`` times the face count is not applied (the simulator keeps the mesh it
-        has), for at most ``defer_frames`` frames in a row; 0 applies every remesh. Why: what
-        a new mesh sets off (the model's arrays, the bending matrix, the block pattern, a
-        preconditioner that needs two solves on one pattern before it exists) costs the same
-        for two flips as for two hundred, while a settling cloth asks for a handful of
-        operations in most frames (docs/remesh/remesh_frame.md). Deferring them keeps the
-        mesh, and everything built on it, for a few frames; the operations are not lost, the
-        next remesh finds them again. Only the simulator reads these two (``remesh()`` always
-        returns its whole result). Measured on hanging at resolution 46 (mapping, ~900 faces,
-        median ms per frame over frames 10-60, single runs on a loaded machine): 0 54, 0.01
-        44 (62 % of the remeshes applied), 0.05 32.
-    """
-    size_min: float = 0.015
-    size_max: float = 0.08
-    aspect_min: float = 0.2
-    refine_angle: float = 0.3
-    refine_velocity: float = 1.0
-    refine_compression: float = 0.05
-    refine_obstacle: float = 0.25
-    curvature_smoothing: int = 2
-    collapse_margin: float = 0.2
-    collapse_rounds: int = 2
-    warm_multipliers: bool = False
-    defer_ops: float = 0.05
-    defer_frames: int = 4
-
-    def validate(self):
-        if not self.size_min > 0:
-            raise ModelError(f"remesh size_min must be > 0 m (got {self.size_min}); "
-                             "e.g. 0.015 for a 1 m cloth")
-        if not self.size_max >= self.size_min:
-            raise ModelError(f"remesh size_max ({self.size_max}) must be >= size_min "
-                             f"({self.size_min}); raise size_max or lower size_min")
-        if not 0 < self.aspect_min <= 1:
-            raise ModelError(f"remesh aspect_min must be in (0, 1] (got {self.aspect_min}); "
-                             "0.2 allows 5:1 anisotropic triangles")
-        for name in ("refine_angle", "refine_velocity", "refine_compression",
-                     "refine_obstacle"):
-            if not getattr(self, name) > 0:
-                raise ModelError(f"remesh {name} must be > 0 (got {getattr(self, name)}); "
-                                 "a larger value refines less")
-        if not 0 <= self.collapse_margin < 1:
-            raise ModelError(f"remesh collapse_margin must be in [0, 1) (got "
-                             f"{self.collapse_margin}); 0.2 is a good hysteresis")
-        if not (isinstance(self.curvature_smoothing, int) and self.curvature_smoothing >= 0):
-            raise ModelError(f"remesh curvature_smoothing must be a whole number >= 0 (got "
-                             f"{self.curvature_smoothing}); 0 uses each face's own curvature")
-        if not self.collapse_rounds >= 0:
-            raise ModelError("remesh collapse_rounds must be >= 0")
-        if not (self.defer_ops >= 0 and isinstance(self.defer_frames, int)
-                and self.defer_frames >= 0):
-            raise ModelError(f"remesh defer_ops must be >= 0 and defer_frames a whole number "
-                             f">= 0 (got {self.defer_ops}, {self.defer_frames}); 0 applies "
-                             "every remesh")
 
 
 # ---------------------------------------------------------------------------------------------

@@ -18,7 +18,7 @@ from dataclasses import asdict, dataclass
 from typing import Optional
 
 from .config import ConfigError, NUMBER_OR_WORD, merge
-from .remesh import RemeshParams
+from .remesh_params import RemeshParams
 from .strain.families import METHODS
 from .strain.defaults import AL_ROUNDS, KKT_VELOCITY, STOP
 

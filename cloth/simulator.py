@@ -16,7 +16,7 @@ every live control: ``set_method``, ``set_bands``, ``set_iterations``, ``set_sub
 ``reset``. Each takes effect at the next substep and keeps ``settings`` in step, so a window, a
 script and a test change a run the same way.
 
-Why one module of ~550 lines: it is the one owner of a run's live state (issue #15); the stages
+Why one long module: it is the one owner of a run's live state (issue #15); the stages
 and the controls read and write the same objects, and every stage's module is imported here,
 one hop from the frame loop.
 """

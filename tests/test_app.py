@@ -596,3 +596,16 @@ def test_layers_import_only_downwards():
                     bad += [f"{os.path.relpath(path, ROOT)}:{node.lineno} imports {n}"
                             for n in names if n.split(".")[0] in forbidden]
     assert not bad, "\n".join(bad)
+
+
+def test_settings_and_metrics_import_without_the_model_or_taichi():
+    """#37: the settings schema and the strain measures are light: reading a scene's
+    settings or measuring a mesh imports neither the Taichi model nor the remesher (the
+    metrics <-> model import cycle and settings -> remesh are gone)."""
+    import subprocess
+    code = ("import sys, cloth.settings, cloth.metrics; "
+            "print(sorted(m for m in ('taichi', 'cloth.model', 'cloth.remesh') "
+            "if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True,
+                         text=True, check=True).stdout.strip()
+    assert out == "[]", out

@@ -15,7 +15,7 @@ Keys:
 Environment: LOOM_APP_FRAMES=N quits after N window frames and prints frame-time statistics
 (used for measurements and smoke tests); LOOM_APP_NO_VSYNC=1 disables vsync.
 
-Why one module of ~450 lines: the panel is one immediate-mode function per frame; what the
+Why one long module: the panel is one immediate-mode function per frame; what the
 controls do is in ``state.py``, drawing in ``render.py``, colours in ``colormap.py``.
 """
 import os

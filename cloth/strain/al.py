@@ -1,7 +1,7 @@
 """The augmented-Lagrangian solve of the strain limits in one kernel (METHOD 4, paper eqs.
 25-27): constraint assembly, merit, residual, the PCG Newton direction with its
 block-Jacobi preconditioner, multiplier updates, and the small bookkeeping kernels around it.
-Why one kernel and ndarray arguments: ``buffers.py``. Why one module of ~600 lines: every func
+Why one kernel and ndarray arguments: ``buffers.py``. Why one long module: every func
 here is inlined into ``solve_al`` (and reused by ``direct.py``); they are the steps of one
 algorithm, in the order the kernel runs them.
 """

@@ -13,7 +13,7 @@ the projection's correction v += dx/h.
 ``solver="jacobi"`` / ``"gauss-seidel"`` run the classic per-triangle projection (Provot /
 PBD style) of the same constraints, the baseline the paper calls traditional.
 
-Why one module of ~550 lines: ``StrainLimiter`` is the host side of every path (settings,
+Why one long module: ``StrainLimiter`` is the host side of every path (settings,
 bands, mesh changes, metrics, the choice of kernel); the kernels themselves live in
 ``al.py``, ``direct.py`` and ``pbd.py``.
 """
