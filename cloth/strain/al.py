@@ -7,13 +7,17 @@ algorithm, in the order the kernel runs them.
 """
 import taichi as ti
 
-from .buffers import (CONTACT_SLOTS, N_STATS, NO_CONTACT, P_C_STEP, P_CONTACT_SCALE,
-                      P_CURVATURE, P_DELTA, P_INNER_RTOL, P_ISO, P_KKT_TOL, P_MARGIN, ST_KKT,
-                      P_SHEAR, P_SVD_DELTA, PC_FACTOR, PC_JACOBI, PC_MULTIGRID, P_WARP, P_WEFT, ST_CG, ST_COMP, ST_CONVERGED,
-                      ST_ITERS, ST_NEWTON, ST_START_VIOL, ST_TRIALS, ST_VIOL, A, T)
+from .buffers import (CONTACT_SLOTS, CONVERGED, FEASIBLE_AS_GIVEN, LAST_TRY, N_STATS,
+                      NO_CONTACT, NO_SKIP, P_C_STEP, P_CONTACT_SCALE, P_CURVATURE, P_DELTA,
+                      P_INNER_RTOL, P_ISO, P_KKT_TOL, P_MARGIN, P_SHEAR, P_SVD_DELTA, P_WARP,
+                      P_WEFT, PC_FACTOR, PC_JACOBI, PC_MULTIGRID, RUNNING, ST_CG, ST_COMP,
+                      ST_CONVERGED, ST_ITERS, ST_KKT, ST_NEWTON, ST_START_VIOL, ST_TRIALS,
+                      ST_VIOL, A, T)
 from . import multigrid
 from .c_curvature import c_curvature_block, face_c_curvature
-from .constraints import MAPPING_PAIRS_BY_ALIGNMENT, face_constraints
+from .constraints import MAPPING_PAIRS_BY_ALIGNMENT, METHOD_IDS, face_constraints
+
+SVD = METHOD_IDS["svd"]     # the method template argument's value for svd
 
 
 # ---- constraint evaluation ---------------------------------------------------------------------
@@ -689,13 +693,14 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
     Newton steps, complementarity, line-search trials)."""
     ti.loop_config(serialize=True)
     for _ in range(1):
-        use_twist = params[P_SVD_DELTA] > 0.0 and K == 4 and params[P_CURVATURE] == 0.0
+        use_twist = params[P_SVD_DELTA] > 0.0 and ti.static(method == SVD) and \
+            params[P_CURVATURE] == 0.0
         margin = params[P_MARGIN]
         c_scale = params[P_CONTACT_SCALE]
         mu = mu0
         rounds, newton, cg_total, trials = 0, 0, 0, 0
         viol, comp = 0.0, 0.0
-        converged = 0
+        converged = RUNNING
         # The KKT stop (``kkt_tol`` > 0): a round that ends feasible (violation and multiplier
         # change below tol) only proposes convergence; the next round's first Newton step,
         # computed with the new multipliers, must then move no vertex further than kkt_tol.
@@ -710,7 +715,7 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
         # The merit at x, kept from the line search that reached x until the multipliers or
         # the penalty change (saves one merit evaluation per Newton step).
         L_x, L_known = 0.0, 0
-        while rounds < max_rounds and converged == 0:
+        while rounds < max_rounds and converged == RUNNING:
             inner = 0
             rr_first = 0.0
             d_max = 0.0
@@ -718,7 +723,7 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
                 slope, cg_it = 0.0, 0
                 L0 = 0.0
                 if first == 0:
-                    skip = -1.0
+                    skip = NO_SKIP
                     if inner > 0:
                         skip = params[P_INNER_RTOL] ** 2 * rr_first
                     slope, cg_it, rr = pcg_direction(method, exact, K, nv, nf, ns, mu, max_cg,
@@ -740,7 +745,7 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
                     if inner == 1:
                         kkt = d_max
                         if proposed == 1 and d_max <= kkt_tol:
-                            converged = 1       # stationary with these multipliers
+                            converged = CONVERGED   # stationary with these multipliers
                             break
                         proposed = 0
                 if first == 0 and not slope < 0.0:
@@ -761,9 +766,9 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
                 # assembled once, at the point reached (measured at 64.8k faces: 5 against 20
                 # ms an assembly, and up to 2-3 trials a Newton step there).
                 alpha, step, tries = 1.0, 0.0, 0
-                while tries < 13:
+                while tries <= LAST_TRY:
                     a = alpha
-                    if tries == 12 or first == 1:
+                    if tries == LAST_TRY or first == 1:
                         a = 0.0
                     for n in range(nv):
                         x_trial[n] = x[n]
@@ -796,7 +801,7 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
                                   vertex_violation(nv, ns, x, contact, stitch, c_scale))
                     stats[ST_START_VIOL] = viol
                     if viol < tol:
-                        converged = 2       # feasible as given: nothing to do
+                        converged = FEASIBLE_AS_GIVEN
                         break
                     choose_start(method, from_prev, K, nv, nf, ns, mu, x, x_hat, x_trial,
                                  w_ptr, w_col, w_val, w_diag, face_verts, Dm_inv, grain,
@@ -813,11 +818,11 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
                     # short one (``adaptive_margin``).
                     if alpha >= 1.0 and tries == 0:
                         margin *= 0.25
-                    elif alpha < 0.25 or tries == 12:
+                    elif alpha < 0.25 or tries == LAST_TRY:
                         margin = ti.min(ti.max(4.0 * margin, 1e-4), 0.1)
                 if step < step_tol or (kkt_tol > 0.0 and d_max <= kkt_tol):
                     break
-            if converged != 0:
+            if converged != RUNNING:
                 break
             viol, comp = update_multipliers(K, nv, nf, ns, mu, mu_max, x, rest_area, lam, g,
                                             contact, lam_c, stitch, lam_s, fric, lam_t,
@@ -828,14 +833,14 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
                 if kkt_tol > 0.0:
                     proposed = 1
                 else:
-                    converged = 1
+                    converged = CONVERGED
             # The penalty grows only while the limits are not met (under the KKT stop a
             # feasible round continues for stationarity, which a stiffer penalty only slows).
             if not (kkt_tol > 0.0 and viol < tol):
                 mu = ti.min(mu * mu_grow, mu_max)
         stats[ST_ITERS] = rounds
         stats[ST_VIOL] = viol
-        stats[ST_CONVERGED] = ti.min(converged, 1)
+        stats[ST_CONVERGED] = 0 if converged == RUNNING else 1
         stats[ST_CG] = cg_total
         stats[ST_NEWTON] = newton
         stats[ST_COMP] = comp

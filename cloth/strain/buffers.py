@@ -31,6 +31,15 @@ ST_ITERS, ST_VIOL, ST_CONVERGED, ST_CG, ST_NEWTON, ST_COMP, ST_START_VIOL, ST_TR
 # final point with the final multipliers (the KKT test's measure, ``al.solve_al``).
 ST_KKT = 8
 N_STATS = 9
+# The AL loop's outcome (``al.solve_al``'s ``converged``; stats[ST_CONVERGED] holds 0 or 1):
+# still running, converged (the limits hold and, with the kkt stop, the last Newton step is
+# below its tolerance), or feasible as given (x_hat within tol: nothing to do).
+RUNNING, CONVERGED, FEASIBLE_AS_GIVEN = 0, 1, 2
+# Backtracking line searches halve the step at most this many times; the try after the last
+# halving takes no step (a = 0) and leaves the constraints assembled at x.
+LAST_TRY = 12
+# ``al.pcg_direction``'s ``skip_rr`` when no step may be skipped (the first of a round).
+NO_SKIP = -1.0
 # The PCG's preconditioner (``al.precondition``): H's 3x3 diagonal blocks, a sparse Cholesky
 # factor of the implicit step's matrix (factor_precond.py), its aggregation multigrid
 # (multigrid.py).

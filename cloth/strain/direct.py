@@ -30,9 +30,9 @@ import taichi as ti
 from .. import ndarrays
 from . import active_set, exact_curvature
 from . import al
-from .al import (assemble_all, choose_start, fill_c_curvature, merit, metric_gradient,
+from .al import (SVD, assemble_all, choose_start, fill_c_curvature, merit, metric_gradient,
                  newton_matrix, residual, update_multipliers, vertex_violation, violation_of)
-from .buffers import (P_CONTACT_SCALE, P_CURVATURE, P_MARGIN, P_SVD_DELTA,
+from .buffers import (LAST_TRY, P_CONTACT_SCALE, P_CURVATURE, P_MARGIN, P_SVD_DELTA,
                       PC_JACOBI, ST_CG, ST_COMP, ST_CONVERGED, ST_ITERS, ST_KKT, ST_NEWTON,
                       ST_START_VIOL, ST_VIOL, A)
 
@@ -90,7 +90,7 @@ def newton_system(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: 
         fill_c_curvature(method, K, nf, mu, x, face_verts, Dm_inv, grain, rest_area, params,
                          lam, g, curv)
         newton_matrix(K, nv, nf, ns, mu, params[P_MARGIN], params[P_CONTACT_SCALE],
-                      params[P_SVD_DELTA] > 0.0 and K == 4 and not exact, exact, x, w_ptr,
+                      params[P_SVD_DELTA] > 0.0 and ti.static(method == SVD) and not exact, exact, x, w_ptr,
                       w_col, w_val, w_diag, pinned, face_verts, rest_area, lam, g, grad, cm,
                       what, kappa, twist, contact, lam_c, fric, lam_t, curv, face_slot,
                       stitch_slot, H)
@@ -112,9 +112,9 @@ def line_search(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: fl
         L0 = merit(K, nv, nf, ns, mu, x, x_hat, w_ptr, w_col, w_val, w_diag, lam, g,
                    contact, lam_c, stitch, lam_s, fric, lam_t)
         alpha, step, tries, taken = 1.0, 0.0, 0, 0.0
-        while tries < 13:
+        while tries <= LAST_TRY:
             a = alpha
-            if tries == 12 or not slope < 0.0:
+            if tries == LAST_TRY or not slope < 0.0:
                 a = 0.0
             for n in range(nv):
                 x_trial[n] = x[n] + a * d[n]
