@@ -286,7 +286,6 @@ def draw_simulation(renderer, sim, color="shading", wireframe=False, extra_cloth
         renderer.add_mesh(f"extra{k}", x, faces, rgb, smooth=smooth)
     if teach is not None:
         teach.draw_scene(renderer, [sim], [np.zeros(3)])
-        teach.draw_selection(renderer, [sim], [np.zeros(3)])
     renderer.finish(lg if legend else None, *(() if layout is None else (layout.bar,)))
     if teach is not None:
         teach.draw_frame(renderer, [sim], [sim.method], color, layout)
