@@ -7,6 +7,7 @@ screenshots) alike.
 The window and headless frames both come through ``TeachingLayer.draw_scene`` (before the
 scene is rendered) and ``TeachingLayer.draw_canvas`` (after).
 """
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -33,6 +34,7 @@ OVERLAYS = ("axes", "plot")
 
 
 _TEXT_TRIS = {}
+_LAYERS = itertools.count()      # each layer its own vertex buffers (it redraws them later)
 
 
 class Canvas2D:
@@ -296,6 +298,7 @@ class TeachingLayer:
         self.refresh_every = refresh_every
         self._sites = {}
         self._canvas = None                   # the last plot's keys, age and redraw call
+        self._buffer_key = f"teach{next(_LAYERS)}"
         self.last_panels = {}                 # simulator index -> (panels, boxes)
         self._px = np.array([1e-3, 1e-3])      # one pixel in window fractions (last draw)
 
@@ -406,7 +409,7 @@ class TeachingLayer:
                 self.last_panels[i] = (panels, sub)
         if key_entries is not None and key_box is not None:
             draw_key(cv, key_title, key_entries, key_box)
-        return draw_geometry(renderer, "teach", *cv.geometry())
+        return draw_geometry(renderer, self._buffer_key, *cv.geometry())
 
     def draw_frame(self, renderer, sims, labels, color, layout):
         """Everything on the canvas for one frame: the plot (if on) and, in the binding
@@ -453,7 +456,7 @@ class TeachingLayer:
             for p, b in zip(panels, boxes):
                 draw_marks(cv, p, plot_frame(p, b, self._px), mark[1], is_hover)
         if cv.discs:
-            cv.flush("teach.marks")
+            cv.flush(self._buffer_key + ".marks")
 
     # -- picking ------------------------------------------------------------------------------
     def pick_plot(self, pos, radius_px=8):
