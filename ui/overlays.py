@@ -354,11 +354,12 @@ class TeachingLayer:
         n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
         n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
         # The side seen from the camera (the cloth hides the other): half the strokes of
-        # drawing both sides. Each kind in one draw call.
+        # drawing both sides. Two draw calls for all: the threads with the ground grid, the
+        # principal strokes with the outlines.
         n *= np.where(np.einsum("ij,ij->i", n, eye - g["centroids"]) < 0, -1.0, 1.0)[:, None]
         off = (0.06 * size * n)[:, None, None, :]
         thr = (g["grain"].reshape(-1, 2, 2, 3) + off).reshape(-1, 3)
-        draw_lines(renderer.scene, renderer._buffers, f"axes{i}.grain", thr, THREAD, width=1.0)
+        renderer.add_thin_lines(thr, THREAD)          # in the ground grid's draw call
         pr = (g["principal"].reshape(-1, 2, 2, 3) + 1.5 * off).reshape(-1, 3)
         col = np.repeat(g["principal_colors"], 2, axis=0)
         if outlines is not None:
