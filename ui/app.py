@@ -7,6 +7,8 @@ Mouse (outside the panel):
     ctrl + right drag   zoom (up: closer)               ctrl or shift + left drag: grab cloth
     left click          select a triangle (on the cloth or its point in the strain-space
                         plot): highlighted in both; a click on nothing clears it
+    hover               with the teaching view on, the triangle under the cursor is
+                        outlined (magenta) in both views
 Keys:
     space pause/run   n single step   r reset simulation   v reset view   z / x zoom in / out
     w wireframe   s smooth/flat   c next colour mode   m next method   p screenshot
@@ -42,6 +44,10 @@ BAR = (0.755, 0.14, 0.23, 0.022)         # its colour bar (x, y bottom-up, w, h)
 PLOT = (0.265, 0.005, 0.735, 0.41)
 KEY = (0.745, 0.01, 0.995, 0.31)
 VIEW_WITH_PLOT = ((0.30, 0.70), (0.44, 0.97))
+# A running strain-space plot is rebuilt every PLOT_EVERY-th window frame (the frames between
+# redraw it as it was; docs/teaching.md, Cost); the hovered face is looked up again as often
+# while the cloth moves under a still cursor, and at once when the cursor moves.
+PLOT_EVERY = 3
 SHORT = {"dynamics": "dyn", "strain_limit": "limit", "collision": "coll", "remesh": "remesh"}
 COLOR_LABELS = {"shading": "shading", "warp-strain": "warp strain", "weft-strain": "weft strain",
                 "bias-strain": "bias strain", "principal-strain": "max principal strain",
@@ -96,7 +102,8 @@ class App:
         self.sim_times = []        # ms of simulation per window frame
         self.frames_shown = 0
         self._last = time.perf_counter()
-        self.teach = TeachingLayer(state.overlays)
+        self.teach = TeachingLayer(state.overlays, refresh_every=PLOT_EVERY)
+        self._hover_at = None      # (cursor, simulator frames) the hover was found for
         self.reset_view()
 
     # -- view ---------------------------------------------------------------------------------
@@ -221,6 +228,7 @@ class App:
                 if p is not None:
                     st.drag(p)
             self.mouse = (mode, pos)
+        self.hover_at(pos)
 
     def reset_sim(self):
         self.state.reset()
@@ -228,6 +236,30 @@ class App:
     def select_at(self, pos):
         """Select the triangle under the cursor: its point in the strain-space plot, else the
         cloth face the view ray hits first; nothing there clears the selection."""
+        self.state.select(self.face_at(pos))
+        self.teach.selected = self.state.selected
+
+    def hover_at(self, pos):
+        """Highlight the triangle under the cursor while the teaching view is on (an overlay
+        or the binding map) and no drag is under way; looked up when the cursor moved, or
+        every ``PLOT_EVERY`` frames while the cloth moves under it."""
+        st = self.state
+        if not (st.overlays or st.color == "binding") or self.mouse is not None or \
+                not (0 <= pos[0] <= 1 and 0 <= pos[1] <= 1) or \
+                (self.in_panel(pos) and not self.teach.in_plot(pos)):
+            self.teach.hover, self._hover_at = None, None
+            return
+        frames = tuple(s.frame for s in st.sims)
+        last = self._hover_at
+        if last is not None and last[0] == tuple(pos) and (
+                last[1] == frames or self.frames_shown - last[2] < PLOT_EVERY):
+            return
+        self._hover_at = (tuple(pos), frames, self.frames_shown)
+        self.teach.hover = self.face_at(pos)
+
+    def face_at(self, pos):
+        """(simulator index, face) under the cursor or None: the face whose point in the
+        strain-space plot is nearest, else the cloth face the view ray hits first."""
         hit = self.teach.pick_plot(pos)
         if hit is None and not self.teach.in_plot(pos):
             o, d = self.renderer.orbit.ray(*pos, self.renderer.aspect)
@@ -240,8 +272,7 @@ class App:
                     if best is None or depth < best[0]:
                         best = (depth, i, f)
             hit = None if best is None else best[1:]
-        self.state.select(hit)
-        self.teach.selected = self.state.selected
+        return hit
 
     # -- panel --------------------------------------------------------------------------------
     def panel(self):
@@ -399,7 +430,6 @@ class App:
             legend = legend or lg
         self.teach.selected = st.selected
         self.teach.draw_scene(r, st.sims, st.offsets)
-        self.teach.draw_selection(r, st.sims, st.offsets)
         if st.grab is not None:
             i, v = st.grab[:2]
             x = st.world_positions(i)[v]

@@ -100,11 +100,24 @@ def draw_circles_2d(canvas, buffers, key, xy, colors, radius):
     per_disc = np.ndim(radius) > 0
     if per_disc:
         vbo[:, RADIUS] = radius       # GGUI reads a disc's radius from the fourth slot
-    canvas.canvas.circles(get_field_info(vbo), True, per_disc, (0.5, 0.5, 0.5),
-                          float(np.max(radius)) if per_disc else float(radius))
+    redraw_circles_2d(canvas, vbo, float(np.max(radius)) if per_disc else float(radius),
+                      per_disc)
+    return vbo
+
+
+def redraw_circles_2d(canvas, vbo, radius, per_disc=True):
+    """Draw discs from a vertex buffer ``draw_circles_2d`` filled (in an earlier frame: the
+    buffer is kept until its key is drawn again)."""
+    canvas.canvas.circles(get_field_info(vbo), True, per_disc, (0.5, 0.5, 0.5), float(radius))
 
 
 def draw_triangles_2d(canvas, buffers, key, xy, colors):
-    """Canvas triangles in window coordinates (0..1, y up), three rows per triangle."""
+    """Canvas triangles in window coordinates (0..1, y up), three rows per triangle; returns
+    the vertex buffer (``redraw_triangles_2d`` draws it again)."""
     vbo = buffers.vertices(key, xy, colors=colors)
+    redraw_triangles_2d(canvas, vbo)
+    return vbo
+
+
+def redraw_triangles_2d(canvas, vbo):
     canvas.canvas.triangles(get_field_info(vbo), get_field_info(None), True, (0.5, 0.5, 0.5))

@@ -7,6 +7,7 @@ screenshots) alike.
 The window and headless frames both come through ``TeachingLayer.draw_scene`` (before the
 scene is rendered) and ``TeachingLayer.draw_canvas`` (after).
 """
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -15,7 +16,8 @@ from cloth import metrics
 
 from . import teaching
 from .colormap import binding_colors
-from .ggui_buffers import draw_circles_2d, draw_lines, draw_triangles_2d
+from .ggui_buffers import (draw_circles_2d, draw_lines, draw_triangles_2d, redraw_circles_2d,
+                           redraw_triangles_2d)
 
 INK = np.array([0.16, 0.16, 0.20])
 GRID = np.array([0.80, 0.81, 0.84])
@@ -25,11 +27,14 @@ REGION_EDGE = np.array([0.10, 0.50, 0.15])
 REFERENCE = np.array([0.55, 0.55, 0.60])
 THREAD = (0.50, 0.50, 0.55)
 HIGHLIGHT = np.array([0.05, 0.85, 0.95])
+HOVER = np.array([0.85, 0.10, 0.85])       # the triangle under the cursor (magenta)
+MARK_WIDTH = 3.0                           # pixels: principal strokes, face outlines
 FAINT = np.array([0.30, 0.30, 0.36])       # thread strains behind the mapped ones
 OVERLAYS = ("axes", "plot")
 
 
 _TEXT_TRIS = {}
+_LAYERS = itertools.count()      # each layer its own vertex buffers (it redraws them later)
 
 
 class Canvas2D:
@@ -84,8 +89,8 @@ class Canvas2D:
                 x -= w * self.px[0]
             elif anchor == "centre":
                 x -= 0.5 * w * self.px[0]
-            lo = np.c_[x + runs[:, 1] * self.px[0], y - (runs[:, 0] + 1) * self.px[1]]
-            hi = np.c_[x + runs[:, 2] * self.px[0], y - runs[:, 0] * self.px[1]]
+            lo = np.c_[x + runs[:, 2] * self.px[0], y - runs[:, 1] * self.px[1]]
+            hi = np.c_[x + runs[:, 3] * self.px[0], y - runs[:, 0] * self.px[1]]
             n0 = len(self.tris)
             self.rects(lo, hi, np.tile(color, (len(runs), 1)))
             hit = (self.tris[n0:], self.cols[n0:])
@@ -96,23 +101,61 @@ class Canvas2D:
         self.tris += hit[0]
         self.cols += hit[1]
 
-    def disc(self, xy, colors, radius_px):
-        self.discs.append(np.asarray(xy, float).reshape(-1, 2))
-        self.disc_cols.append(np.asarray(colors, float).reshape(-1, 3))
+    def disc(self, xy, colors, radius_px, merge=False):
+        """Discs of one radius (pixels). ``merge``: of discs with the same colour whose
+        centres fall in the same half-pixel cell, only the last is kept (it covers the
+        others but for a fraction of a pixel): dense clouds draw far fewer discs."""
+        xy = np.asarray(xy, float).reshape(-1, 2)
+        colors = np.asarray(colors, float).reshape(-1, 3)
+        if merge and len(xy) > 1:
+            keep = distinct_discs(xy, colors, self.px)
+            xy, colors = xy[keep], colors[keep]
+        self.discs.append(xy)
+        self.disc_cols.append(colors)
         self.disc_r.append(radius_px)
 
-    def flush(self, key):
-        r = self.r
-        if self.tris:
-            draw_triangles_2d(r.canvas, r._buffers, key + ".tri", np.concatenate(self.tris),
-                              np.concatenate(self.cols))
+    def geometry(self):
+        """What ``flush`` draws: (triangle corners, their colours, disc centres, their
+        colours, disc radii as fractions of the window's height); None for an empty part."""
+        tris = (np.concatenate(self.tris), np.concatenate(self.cols)) if self.tris else None
+        discs = None
         if self.discs:
-            # One call: GGUI's per-disc radius sits in the vertex's fourth slot.
-            xy = np.concatenate(self.discs)
-            rad = np.concatenate([np.full(len(d), rr * self.px[1])
-                                  for d, rr in zip(self.discs, self.disc_r)])
-            draw_circles_2d(r.canvas, r._buffers, key + ".disc", xy,
-                            np.concatenate(self.disc_cols), rad)
+            discs = (np.concatenate(self.discs), np.concatenate(self.disc_cols),
+                     np.concatenate([np.full(len(d), rr * self.px[1])
+                                     for d, rr in zip(self.discs, self.disc_r)]))
+        return tris, discs
+
+    def flush(self, key):
+        draw_geometry(self.r, key, *self.geometry())
+
+
+def distinct_discs(xy, colors, px, cell=0.5):
+    """Indices (in drawing order) of the discs to draw: per half-pixel cell and colour the
+    last one drawn."""
+    q = np.floor(xy / (cell * px)).astype(np.int64) & 0xFFFF
+    c = np.round(np.clip(colors, 0, 1) * 255).astype(np.int64)
+    key = (q[:, 0] << 40) | (q[:, 1] << 24) | (c[:, 0] << 16) | (c[:, 1] << 8) | c[:, 2]
+    _, first_rev = np.unique(key[::-1], return_index=True)
+    return np.sort(len(key) - 1 - first_rev)
+
+
+def draw_geometry(renderer, key, tris, discs):
+    """Canvas triangles (one call), then discs (one call: GGUI's per-disc radius sits in the
+    vertex's fourth slot), as ``Canvas2D.geometry`` gives them. Returns a function that draws
+    the same again in a later frame without refilling the vertex buffers."""
+    calls = []
+    if tris is not None:
+        vbo = draw_triangles_2d(renderer.canvas, renderer._buffers, key + ".tri", *tris)
+        calls.append(lambda: redraw_triangles_2d(renderer.canvas, vbo))
+    if discs is not None:
+        dbo = draw_circles_2d(renderer.canvas, renderer._buffers, key + ".disc", *discs)
+        rmax = float(np.max(discs[2]))
+        calls.append(lambda: redraw_circles_2d(renderer.canvas, dbo, rmax))
+
+    def again():
+        for call in calls:
+            call()
+    return again
 
 
 def plot_frame(panel, box, px):
@@ -166,13 +209,10 @@ def draw_panel(cv, panel, box, highlight=None, title=True):
         cv.outline(wa, wc, wb, wd, REGION_EDGE, 2.0)
     cv.outline(fx0, fy0, fx1, fy1, INK, 1.0)
     if panel.faint is not None and len(panel.faint):
-        cv.disc(to_win(panel.faint), np.tile(FAINT, (len(panel.faint), 1)), 1.3)
-    cv.disc(to_win(panel.points), panel.colors, 2.0)
+        cv.disc(to_win(panel.faint), np.tile(FAINT, (len(panel.faint), 1)), 1.3, merge=True)
+    cv.disc(to_win(panel.points), panel.colors, 2.0, merge=True)
     if highlight is not None:
-        sel = np.nonzero(np.asarray(panel.faces) == highlight)[0]
-        if len(sel):
-            cv.disc(to_win(panel.points[sel]), np.tile(INK, (len(sel), 1)), 6.0)
-            cv.disc(to_win(panel.points[sel]), np.tile(HIGHLIGHT, (len(sel), 1)), 4.0)
+        draw_marks(cv, panel, frame, highlight)
     # Labels: title and note above, ranges at the frame's ends, axis names.
     if title:
         cv.text(panel.title, x0 + 4 * px, y1 - 3 * py, INK, 12)
@@ -186,6 +226,17 @@ def draw_panel(cv, panel, box, highlight=None, title=True):
     cv.text(f(panel.ylim[0]), fx0 - 2 * px, fy0 + 10 * py, INK, 10, anchor="right")
     cv.text(f(panel.ylim[1]), fx0 - 2 * px, fy1, INK, 10, anchor="right")
     cv.text("^ " + panel.ylabel, fx0, fy1 + 14 * py, INK, 10)
+
+
+def draw_marks(cv, panel, frame, face, hover=False):
+    """Ring the points of ``face`` in a panel drawn in ``frame``: the selection (large), or
+    the triangle under the cursor (``hover``: small)."""
+    sel = np.nonzero(np.asarray(panel.faces) == face)[0]
+    if len(sel):
+        w = to_window(panel, frame, panel.points[sel])
+        outer, inner = (4.5, 3.0) if hover else (6.0, 4.0)
+        cv.disc(w, np.tile(INK, (len(sel), 1)), outer)
+        cv.disc(w, np.tile(HOVER if hover else HIGHLIGHT, (len(sel), 1)), inner)
 
 
 def draw_key(cv, title, entries, box):
@@ -226,9 +277,16 @@ def frame_layout(overlays):
 
 class TeachingLayer:
     """The overlays of one window (or offscreen renderer): which are on, the selected face,
-    and per simulator the cached glyph sites (they change only with the mesh)."""
+    the face under the cursor, per simulator the cached glyph sites (they change only with
+    the mesh), and the canvas drawing of the last plot.
 
-    def __init__(self, overlays=(), plot_rect=None):
+    The plot and the key are rebuilt only when what they show changed (the simulators'
+    frames, methods, bands, the layout, the window's size); a window sets
+    ``refresh_every = k`` to rebuild a running plot at most every k-th frame (the frames
+    between redraw the kept vertex buffers: the plot lags the cloth by up to k - 1 frames).
+    The selection and hover marks are drawn every frame on top."""
+
+    def __init__(self, overlays=(), plot_rect=None, refresh_every=1):
         self.on = set(overlays)
         unknown = self.on - set(OVERLAYS)
         if unknown:
@@ -236,7 +294,11 @@ class TeachingLayer:
                              f"{', '.join(OVERLAYS)}")
         self.plot_rect = plot_rect            # (x0, y0, x1, y1) window fractions, y up
         self.selected = None                  # (simulator index, face)
+        self.hover = None                     # (simulator index, face) under the cursor
+        self.refresh_every = refresh_every
         self._sites = {}
+        self._canvas = None                   # the last plot's keys, age and redraw call
+        self._buffer_key = f"teach{next(_LAYERS)}"
         self.last_panels = {}                 # simulator index -> (panels, boxes)
         self._px = np.array([1e-3, 1e-3])      # one pixel in window fractions (last draw)
 
@@ -253,52 +315,77 @@ class TeachingLayer:
         return self._sites[key]
 
     def draw_scene(self, renderer, sims, offsets):
-        """The principal-axes strokes (3-D, before the scene is rendered)."""
-        if "axes" not in self.on:
-            return
-        for i, sim in enumerate(sims):
-            m = sim.model
-            sites, size, Dm_inv = self._mesh_cache(i, sim)
-            x = m.positions() + offsets[i]
-            g = teaching.axis_glyphs(x, m.faces, Dm_inv, m.grain, sites, size, sim.bands())
-            t = x[m.faces[sites]]
-            n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
-            n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
-            # Lifted off both sides (seen from either), each kind in one draw call.
-            off = (0.06 * size * n)[:, None, None, :]
-            thr = g["grain"].reshape(-1, 2, 2, 3)
-            thr = np.concatenate([thr + off, thr - off]).reshape(-1, 3)
-            draw_lines(renderer.scene, renderer._buffers, f"axes{i}.grain", thr, THREAD,
-                       width=1.0)
-            pr = g["principal"].reshape(-1, 2, 2, 3)
-            pr = np.concatenate([pr + 1.5 * off, pr - 1.5 * off]).reshape(-1, 3)
-            col = np.repeat(g["principal_colors"], 2, axis=0)
-            draw_lines(renderer.scene, renderer._buffers, f"axes{i}.pr", pr, (0, 0, 0),
-                       width=3.0, colors=np.concatenate([col, col]))
-            if self.selected is not None and self.selected[0] == i:
-                self._draw_selected(renderer, sim, x, i)
+        """The principal-axes strokes (3-D, before the scene is rendered), lifted off the
+        side of the cloth that faces the camera, and the outlines of the selected and the
+        hovered face. Every scene draw call costs GGUI about a millisecond a frame on
+        software Vulkan whatever it holds, so the outlines go into the strokes' call."""
+        eye = np.asarray(renderer.orbit.position, float)
+        outlines = self._outlines(sims, offsets, eye)
+        if "axes" in self.on:
+            for i, sim in enumerate(sims):
+                self._draw_axes(renderer, sim, i, offsets[i], eye,
+                                outlines if i == len(sims) - 1 else None)
+        elif outlines is not None:
+            draw_lines(renderer.scene, renderer._buffers, "marks", outlines[0], (0, 0, 0),
+                       width=MARK_WIDTH, colors=outlines[1])
 
-    def _draw_selected(self, renderer, sim, x, i):
-        if self.selected[1] >= sim.model.n_faces:       # remeshed since
-            return
-        f = sim.model.faces[self.selected[1]]
-        tri = x[f]
-        pts = np.concatenate([tri, tri[[1, 2, 0]]], axis=1).reshape(-1, 3)
-        draw_lines(renderer.scene, renderer._buffers, f"sel{i}", pts, HIGHLIGHT, width=4.0)
+    def _outlines(self, sims, offsets, eye):
+        """The selected and the hovered face's edges as segments (points, colours), or None;
+        moved 2 % of the way to the camera (the same place on screen, in front of the
+        cloth)."""
+        hover = self.hover if self.hover != self.selected else None
+        pts, cols = [], []
+        for mark, color in ((self.selected, HIGHLIGHT), (hover, HOVER)):
+            if mark is None or mark[0] >= len(sims) or mark[1] >= sims[mark[0]].model.n_faces:
+                continue                              # (remeshed since)
+            i, m = mark[0], sims[mark[0]].model
+            tri = m.positions()[m.faces[mark[1]]] + offsets[i]
+            tri += 0.02 * (eye - tri)
+            pts.append(np.concatenate([tri, tri[[1, 2, 0]]], axis=1).reshape(-1, 3))
+            cols.append(np.tile(color, (6, 1)))
+        return (np.concatenate(pts), np.concatenate(cols)) if pts else None
 
-    def draw_selection(self, renderer, sims, offsets):
-        """The selected face's outline in the 3-D view (also without the axes overlay)."""
-        if self.selected is None or "axes" in self.on:
-            return
-        i, _ = self.selected
-        if i < len(sims):
-            self._draw_selected(renderer, sims[i], sims[i].model.positions() + offsets[i], i)
+    def _draw_axes(self, renderer, sim, i, offset, eye, outlines=None):
+        m = sim.model
+        sites, size, Dm_inv = self._mesh_cache(i, sim)
+        x = m.positions() + offset
+        g = teaching.axis_glyphs(x, m.faces, Dm_inv, m.grain, sites, size, sim.bands())
+        t = x[m.faces[sites]]
+        n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+        # The side seen from the camera (the cloth hides the other): half the strokes of
+        # drawing both sides. Two draw calls for all: the threads with the ground grid, the
+        # principal strokes with the outlines.
+        n *= np.where(np.einsum("ij,ij->i", n, eye - g["centroids"]) < 0, -1.0, 1.0)[:, None]
+        off = (0.06 * size * n)[:, None, None, :]
+        thr = (g["grain"].reshape(-1, 2, 2, 3) + off).reshape(-1, 3)
+        renderer.add_thin_lines(thr, THREAD)          # in the ground grid's draw call
+        pr = (g["principal"].reshape(-1, 2, 2, 3) + 1.5 * off).reshape(-1, 3)
+        col = np.repeat(g["principal_colors"], 2, axis=0)
+        if outlines is not None:
+            pr, col = np.concatenate([pr, outlines[0]]), np.concatenate([col, outlines[1]])
+        draw_lines(renderer.scene, renderer._buffers, f"axes{i}.pr", pr, (0, 0, 0),
+                   width=MARK_WIDTH, colors=col)
+
+    def _keys(self, renderer, sims, labels, color, layout, want_plot):
+        """What the canvas shows besides the simulators' states, and their states."""
+        px = tuple(1.0 / np.asarray(renderer.window.get_window_shape(), float))
+        per_sim = []
+        for s in sims:
+            iso = s.strain.mapping_iso if s.strain is not None else 0.0
+            on = s.strain is not None and s.stage("strain_limit").enabled
+            per_sim.append((id(s), id(s.model), s.model.n_faces, s.method,
+                            repr(sorted(s.bands().items())), iso, on))
+        shown = (id(renderer), px, bool(want_plot), color, tuple(labels), tuple(per_sim),
+                 None if layout is None else (tuple(layout.plot), layout.key))
+        return shown, tuple((s.frame, s.time) for s in sims)
 
     def draw_canvas(self, renderer, sims, labels, binds, boxes=None, key_box=None,
                     key_entries=None, key_title=""):
         """The strain-space plot (one pair of panels per simulator, in ``boxes``: per
         simulator a (x0, y0, x1, y1) window box for its two panels) and the binding key,
-        after the scene is rendered (on top of it)."""
+        after the scene is rendered (on top of it). Returns a function that draws the same
+        again."""
         cv = Canvas2D(renderer)
         self._px = cv.px
         self.last_panels = {}
@@ -316,20 +403,33 @@ class TeachingLayer:
                 else:                   # stacked under each cloth
                     mid = 0.5 * (y0 + y1)
                     sub = [(x0, mid + 0.004, x1, y1), (x0, y0, x1, mid - 0.004)]
-                hl = self.selected[1] if self.selected and self.selected[0] == i else None
                 for p, b in zip(panels, sub):
                     if len(sims) > 1:
                         p.title = f"{labels[i]}: {p.title}"
-                    draw_panel(cv, p, b, hl)
+                    draw_panel(cv, p, b)
                 self.last_panels[i] = (panels, sub)
         if key_entries is not None and key_box is not None:
             draw_key(cv, key_title, key_entries, key_box)
-        cv.flush("teach")
+        return draw_geometry(renderer, self._buffer_key, *cv.geometry())
 
     def draw_frame(self, renderer, sims, labels, color, layout):
         """Everything on the canvas for one frame: the plot (if on) and, in the binding
-        colour mode, its key."""
+        colour mode, its key (rebuilt when they changed, see the class), then the selection
+        and hover marks."""
         want_plot = "plot" in self.on and layout is not None and layout.plot
+        shown, states = self._keys(renderer, sims, labels, color, layout, want_plot)
+        c = self._canvas
+        if c is not None and c["shown"] == shown and (c["states"] == states or
+                                                      c["age"] + 1 < self.refresh_every):
+            if c["states"] != states:
+                c["age"] += 1
+            c["again"]()
+        else:
+            again = self._build(renderer, sims, labels, color, layout, want_plot)
+            self._canvas = {"shown": shown, "states": states, "age": 0, "again": again}
+        self._draw_plot_marks(renderer)
+
+    def _build(self, renderer, sims, labels, color, layout, want_plot):
         binds = [teaching.binding(s) if (want_plot or color == "binding") else None
                  for s in sims]
         entries, title = None, ""
@@ -342,8 +442,22 @@ class TeachingLayer:
                             if len(sims) == 1 or not name.startswith("free")]
             title = ("binding constraint (largest multiplier)" if len(sims) == 1 else
                      "binding constraint per method (grey: free)")
-        self.draw_canvas(renderer, sims, labels, binds, layout.plot if want_plot else None,
-                         layout.key if layout is not None else None, entries, title)
+        return self.draw_canvas(renderer, sims, labels, binds,
+                                layout.plot if want_plot else None,
+                                layout.key if layout is not None else None, entries, title)
+
+    def _draw_plot_marks(self, renderer):
+        """The selected and the hovered face's points in the plot, ringed."""
+        cv = Canvas2D(renderer)
+        hover = self.hover if self.hover != self.selected else None
+        for mark, is_hover in ((hover, True), (self.selected, False)):
+            if mark is None or mark[0] not in self.last_panels:
+                continue
+            panels, boxes = self.last_panels[mark[0]]
+            for p, b in zip(panels, boxes):
+                draw_marks(cv, p, plot_frame(p, b, self._px), mark[1], is_hover)
+        if cv.discs:
+            cv.flush(self._buffer_key + ".marks")
 
     # -- picking ------------------------------------------------------------------------------
     def pick_plot(self, pos, radius_px=8):

@@ -99,6 +99,7 @@ class ClothRenderer:
         self.ground_y, self.ground_half = ground_y, ground_half
         self.set_camera_cfg(camera_cfg)
         self._add_ground()
+        self._thin = []
         self._legend = None
 
     def set_camera_cfg(self, camera_cfg):
@@ -167,11 +168,25 @@ class ClothRenderer:
         self.scene.ambient_light((0.35, 0.35, 0.38))
         self.scene.point_light(pos=(2.0, 4.0, 3.0), color=(0.9, 0.9, 0.9))
         self.scene.point_light(pos=(-3.0, 3.0, -2.0), color=(0.35, 0.35, 0.4))
-        draw_lines(self.scene, self._buffers, "ground", self.ground, GROUND)
+        self._thin = []          # width-1 lines drawn with the ground (add_thin_lines)
+
+    def add_thin_lines(self, points, color):
+        """Segments (consecutive point pairs, world) one pixel wide in ``color`` (one, or one
+        per point), drawn in the ground grid's draw call: each scene draw call costs GGUI
+        about a millisecond a frame on software Vulkan, whatever it holds."""
+        points = np.asarray(points, np.float32).reshape(-1, 3)
+        colors = np.broadcast_to(np.asarray(color, np.float32), (len(points), 3))
+        self._thin.append((points, colors))
 
     def finish(self, legend=None, bar_rect=(0.70, 0.075, 0.27, 0.025)):
         """Render the scene into the canvas (call before every capture) and draw the colour
         bar of ``legend`` (rect x, y, w, h in window fractions, y up)."""
+        pts = [self.ground] + [p for p, _ in self._thin]
+        cols = [np.broadcast_to(np.asarray(GROUND, np.float32), self.ground.shape)]
+        cols += [c for _, c in self._thin]
+        draw_lines(self.scene, self._buffers, "ground", np.concatenate(pts), GROUND,
+                   colors=np.concatenate(cols))
+        self._thin = []
         self.canvas.set_background_color(BACKGROUND)
         self._legend = (legend, bar_rect) if legend is not None else None
         if legend is not None:
@@ -286,7 +301,6 @@ def draw_simulation(renderer, sim, color="shading", wireframe=False, extra_cloth
         renderer.add_mesh(f"extra{k}", x, faces, rgb, smooth=smooth)
     if teach is not None:
         teach.draw_scene(renderer, [sim], [np.zeros(3)])
-        teach.draw_selection(renderer, [sim], [np.zeros(3)])
     renderer.finish(lg if legend else None, *(() if layout is None else (layout.bar,)))
     if teach is not None:
         teach.draw_frame(renderer, [sim], [sim.method], color, layout)
