@@ -423,6 +423,10 @@ class StrainLimiter:
         """The bias band in ||w_u + w_v|| units (sqrt 2 at rest), as the constraints use it."""
         return tuple(float(np.sqrt(2.0) * (1.0 + b)) for b in self.bias)
 
+    def _kernel_pdas(self):
+        """The active-set model in the kernels (PCG, ``al.pdas_resolves``), not on the host."""
+        return self.newton_model == "active-set" and self.linear_solver == "pcg"
+
     def _upload_params(self):
         if self._ws is None or self.warp is None or self.weft is None:
             return
@@ -435,6 +439,7 @@ class StrainLimiter:
             self.active_margin
         params[buffers.P_INNER_RTOL] = self.inner_rtol
         params[buffers.P_KKT_TOL] = self.kkt_length
+        params[buffers.P_PDAS] = 1.0 if self._kernel_pdas() else 0.0
         params[buffers.P_DELTA] = self.mapping_delta
         params[buffers.P_SVD_DELTA] = self.svd_delta
         params[buffers.P_ISO] = self.mapping_iso
@@ -661,13 +666,13 @@ class StrainLimiter:
                 for a in (ws.lam, ws.lam_c, ws.lam_s, ws.lam_t):
                     ndarrays.zero(a)
             use_system = self.coupling == "implicit" and h > 0 and self._system_ready
-            if self.linear_solver == "cholesky" or self.newton_model == "active-set" or \
-                    _host_loop_only():
+            if self.linear_solver == "cholesky" or _host_loop_only() or \
+                    (self.newton_model == "active-set" and not self._kernel_pdas()):
                 rounds, newton, converged = self._solve_direct(mid, K, use_system)
                 stats = ws.stats.to_numpy()
             else:
                 # (_solve_al read the stats already: a read-back costs ~0.2 ms.)
-                rounds, newton, converged, stats = self._solve_al(
+                rounds, newton, converged, stats = self._solve_al_with_fallback(
                     mid, K, self._newton_metric(use_system), contacts)
             if saved is not None:
                 for a, val in zip((ws.lam, ws.lam_c, ws.lam_s, ws.lam_t), saved):
@@ -774,6 +779,40 @@ class StrainLimiter:
         one busy). Choosing "exact" compiles its own variant once."""
         return int(self.curvature == "exact" and not self.exact_curvature
                    and self.method in EXACT_CURVATURE_FOR)
+
+    def _solve_al_with_fallback(self, mid, K, metric, contacts):
+        """``_solve_al``; under the kernels' active-set model (``_kernel_pdas``) a projection
+        not converged in ``direct.ACTIVE_SET_ROUNDS`` rounds is solved again from its start
+        with the margin model (``last_fallback``), as the host loop does (direct.solve)."""
+        self.last_fallback = False
+        if not self._kernel_pdas():
+            return self._solve_al(mid, K, metric, contacts)
+        from .direct import ACTIVE_SET_ROUNDS
+        ws = self._ws
+        multipliers_in = [a.to_numpy() for a in (ws.lam, ws.lam_c, ws.lam_s, ws.lam_t)]
+        budget = self.max_iters
+        self.max_iters = min(ACTIVE_SET_ROUNDS, budget)
+        try:
+            out = self._solve_al(mid, K, metric, contacts)
+        finally:
+            self.max_iters = budget
+        if out[2]:
+            return out
+        self.last_fallback = True
+        al.copy_vectors(self.model.n_verts, ws.x_start, ws.x)
+        for a, val in zip((ws.lam, ws.lam_c, ws.lam_s, ws.lam_t), multipliers_in):
+            a.from_numpy(val)
+        params = ws.params.to_numpy()
+        saved, mu_scale = params.copy(), self.mu_scale
+        params[buffers.P_PDAS], params[buffers.P_MARGIN] = 0.0, self.active_margin
+        ws.params.from_numpy(params)
+        self.mu_scale = _default_mu_scale(self.coupling, "margin")
+        try:
+            rounds, newton, converged, stats = self._solve_al(mid, K, metric, contacts)
+        finally:
+            ws.params.from_numpy(saved)
+            self.mu_scale = mu_scale
+        return out[0] + rounds, out[1] + newton, converged, stats
 
     def _solve_al(self, mid, K, metric, contacts=False):
         """The AL loop (METHOD 4), one kernel launch (al.solve_al): rounds of inexact
