@@ -57,7 +57,8 @@ LINEAR_SOLVERS = ("cholesky", "pcg")
 # The AL's Newton model (settings strain.newton_model): "margin" puts every constraint within
 # ``active_margin`` of its band into the Newton matrix (the PCG kernels' model); "active-set"
 # predicts the step's active set primal-dual style and solves again until it settles
-# (active_set.py; the host loop of direct.py with exact solves, whatever linear_solver says).
+# (active_set.py: in the host loop of direct.py with exact solves under linear_solver
+# "cholesky", in the kernels with PCG (al.pdas_resolves) under "pcg").
 NEWTON_MODELS = ("margin", "active-set")
 # The active-set model's initial penalty relative to MU_SCALE: with the Hessian as its matrix
 # it needs no stiff penalty to keep steps short, and a soft one lets the line search cross a
@@ -135,6 +136,12 @@ FACTOR_CG, FACTOR_CG_MAX, FACTOR_CG_WORK = 6, 20, 6000
 # median of 5.0e-8 J (8 of 8 under), 13.5-13.7 ms a frame alone; resolution 9 at 1.4-3.8e-8
 # J for all three methods. Block Jacobi keeps 5 (tenth session: 3 shimmered at 1.8e-6 J).
 MAX_NEWTON, FACTOR_NEWTON = 5, 4
+# The active-set model in the kernels (``_kernel_pdas``): its step predicts the active set from
+# the PCG's answer, so the PCG runs to a tighter tolerance, and a round takes more Newton steps
+# (each runs to a tenth of the kkt tolerance). Measured on hanging at resolution 25 (svd, 8
+# frames from the start): with the margin model's settings (rtol 0.1, 4 steps) 2 of 8 frames
+# ran 100 rounds; with these every frame converged (docs/speed/motion.md section 8).
+PDAS_CG_RTOL, PDAS_NEWTON = 1e-2, 10
 # Newton steps per AL round with the multigrid (above FACTOR_MAX_FACES faces). Its rounds ran
 # their 4 steps in full (inner_rtol rarely stopped them), and the rounds are set by the
 # multiplier updates: hanging from the start, frames 2-11, median ms per frame with 4 / 3 / 2
@@ -423,6 +430,15 @@ class StrainLimiter:
         """The bias band in ||w_u + w_v|| units (sqrt 2 at rest), as the constraints use it."""
         return tuple(float(np.sqrt(2.0) * (1.0 + b)) for b in self.bias)
 
+    def set_linear_solver(self, name):
+        """"pcg" or "cholesky" for the Newton steps, live (under the active-set model it also
+        chooses kernels or host loop: the parameters follow)."""
+        if name not in LINEAR_SOLVERS:
+            raise StrainLimitError(f"unknown strain linear_solver '{name}': use one of "
+                                   f"{', '.join(LINEAR_SOLVERS)}")
+        self.linear_solver = name
+        self._upload_params()
+
     def _kernel_pdas(self):
         """The active-set model in the kernels (PCG, ``al.pdas_resolves``), not on the host."""
         return self.newton_model == "active-set" and self.linear_solver == "pcg"
@@ -437,7 +453,7 @@ class StrainLimiter:
         # The active-set model's matrix is the Hessian: no constraint enters it early.
         params[buffers.P_MARGIN] = 0.0 if self.newton_model == "active-set" else \
             self.active_margin
-        params[buffers.P_INNER_RTOL] = self.inner_rtol
+        params[buffers.P_INNER_RTOL] = 0.0 if self._kernel_pdas() else self.inner_rtol
         params[buffers.P_KKT_TOL] = self.kkt_length
         params[buffers.P_PDAS] = 1.0 if self._kernel_pdas() else 0.0
         params[buffers.P_DELTA] = self.mapping_delta
@@ -742,6 +758,8 @@ class StrainLimiter:
         Jacobi."""
         if self.max_newton is not None:
             return self.max_newton
+        if self._kernel_pdas():
+            return PDAS_NEWTON
         if pc_mode == PC_MULTIGRID:
             return MULTIGRID_NEWTON
         return MAX_NEWTON if pc_mode == PC_JACOBI else FACTOR_NEWTON
@@ -784,7 +802,7 @@ class StrainLimiter:
         """``_solve_al``; under the kernels' active-set model (``_kernel_pdas``) a projection
         not converged in ``direct.ACTIVE_SET_ROUNDS`` rounds is solved again from its start
         with the margin model (``last_fallback``), as the host loop does (direct.solve)."""
-        self.last_fallback = False
+        self.last_fallback, self.last_solves = False, 0      # (host solves: direct.py)
         if not self._kernel_pdas():
             return self._solve_al(mid, K, metric, contacts)
         from .direct import ACTIVE_SET_ROUNDS
@@ -833,7 +851,9 @@ class StrainLimiter:
         mg = pc if pc_mode == PC_MULTIGRID else self._stubs[PC_MULTIGRID]
         al.solve_al(mid, self._kernel_curvature(), K, m.n_verts, m.n_faces, len(self._stitches), mu, self.mu_grow,
                    mu_max, self.max_iters,
-                   self.newton_budget(pc_mode), self.pcg_budget(pc_mode), self.cg_rtol, self.tol, step_tol,
+                   self.newton_budget(pc_mode), self.pcg_budget(pc_mode),
+                   min(self.cg_rtol, PDAS_CG_RTOL) if self._kernel_pdas() else self.cg_rtol,
+                   self.tol, step_tol,
                    int(self.adaptive_margin),
                    int(self.coupling == "implicit" and metric is self._system), ws.params, ws.x, ws.x_hat,
                    ws.x_trial, metric.ptr, metric.col, metric.val, metric.diag,
