@@ -543,6 +543,11 @@ def newton_direction(method: ti.template(), exact: ti.template(), K, nv, nf, ns,
 # At most this many solves per Newton step while the predicted active set keeps changing
 # (active_set.MAX_RESOLVES, the host version's).
 PDAS_SOLVES = 6
+# Each round's Newton loop runs to this fraction of the kkt tolerance before the multiplier
+# update (with the kkt tolerance itself the rounds ended after one step), and the penalty
+# grows only in a round whose violation did not fall below PDAS_STALL times the last
+# round's (grown every round, it reached 1e4-1e5 x its start within one projection and the
+# line search cut steps to 1/256: docs/speed/motion.md section 5).
 PDAS_INNER_FRACTION = 0.1
 PDAS_STALL = 0.25
 
