@@ -202,7 +202,8 @@ SCHEMA = {
         "newton_model": Key("", "the AL's Newton model: margin (constraints near their band "
                             "enter the matrix early; fast, stops short of the minimiser) or "
                             "active-set (the Hessian with the step's predicted active set; "
-                            "converges, slower: host loop with sparse Cholesky)",
+                            "converges, slower: in the kernels with pcg, in a host loop with "
+                            "cholesky)",
                             choices=("margin", "active-set")),
         "isotropy": Key("", "mapping only: width of the closure of its feasible set at "
                         "isotropy; 0 = the paper's constraint exactly", lo=0),

@@ -395,7 +395,7 @@ class Simulator:
         around it instead of stopping dead: docs/speed/drape_depth.md)."""
         self._change("strain", linear_solver=name)      # the schema refuses other names
         if self.strain is not None:
-            self.strain.linear_solver = name
+            self.strain.set_linear_solver(name)
 
     def set_substeps(self, n):
         """Time steps per frame (h = 1 / (fps x substeps))."""

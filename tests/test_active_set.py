@@ -111,16 +111,19 @@ def test_active_set_projection_lands_on_the_tight_solve(method):
         sim.step_frame()
     state = _saved_state(sim)
     lim = _settle(sim, "active-set", tol=1e-8, kkt_velocity=1e-6, max_newton=30,
-                  curvature="exact")
+                  curvature="exact", linear_solver="cholesky")
     _redo_dynamics(sim, state)
     lim.project(sim.h)
     assert lim.last_converged and not lim.last_fallback
     tight = sim.model.positions()
-    _settle(sim, "active-set", tol=1e-5, kkt_velocity=1e-2, max_newton=None)
+    # As a user switches it on: the kernels' active-set step (PCG).
+    _settle(sim, "active-set", tol=1e-5, kkt_velocity=1e-2, max_newton=None,
+            linear_solver="pcg")
     _redo_dynamics(sim, state)
     lim.project(sim.h)
     assert lim.last_converged and lim.last_violation_max < 1e-5
     assert lim.last_stationarity <= 1e-2
+    assert lim.last_solves == 0 and not lim.last_fallback    # in the kernels, no host solve
     assert np.abs(sim.model.positions() - tight).max() < 2e-4
     _settle(sim, "margin", stop="violation", curvature="model", tol=1e-4)
     _redo_dynamics(sim, state)
@@ -129,13 +132,14 @@ def test_active_set_projection_lands_on_the_tight_solve(method):
     assert np.abs(sim.model.positions() - tight).max() > 5e-4     # the default stops short
 
 
-def test_active_set_falls_back_on_the_margin_model(monkeypatch):
+@pytest.mark.parametrize("linear_solver", ["pcg", "cholesky"])
+def test_active_set_falls_back_on_the_margin_model(monkeypatch, linear_solver):
     """A projection the active-set model does not finish within ACTIVE_SET_ROUNDS is solved
-    again from its start with the margin model: it converges, holds the limits, and says so
-    (``last_fallback``)."""
+    again from its start with the margin model, in the kernels (pcg) as in the host loop
+    (cholesky): it converges, holds the limits, and says so (``last_fallback``)."""
     sim = _hanging("svd", "implicit", res=9)
     sim.step_frame()
-    lim = _settle(sim, "active-set")
+    lim = _settle(sim, "active-set", linear_solver=linear_solver)
     monkeypatch.setattr(direct, "ACTIVE_SET_ROUNDS", 1)
     sim.step_frame()
     assert lim.last_fallback

@@ -1,5 +1,7 @@
 """The primal-dual active-set (PDAS) Newton step of the strain projection (settings
-``strain.newton_model = "active-set"``; the host loop of ``direct.py``, exact linear solves).
+``strain.newton_model = "active-set"``): here for the host loop of ``direct.py`` with exact
+linear solves (``strain.linear_solver = "cholesky"``); ``al.pdas_resolves`` is the same step in
+the kernels with PCG (``"pcg"``).
 
 Why: the default Newton model puts every constraint within ``active_margin`` (1e-2 strain) of
 its band into the Newton matrix. That keeps the line search from running into constraints the
@@ -26,9 +28,10 @@ their curvature. Those Gauss-Newton terms are replaced by the predicted set's; t
 import numpy as np
 
 # At most this many solves per Newton step while the predicted set keeps changing (the
-# prototype needed 2-3; a step whose set has not settled is still a descent direction for the
-# line search, since each solve's matrix is positive definite).
-MAX_RESOLVES = 6
+# kernels' limit, al.PDAS_SOLVES: the prototype needed 2-3; a step whose set has not settled
+# is still a descent direction for the line search, since each solve's matrix is positive
+# definite).
+from .al import PDAS_SOLVES as MAX_RESOLVES  # noqa: E402
 
 
 class LinearisedConstraints:

@@ -9,7 +9,7 @@ import taichi as ti
 
 from .buffers import (CONTACT_SLOTS, CONVERGED, FEASIBLE_AS_GIVEN, LAST_TRY, N_STATS,
                       NO_CONTACT, NO_SKIP, P_C_STEP, P_CONTACT_SCALE, P_CURVATURE, P_DELTA,
-                      P_INNER_RTOL, P_ISO, P_KKT_TOL, P_MARGIN, P_SHEAR, P_SVD_DELTA, P_WARP,
+                      P_INNER_RTOL, P_ISO, P_KKT_TOL, P_MARGIN, P_PDAS, P_SHEAR, P_SVD_DELTA, P_WARP,
                       P_WEFT, PC_FACTOR, PC_JACOBI, PC_MULTIGRID, RUNNING, ST_CG, ST_COMP,
                       ST_CONVERGED, ST_ITERS, ST_KKT, ST_NEWTON, ST_START_VIOL, ST_TRIALS,
                       ST_VIOL, A, T)
@@ -488,8 +488,9 @@ def newton_direction(method: ti.template(), exact: ti.template(), K, nv, nf, ns,
                      lam_c: T, fric: T, lam_t: T, c_scale, curv: T, face_slot: T,
                      stitch_slot: T, H: T, b: T, d: T, r: T, z: T, p: T, Ap: T, P_inv: T,
                      pc_mode, f_ptr: T, f_idx: T, f_val: T, f_perm: T, f_work: T,
-                     mg_int: T, mg_real: T, mg_block: T):
-    """pcg_direction's matrix and PCG solve, with r = -grad L_A already in r."""
+                     mg_int: T, mg_real: T, mg_block: T, x_trial: T):
+    """pcg_direction's matrix and PCG solve, with r = -grad L_A already in r (and the
+    active-set re-solves when params[P_PDAS] is set; x_trial is their scratch)."""
     if ti.static(exact):
         fill_c_curvature(method, K, nf, mu, x, face_verts, Dm_inv, grain, rest_area, params,
                          lam, g, curv)
@@ -529,7 +530,209 @@ def newton_direction(method: ti.template(), exact: ti.template(), K, nv, nf, ns,
         rz = rz_new
         for n in range(nv):
             p[n] = z[n] + beta * p[n]
-    return -dot(b, d, nv), it
+    slope = -dot(b, d, nv)
+    if params[P_PDAS] > 0.0:
+        slope, it = pdas_resolves(K, nv, nf, mu, max_cg, rtol, it, x, w_ptr, w_col, w_diag,
+                                  pinned, face_verts, lam, g, grad, kappa, contact, lam_c, H,
+                                  b, d, r, z, p, Ap, P_inv, pc_mode, f_ptr, f_idx, f_val,
+                                  f_perm, f_work, mg_int, mg_real, mg_block, x_trial)
+    return slope, it
+
+
+# ---- the primal-dual active-set step (strain.newton_model = "active-set", PCG) -------------
+# At most this many solves per Newton step while the predicted active set keeps changing
+# (active_set.MAX_RESOLVES, the host version's).
+PDAS_SOLVES = 6
+# Each round's Newton loop runs to this fraction of the kkt tolerance before the multiplier
+# update (with the kkt tolerance itself the rounds ended after one step), and the penalty
+# grows only in a round whose violation did not fall below PDAS_STALL times the last
+# round's (grown every round, it reached 1e4-1e5 x its start within one projection and the
+# line search cut steps to 1/256: docs/speed/motion.md section 5).
+PDAS_INNER_FRACTION = 0.1
+PDAS_STALL = 0.25
+
+
+@ti.func
+def face_step(face_verts: T, v: T, f):
+    """The 9-vector of v at face f's three vertices."""
+    ids = face_verts[f]
+    a, b_, c = v[ids[0]], v[ids[1]], v[ids[2]]
+    return ti.Vector([a[0], a[1], a[2], b_[0], b_[1], b_[2], c[0], c[1], c[2]])
+
+
+@ti.func
+def pdas_changes(K, nv, nf, mu, face_verts: T, pinned: T, lam: T, g: T, grad: T,
+                 contact: T, lam_c: T, x: T, d: T, prev: T, first, flip: T):
+    """How many constraints the linearised step d switches relative to the set the last solve
+    used (the set active at x when ``first``, else the one predicted from ``prev``); writes
+    flip[f, c] = (active after d) - (active at x) in {-1, 0, 1} for the faces (the contacts'
+    are recomputed where needed: ``pdas_contact_flip``)."""
+    changes = 0
+    for f in range(nf):
+        jd = face_step(face_verts, d, f)
+        jp = face_step(face_verts, prev, f)
+        for c in range(K):
+            t = g[f, c] + lam[f, c] / mu
+            gr = pair_grad(grad, f, c)
+            now = 1 if t > 0.0 else 0
+            new = 1 if t + gr.dot(jd) > 0.0 else 0
+            old = now
+            if not first:
+                old = 1 if t + gr.dot(jp) > 0.0 else 0
+            if new != old:
+                changes += 1
+            flip[f, c] = float(new - now)
+    for n in range(nv):
+        if pinned[n] == 0:
+            for j in ti.static(range(CONTACT_SLOTS)):
+                cn = contact_normal(contact, n, j)
+                t = (lam_c[n, j] + mu * contact_g(contact, x, n, j)) / mu
+                now = 1 if t > 0.0 else 0
+                new = 1 if t - cn.dot(d[n]) > 0.0 else 0
+                old = now
+                if not first:
+                    old = 1 if t - cn.dot(prev[n]) > 0.0 else 0
+                if new != old:
+                    changes += 1
+    return changes
+
+
+@ti.func
+def pdas_contact_flip(mu, contact: T, lam_c: T, x: T, prev: T, n, j):
+    """(active after the step ``prev``) - (active at x) of vertex n's contact slot j, and t."""
+    cn = contact_normal(contact, n, j)
+    t = (lam_c[n, j] + mu * contact_g(contact, x, n, j)) / mu
+    now = 1.0 if t > 0.0 else 0.0
+    new = 1.0 if t - cn.dot(prev[n]) > 0.0 else 0.0
+    return new - now, t
+
+
+@ti.func
+def pdas_times(K, nv, nf, mu, w_ptr: T, w_col: T, pinned: T, face_verts: T, grad: T,
+               contact: T, lam_c: T, x: T, prev: T, flip: T, H: T, p: T, Ap: T):
+    """Ap = (H + mu sum_c flip_c J_c^T J_c) p: the Newton matrix with the Gauss-Newton terms of
+    the predicted set in place of those of the set active at x (``flip``, ``prev``)."""
+    for n in range(nv):
+        Ap[n] = metric_times(n, w_ptr, w_col, H, p)
+    for f in range(nf):
+        ids = face_verts[f]
+        jp = face_step(face_verts, p, f)
+        for pair in range(K // 2):
+            # A bound pair shares its gradient up to sign; at most one of the two is active.
+            c = 2 * pair
+            w = flip[f, c] + flip[f, c + 1]
+            if w != 0.0:
+                gr = grad[f, c]
+                scatter(Ap, ids, gr, mu * w * gr.dot(jp))
+    for n in range(nv):
+        if pinned[n] == 1:
+            Ap[n] = ti.Vector([0.0, 0.0, 0.0])
+        else:
+            for j in ti.static(range(CONTACT_SLOTS)):
+                fl, _t = pdas_contact_flip(mu, contact, lam_c, x, prev, n, j)
+                if fl != 0.0:
+                    cn = contact_normal(contact, n, j)
+                    Ap[n] += (mu * fl * cn.dot(p[n])) * cn
+
+
+@ti.func
+def pdas_resolves(K, nv, nf, mu, max_cg, rtol, it, x: T, w_ptr: T, w_col: T, w_diag: T,
+                  pinned: T, face_verts: T, lam: T, g: T, grad: T, flip: T, contact: T,
+                  lam_c: T, H: T, b: T, d: T, r: T, z: T, p: T, Ap: T, P_inv: T, pc_mode,
+                  f_ptr: T, f_idx: T, f_val: T, f_perm: T, f_work: T, mg_int: T, mg_real: T,
+                  mg_block: T, prev: T):
+    """The active-set Newton step (cloth/strain/active_set.py, here in the kernels with PCG):
+    d holds the step with the set active at x (H's own, margin 0) and b = -grad L_A. While
+    the step switches constraints on or off, solve again with the Gauss-Newton terms and
+    forces of the set it predicts, t + J d > 0 (t = g + lambda / mu), at most PDAS_SOLVES
+    times; a re-solved step that is not a descent direction is replaced by the first solve's.
+    ``flip`` (kappa's storage, free once H is assembled) and ``prev`` (x_trial's, free until
+    the line search) are scratch. Returns (slope, CG iterations)."""
+    total = it
+    k = 1
+    while k < PDAS_SOLVES:
+        if pdas_changes(K, nv, nf, mu, face_verts, pinned, lam, g, grad, contact, lam_c, x,
+                        d, prev, k == 1, flip) == 0:
+            break
+        for n in range(nv):
+            prev[n] = d[n]
+        # rhs = b - mu sum_c flip_c t_c J_c^T (faces; contacts' J = -n).
+        for n in range(nv):
+            r[n] = b[n]
+        for f in range(nf):
+            ids = face_verts[f]
+            for c in range(K):
+                if flip[f, c] != 0.0:
+                    t = g[f, c] + lam[f, c] / mu
+                    scatter(r, ids, pair_grad(grad, f, c), -mu * flip[f, c] * t)
+        for n in range(nv):
+            if pinned[n] == 1:
+                r[n] = ti.Vector([0.0, 0.0, 0.0])
+            else:
+                for j in ti.static(range(CONTACT_SLOTS)):
+                    fl, t = pdas_contact_flip(mu, contact, lam_c, x, prev, n, j)
+                    if fl != 0.0:
+                        r[n] += (mu * fl * t) * contact_normal(contact, n, j)
+        total += pdas_pcg(K, nv, nf, mu, max_cg, rtol, w_ptr, w_col, pinned, face_verts,
+                          grad, contact, lam_c, x, prev, flip, H, d, r, z, p, Ap, P_inv,
+                          pc_mode, f_ptr, f_idx, f_val, f_perm, f_work, mg_int, mg_real,
+                          mg_block)
+        k += 1
+    slope = -dot(b, d, nv)
+    if k > 1 and not slope < 0.0:
+        # Back to the first solve: the set active at x (no flips).
+        for f in range(nf):
+            for c in range(K):
+                flip[f, c] = 0.0
+        for n in range(nv):
+            prev[n] = ti.Vector([0.0, 0.0, 0.0])
+            r[n] = b[n]
+        total += pdas_pcg(K, nv, nf, mu, max_cg, rtol, w_ptr, w_col, pinned, face_verts,
+                          grad, contact, lam_c, x, prev, flip, H, d, r, z, p, Ap, P_inv,
+                          pc_mode, f_ptr, f_idx, f_val, f_perm, f_work, mg_int, mg_real,
+                          mg_block)
+        slope = -dot(b, d, nv)
+    return slope, total
+
+
+@ti.func
+def pdas_pcg(K, nv, nf, mu, max_cg, rtol, w_ptr: T, w_col: T, pinned: T, face_verts: T,
+             grad: T, contact: T, lam_c: T, x: T, prev: T, flip: T, H: T, d: T, r: T, z: T,
+             p: T, Ap: T, P_inv: T, pc_mode, f_ptr: T, f_idx: T, f_val: T, f_perm: T,
+             f_work: T, mg_int: T, mg_real: T, mg_block: T):
+    """PCG from d = 0 on ``pdas_times``' matrix with the rhs in r (H's preconditioner)."""
+    rr = 0.0
+    for n in range(nv):
+        d[n] = ti.Vector([0.0, 0.0, 0.0])
+        rr += r[n].dot(r[n])
+    rz = precondition(pc_mode, nv, P_inv, f_ptr, f_idx, f_val, f_perm, f_work, mg_int,
+                      mg_real, mg_block, r, z)
+    for n in range(nv):
+        p[n] = z[n]
+    stop = rtol * rtol * rr
+    it = 0
+    while it < max_cg and rr > stop:
+        pdas_times(K, nv, nf, mu, w_ptr, w_col, pinned, face_verts, grad, contact, lam_c, x,
+                   prev, flip, H, p, Ap)
+        pAp = 0.0
+        for n in range(nv):
+            pAp += p[n].dot(Ap[n])
+        if pAp <= 0.0:
+            break
+        alpha = rz / pAp
+        rr = 0.0
+        for n in range(nv):
+            d[n] += alpha * p[n]
+            r[n] -= alpha * Ap[n]
+            rr += r[n].dot(r[n])
+        rz_new = precondition(pc_mode, nv, P_inv, f_ptr, f_idx, f_val, f_perm, f_work,
+                              mg_int, mg_real, mg_block, r, z)
+        it += 1
+        beta = rz_new / rz
+        rz = rz_new
+        for n in range(nv):
+            p[n] = z[n] + beta * p[n]
+    return it
 
 
 @ti.func
@@ -542,7 +745,7 @@ def pcg_direction(method: ti.template(), exact: ti.template(), K, nv, nf, ns, mu
                   lam_s: T, fric: T, lam_t: T, c_scale, curv: T, face_slot: T, stitch_slot: T,
                   H: T, b: T, d: T, r: T, z: T, p: T, Ap: T, P_inv: T, pc_mode, f_ptr: T,
                   f_idx: T, f_val: T, f_perm: T, f_work: T, mg_int: T, mg_real: T,
-                  mg_block: T, skip_rr):
+                  mg_block: T, skip_rr, x_trial: T):
     """Projected-Newton direction: solve H d = -grad L_A (H from ``newton_matrix``) by PCG
     with H's 3x3 diagonal blocks as preconditioner (block Jacobi), from d = 0 to
     |r| <= rtol |grad L_A| (an inexact Newton step: measured on the hanging scene, rtol = 0.1
@@ -560,7 +763,7 @@ def pcg_direction(method: ti.template(), exact: ti.template(), K, nv, nf, ns, mu
                                      grad, cm, what, kappa, twist, contact, lam_c, fric, lam_t,
                                      c_scale, curv, face_slot, stitch_slot, H, b, d, r, z, p,
                                      Ap, P_inv, pc_mode, f_ptr, f_idx, f_val, f_perm,
-                                     f_work, mg_int, mg_real, mg_block)
+                                     f_work, mg_int, mg_real, mg_block, x_trial)
     else:
         for n in range(nv):
             d[n] = ti.Vector([0.0, 0.0, 0.0])
@@ -707,6 +910,12 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
         # That step is the distance to the minimiser as far as the Newton model sees it, so
         # the stop bounds stationarity, not only feasibility (issue #32).
         kkt_tol = params[P_KKT_TOL]
+        # The active-set step's matrix is the merit's Hessian: each round's Newton loop runs
+        # to a tenth of the kkt tolerance before the multipliers move, and the penalty grows
+        # only when the violation stalls (direct.py's INNER_FRACTION and STALL, measured there).
+        pdas = params[P_PDAS] > 0.0
+        inner_kkt = kkt_tol * (PDAS_INNER_FRACTION if pdas else 1.0)
+        last_viol = 1e30
         proposed = 0
         kkt = 0.0
         for n in range(nv):
@@ -735,7 +944,7 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
                                                      c_scale, curv, face_slot, stitch_slot, H,
                                                      b, d, r, z, p, Ap, P_inv, pc_mode, f_ptr,
                                                      f_idx, f_val, f_perm, f_work, mg_int,
-                                                     mg_real, mg_block, skip)
+                                                     mg_real, mg_block, skip, x_trial)
                     if inner == 0:
                         rr_first = rr
                     cg_total += cg_it
@@ -820,7 +1029,7 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
                         margin *= 0.25
                     elif alpha < 0.25 or tries == LAST_TRY:
                         margin = ti.min(ti.max(4.0 * margin, 1e-4), 0.1)
-                if step < step_tol or (kkt_tol > 0.0 and d_max <= kkt_tol):
+                if step < step_tol or (kkt_tol > 0.0 and d_max <= inner_kkt):
                     break
             if converged != RUNNING:
                 break
@@ -836,7 +1045,11 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
                     converged = CONVERGED
             # The penalty grows only while the limits are not met (under the KKT stop a
             # feasible round continues for stationarity, which a stiffer penalty only slows).
-            if not (kkt_tol > 0.0 and viol < tol):
+            grow = not (kkt_tol > 0.0 and viol < tol)
+            if pdas and viol < PDAS_STALL * last_viol:
+                grow = False
+            last_viol = viol
+            if grow:
                 mu = ti.min(mu * mu_grow, mu_max)
         stats[ST_ITERS] = rounds
         stats[ST_VIOL] = viol

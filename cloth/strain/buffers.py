@@ -56,7 +56,10 @@ P_INNER_RTOL = 13
 # The KKT stop's stationarity tolerance (metres: the largest vertex move of a Newton step at the
 # answer); 0 = the old stop on violation and multiplier change alone.
 P_KKT_TOL = 14
-N_PARAMS = 15
+# 1: the PCG path's Newton step is the primal-dual active-set step (``al.pdas_resolves``,
+# strain.newton_model = "active-set" with strain.linear_solver = "pcg"); 0: the margin model's.
+P_PDAS = 15
+N_PARAMS = 16
 # A vertex without a contact half-space: n = 0 and d far below any position, so d - n.x never
 # comes near activating.
 NO_CONTACT = -1e30

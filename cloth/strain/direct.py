@@ -39,9 +39,9 @@ from .buffers import (LAST_TRY, P_CONTACT_SCALE, P_CURVATURE, P_MARGIN, P_SVD_DE
 # LOOM_DEBUG_DIRECT=1 prints every Newton step (residual, step, line-search alpha).
 _DEBUG = bool(os.environ.get("LOOM_DEBUG_DIRECT"))
 # The active-set model raises the penalty only in a round whose violation did not fall below
-# this fraction of the last round's.
-STALL = 0.25
-INNER_FRACTION = 0.1
+# STALL times the last round's, and runs each round's Newton loop to INNER_FRACTION of the
+# kkt tolerance: the kernels' rules (al.py), one definition.
+STALL, INNER_FRACTION = al.PDAS_STALL, al.PDAS_INNER_FRACTION
 # Rounds the active-set model gets before ``solve`` falls back on the margin model (converged
 # projections took 2-8 rounds on hanging at resolutions 9 and 25, svd and warp-weft).
 ACTIVE_SET_ROUNDS = 30

@@ -57,7 +57,8 @@ LINEAR_SOLVERS = ("cholesky", "pcg")
 # The AL's Newton model (settings strain.newton_model): "margin" puts every constraint within
 # ``active_margin`` of its band into the Newton matrix (the PCG kernels' model); "active-set"
 # predicts the step's active set primal-dual style and solves again until it settles
-# (active_set.py; the host loop of direct.py with exact solves, whatever linear_solver says).
+# (active_set.py: in the host loop of direct.py with exact solves under linear_solver
+# "cholesky", in the kernels with PCG (al.pdas_resolves) under "pcg").
 NEWTON_MODELS = ("margin", "active-set")
 # The active-set model's initial penalty relative to MU_SCALE: with the Hessian as its matrix
 # it needs no stiff penalty to keep steps short, and a soft one lets the line search cross a
@@ -135,6 +136,12 @@ FACTOR_CG, FACTOR_CG_MAX, FACTOR_CG_WORK = 6, 20, 6000
 # median of 5.0e-8 J (8 of 8 under), 13.5-13.7 ms a frame alone; resolution 9 at 1.4-3.8e-8
 # J for all three methods. Block Jacobi keeps 5 (tenth session: 3 shimmered at 1.8e-6 J).
 MAX_NEWTON, FACTOR_NEWTON = 5, 4
+# The active-set model in the kernels (``_kernel_pdas``): its step predicts the active set from
+# the PCG's answer, so the PCG runs to a tighter tolerance, and a round takes more Newton steps
+# (each runs to a tenth of the kkt tolerance). Measured on hanging at resolution 25 (svd, 8
+# frames from the start): with the margin model's settings (rtol 0.1, 4 steps) 2 of 8 frames
+# ran 100 rounds; with these every frame converged (docs/speed/motion.md section 8).
+PDAS_CG_RTOL, PDAS_NEWTON = 1e-2, 10
 # Newton steps per AL round with the multigrid (above FACTOR_MAX_FACES faces). Its rounds ran
 # their 4 steps in full (inner_rtol rarely stopped them), and the rounds are set by the
 # multiplier updates: hanging from the start, frames 2-11, median ms per frame with 4 / 3 / 2
@@ -423,6 +430,19 @@ class StrainLimiter:
         """The bias band in ||w_u + w_v|| units (sqrt 2 at rest), as the constraints use it."""
         return tuple(float(np.sqrt(2.0) * (1.0 + b)) for b in self.bias)
 
+    def set_linear_solver(self, name):
+        """"pcg" or "cholesky" for the Newton steps, live (under the active-set model it also
+        chooses kernels or host loop: the parameters follow)."""
+        if name not in LINEAR_SOLVERS:
+            raise StrainLimitError(f"unknown strain linear_solver '{name}': use one of "
+                                   f"{', '.join(LINEAR_SOLVERS)}")
+        self.linear_solver = name
+        self._upload_params()
+
+    def _kernel_pdas(self):
+        """The active-set model in the kernels (PCG, ``al.pdas_resolves``), not on the host."""
+        return self.newton_model == "active-set" and self.linear_solver == "pcg"
+
     def _upload_params(self):
         if self._ws is None or self.warp is None or self.weft is None:
             return
@@ -433,8 +453,9 @@ class StrainLimiter:
         # The active-set model's matrix is the Hessian: no constraint enters it early.
         params[buffers.P_MARGIN] = 0.0 if self.newton_model == "active-set" else \
             self.active_margin
-        params[buffers.P_INNER_RTOL] = self.inner_rtol
+        params[buffers.P_INNER_RTOL] = 0.0 if self._kernel_pdas() else self.inner_rtol
         params[buffers.P_KKT_TOL] = self.kkt_length
+        params[buffers.P_PDAS] = 1.0 if self._kernel_pdas() else 0.0
         params[buffers.P_DELTA] = self.mapping_delta
         params[buffers.P_SVD_DELTA] = self.svd_delta
         params[buffers.P_ISO] = self.mapping_iso
@@ -661,13 +682,13 @@ class StrainLimiter:
                 for a in (ws.lam, ws.lam_c, ws.lam_s, ws.lam_t):
                     ndarrays.zero(a)
             use_system = self.coupling == "implicit" and h > 0 and self._system_ready
-            if self.linear_solver == "cholesky" or self.newton_model == "active-set" or \
-                    _host_loop_only():
+            if self.linear_solver == "cholesky" or _host_loop_only() or \
+                    (self.newton_model == "active-set" and not self._kernel_pdas()):
                 rounds, newton, converged = self._solve_direct(mid, K, use_system)
                 stats = ws.stats.to_numpy()
             else:
                 # (_solve_al read the stats already: a read-back costs ~0.2 ms.)
-                rounds, newton, converged, stats = self._solve_al(
+                rounds, newton, converged, stats = self._solve_al_with_fallback(
                     mid, K, self._newton_metric(use_system), contacts)
             if saved is not None:
                 for a, val in zip((ws.lam, ws.lam_c, ws.lam_s, ws.lam_t), saved):
@@ -737,6 +758,8 @@ class StrainLimiter:
         Jacobi."""
         if self.max_newton is not None:
             return self.max_newton
+        if self._kernel_pdas():
+            return PDAS_NEWTON
         if pc_mode == PC_MULTIGRID:
             return MULTIGRID_NEWTON
         return MAX_NEWTON if pc_mode == PC_JACOBI else FACTOR_NEWTON
@@ -775,6 +798,40 @@ class StrainLimiter:
         return int(self.curvature == "exact" and not self.exact_curvature
                    and self.method in EXACT_CURVATURE_FOR)
 
+    def _solve_al_with_fallback(self, mid, K, metric, contacts):
+        """``_solve_al``; under the kernels' active-set model (``_kernel_pdas``) a projection
+        not converged in ``direct.ACTIVE_SET_ROUNDS`` rounds is solved again from its start
+        with the margin model (``last_fallback``), as the host loop does (direct.solve)."""
+        self.last_fallback, self.last_solves = False, 0      # (host solves: direct.py)
+        if not self._kernel_pdas():
+            return self._solve_al(mid, K, metric, contacts)
+        from .direct import ACTIVE_SET_ROUNDS
+        ws = self._ws
+        multipliers_in = [a.to_numpy() for a in (ws.lam, ws.lam_c, ws.lam_s, ws.lam_t)]
+        budget = self.max_iters
+        self.max_iters = min(ACTIVE_SET_ROUNDS, budget)
+        try:
+            out = self._solve_al(mid, K, metric, contacts)
+        finally:
+            self.max_iters = budget
+        if out[2]:
+            return out
+        self.last_fallback = True
+        al.copy_vectors(self.model.n_verts, ws.x_start, ws.x)
+        for a, val in zip((ws.lam, ws.lam_c, ws.lam_s, ws.lam_t), multipliers_in):
+            a.from_numpy(val)
+        params = ws.params.to_numpy()
+        saved, mu_scale = params.copy(), self.mu_scale
+        params[buffers.P_PDAS], params[buffers.P_MARGIN] = 0.0, self.active_margin
+        ws.params.from_numpy(params)
+        self.mu_scale = _default_mu_scale(self.coupling, "margin")
+        try:
+            rounds, newton, converged, stats = self._solve_al(mid, K, metric, contacts)
+        finally:
+            ws.params.from_numpy(saved)
+            self.mu_scale = mu_scale
+        return out[0] + rounds, out[1] + newton, converged, stats
+
     def _solve_al(self, mid, K, metric, contacts=False):
         """The AL loop (METHOD 4), one kernel launch (al.solve_al): rounds of inexact
         minimisation of L_A by projected Newton with a backtracking line search, then the
@@ -794,7 +851,9 @@ class StrainLimiter:
         mg = pc if pc_mode == PC_MULTIGRID else self._stubs[PC_MULTIGRID]
         al.solve_al(mid, self._kernel_curvature(), K, m.n_verts, m.n_faces, len(self._stitches), mu, self.mu_grow,
                    mu_max, self.max_iters,
-                   self.newton_budget(pc_mode), self.pcg_budget(pc_mode), self.cg_rtol, self.tol, step_tol,
+                   self.newton_budget(pc_mode), self.pcg_budget(pc_mode),
+                   min(self.cg_rtol, PDAS_CG_RTOL) if self._kernel_pdas() else self.cg_rtol,
+                   self.tol, step_tol,
                    int(self.adaptive_margin),
                    int(self.coupling == "implicit" and metric is self._system), ws.params, ws.x, ws.x_hat,
                    ws.x_trial, metric.ptr, metric.col, metric.val, metric.diag,
