@@ -103,8 +103,9 @@ COMMON_DEFAULTS = {
         "kkt_velocity": KKT_VELOCITY,
         # The AL's Newton model: "margin" (constraints within 1e-2 strain of their band already
         # in the matrix; the fast PCG kernels) or "active-set" (the merit's Hessian with the
-        # step's active set predicted and re-solved: converges to the minimiser; host loop with
-        # exact solves). Why not the default: docs/speed/motion.md.
+        # step's active set predicted and re-solved: converges to the minimiser; in the kernels
+        # under linear_solver "pcg", a host loop under "cholesky"). Why not the default:
+        # docs/speed/motion.md.
         "newton_model": "margin",
         # mapping only: width (in eta1^2 - eta2^2) of the closure of its feasible set at
         # isotropy, where the paper's constraint depends on an arbitrary principal frame;
