@@ -885,14 +885,7 @@ class StrainLimiter:
                 backend.arch() == "cpu"):
             return None
         kind = self.precondition
-        if kind == "auto" and self._kernel_pdas() and HAVE_PYAMG and \
-                3 * self.model.n_verts > MAX_COARSE:
-            # The active-set step's PCG: the multigrid halves its time at every size measured
-            # (hanging mapping, frames 3-10: 1152 faces 190-270 against 430-550 ms a frame
-            # with the factor, 4050 faces 840-1060 against 1630-2180 ms; docs/speed/motion.md
-            # section 8). (Block Jacobi fell back on the margin model in every frame.)
-            kind = "multigrid"
-        elif kind == "auto":
+        if kind == "auto":
             limit = FACTOR_MAX_FACES if self.factor_max_faces is None else self.factor_max_faces
             kind = "factor" if self.model.n_faces <= limit else "multigrid"
         if kind == "factor" and not linalg.HAVE_CHOLMOD:
