@@ -497,39 +497,16 @@ def newton_direction(method: ti.template(), exact: ti.template(), K, nv, nf, ns,
     newton_matrix(K, nv, nf, ns, mu, margin, c_scale, use_twist, exact, x, w_ptr, w_col, w_val,
                   w_diag, pinned, face_verts, rest_area, lam, g, grad, cm, what, kappa, twist,
                   contact, lam_c, fric, lam_t, curv, face_slot, stitch_slot, H)
-    rz, rr = 0.0, 0.0
+    rr = 0.0
     for n in range(nv):
         if pc_mode == PC_JACOBI:
             P_inv[n] = H[w_diag[n]].inverse()       # pinned rows: the identity
         b[n] = r[n]
         d[n] = ti.Vector([0.0, 0.0, 0.0])
         rr += r[n].dot(r[n])
-    rz = precondition(pc_mode, nv, P_inv, f_ptr, f_idx, f_val, f_perm, f_work, mg_int,
-                      mg_real, mg_block, r, z)
-    for n in range(nv):
-        p[n] = z[n]
-    stop = rtol * rtol * rr
-    it = 0
-    while it < max_cg and rr > stop:
-        pAp = 0.0
-        for n in range(nv):
-            Ap[n] = metric_times(n, w_ptr, w_col, H, p)
-            pAp += p[n].dot(Ap[n])
-        if pAp <= 0.0:
-            break
-        alpha = rz / pAp
-        rr = 0.0
-        for n in range(nv):
-            d[n] += alpha * p[n]
-            r[n] -= alpha * Ap[n]
-            rr += r[n].dot(r[n])
-        rz_new = precondition(pc_mode, nv, P_inv, f_ptr, f_idx, f_val, f_perm, f_work,
-                              mg_int, mg_real, mg_block, r, z)
-        it += 1
-        beta = rz_new / rz
-        rz = rz_new
-        for n in range(nv):
-            p[n] = z[n] + beta * p[n]
+    it = pcg_loop(False, K, nv, nf, mu, max_cg, rtol, rr, w_ptr, w_col, pinned, face_verts,
+                  grad, contact, lam_c, x, x_trial, kappa, H, d, r, z, p, Ap, P_inv, pc_mode,
+                  f_ptr, f_idx, f_val, f_perm, f_work, mg_int, mg_real, mg_block)
     slope = -dot(b, d, nv)
     if params[P_PDAS] > 0.0:
         slope, it = pdas_resolves(K, nv, nf, mu, max_cg, rtol, it, x, w_ptr, w_col, w_diag,
@@ -705,6 +682,19 @@ def pdas_pcg(K, nv, nf, mu, max_cg, rtol, w_ptr: T, w_col: T, pinned: T, face_ve
     for n in range(nv):
         d[n] = ti.Vector([0.0, 0.0, 0.0])
         rr += r[n].dot(r[n])
+    return pcg_loop(True, K, nv, nf, mu, max_cg, rtol, rr, w_ptr, w_col, pinned, face_verts,
+                    grad, contact, lam_c, x, prev, flip, H, d, r, z, p, Ap, P_inv, pc_mode,
+                    f_ptr, f_idx, f_val, f_perm, f_work, mg_int, mg_real, mg_block)
+
+
+@ti.func
+def pcg_loop(flipped: ti.template(), K, nv, nf, mu, max_cg, rtol, rr, w_ptr: T, w_col: T,
+             pinned: T, face_verts: T, grad: T, contact: T, lam_c: T, x: T, prev: T,
+             flip: T, H: T, d: T, r: T, z: T, p: T, Ap: T, P_inv: T, pc_mode, f_ptr: T,
+             f_idx: T, f_val: T, f_perm: T, f_work: T, mg_int: T, mg_real: T, mg_block: T):
+    """The PCG iterations of a Newton step, from d = 0 with the residual in r (|r|^2 = rr)
+    to |r| <= rtol |r0|: on H, or with ``flipped`` on ``pdas_times``' matrix (H with the
+    predicted set's Gauss-Newton terms). Returns the iterations."""
     rz = precondition(pc_mode, nv, P_inv, f_ptr, f_idx, f_val, f_perm, f_work, mg_int,
                       mg_real, mg_block, r, z)
     for n in range(nv):
@@ -712,11 +702,16 @@ def pdas_pcg(K, nv, nf, mu, max_cg, rtol, w_ptr: T, w_col: T, pinned: T, face_ve
     stop = rtol * rtol * rr
     it = 0
     while it < max_cg and rr > stop:
-        pdas_times(K, nv, nf, mu, w_ptr, w_col, pinned, face_verts, grad, contact, lam_c, x,
-                   prev, flip, H, p, Ap)
         pAp = 0.0
-        for n in range(nv):
-            pAp += p[n].dot(Ap[n])
+        if ti.static(flipped):
+            pdas_times(K, nv, nf, mu, w_ptr, w_col, pinned, face_verts, grad, contact, lam_c,
+                       x, prev, flip, H, p, Ap)
+            for n in range(nv):
+                pAp += p[n].dot(Ap[n])
+        else:
+            for n in range(nv):
+                Ap[n] = metric_times(n, w_ptr, w_col, H, p)
+                pAp += p[n].dot(Ap[n])
         if pAp <= 0.0:
             break
         alpha = rz / pAp

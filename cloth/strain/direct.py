@@ -179,15 +179,12 @@ def solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, margin_mu=None):
     if lim.newton_model != "active-set":
         return _solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, False, lim.max_iters)
     ws = lim._ws
-    multipliers_in = [a.to_numpy() for a in (ws.lam, ws.lam_c, ws.lam_s, ws.lam_t)]
+    multipliers_in = lim.multipliers()
     out = _solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, True,
                  min(ACTIVE_SET_ROUNDS, lim.max_iters))
     if out[2] or margin_mu is None:
         return out
-    lim.last_fallback = True
-    al.copy_vectors(lim.model.n_verts, ws.x_start, ws.x)
-    for a, val in zip((ws.lam, ws.lam_c, ws.lam_s, ws.lam_t), multipliers_in):
-        a.from_numpy(val)
+    lim.restart_from(multipliers_in)
     params = ws.params.to_numpy()
     params[P_MARGIN] = lim.active_margin
     ws.params.from_numpy(params)

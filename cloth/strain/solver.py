@@ -678,7 +678,7 @@ class StrainLimiter:
         if self.solver == "al":
             saved = None
             if not warm:
-                saved = [a.to_numpy() for a in (ws.lam, ws.lam_c, ws.lam_s, ws.lam_t)]
+                saved = self.multipliers()
                 for a in (ws.lam, ws.lam_c, ws.lam_s, ws.lam_t):
                     ndarrays.zero(a)
             use_system = self.coupling == "implicit" and h > 0 and self._system_ready
@@ -798,6 +798,20 @@ class StrainLimiter:
         return int(self.curvature == "exact" and not self.exact_curvature
                    and self.method in EXACT_CURVATURE_FOR)
 
+    def multipliers(self):
+        """The AL multipliers (faces, contacts, seams, friction) as numpy copies."""
+        ws = self._ws
+        return [a.to_numpy() for a in (ws.lam, ws.lam_c, ws.lam_s, ws.lam_t)]
+
+    def restart_from(self, multipliers):
+        """A projection solved again from its start: x back to x_start, the multipliers to
+        ``multipliers`` (``multipliers()`` taken before), ``last_fallback`` set."""
+        ws = self._ws
+        self.last_fallback = True
+        al.copy_vectors(self.model.n_verts, ws.x_start, ws.x)
+        for a, val in zip((ws.lam, ws.lam_c, ws.lam_s, ws.lam_t), multipliers):
+            a.from_numpy(val)
+
     def _solve_al_with_fallback(self, mid, K, metric, contacts):
         """``_solve_al``; under the kernels' active-set model (``_kernel_pdas``) a projection
         not converged in ``direct.ACTIVE_SET_ROUNDS`` rounds is solved again from its start
@@ -807,7 +821,7 @@ class StrainLimiter:
             return self._solve_al(mid, K, metric, contacts)
         from .direct import ACTIVE_SET_ROUNDS
         ws = self._ws
-        multipliers_in = [a.to_numpy() for a in (ws.lam, ws.lam_c, ws.lam_s, ws.lam_t)]
+        multipliers_in = self.multipliers()
         budget = self.max_iters
         self.max_iters = min(ACTIVE_SET_ROUNDS, budget)
         try:
@@ -816,10 +830,7 @@ class StrainLimiter:
             self.max_iters = budget
         if out[2]:
             return out
-        self.last_fallback = True
-        al.copy_vectors(self.model.n_verts, ws.x_start, ws.x)
-        for a, val in zip((ws.lam, ws.lam_c, ws.lam_s, ws.lam_t), multipliers_in):
-            a.from_numpy(val)
+        self.restart_from(multipliers_in)
         params = ws.params.to_numpy()
         saved, mu_scale = params.copy(), self.mu_scale
         params[buffers.P_PDAS], params[buffers.P_MARGIN] = 0.0, self.active_margin
