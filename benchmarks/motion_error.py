@@ -302,10 +302,12 @@ def main():
     ap.add_argument("--fresh", action="store_true", help="measure again, ignoring cached runs")
     ap.add_argument("--child")
     a = ap.parse_args()
+    drape_solves = list(DRAPE_SOLVES)
     for item in a.extra:
         name, _, value = item.partition("=")
         SOLVES[name] = json.loads(value)
         a.solves.append(name)
+        drape_solves.append(name)        # an extra solve runs every drop
     if a.child:
         case, solve, drop, extra = json.loads(a.child)
         SOLVES.update(extra)
@@ -316,7 +318,7 @@ def main():
     plan = []
     for case in a.cases:
         if case == "drape":
-            plan += [(case, s, d) for s in DRAPE_SOLVES if s in a.solves for d in DROPS]
+            plan += [(case, s, d) for s in drape_solves if s in a.solves for d in DROPS]
             plan += [(case, s, None) for s in a.solves]
         else:
             plan += [(case, s, None) for s in a.solves]

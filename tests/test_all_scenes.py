@@ -72,39 +72,36 @@ def test_obstacle_contacts_keep_the_strain_limits(name, frames):
         worst = max(worst, sim.metrics_row()["own_violation_max"])
         touched = max(touched, sim.collider.last_contacts)
         assert sim.collider.max_penetration() < 1e-6
-    # The cloth did land. At resolution 11 it touches 10-13 vertices with the default strain
-    # solve, against 41-43 with exact (Cholesky) Newton steps: the inexact solve holds the
-    # sheet back from wrapping the sphere (docs/speed/drape_depth.md, issue #13).
+    # The cloth did land (test_the_drape_lands_without_stopping_dead: how far it wraps).
     assert touched > 5
     assert worst < 2 * sim.strain.tol
 
 
 
 @pytest.mark.slow
-def test_exact_strain_steps_let_the_drape_land_without_stopping_dead():
-    """With exact Newton steps (strain.linear_solver = "cholesky", the drape scene's default)
-    the sheet that lands on the sphere keeps falling around it: the part on the sphere stops,
-    the rest does not. Measured at resolution 11 over three drop heights: kinetic energy at
-    frame 8 = 0.47-1.0 of the largest before it, 25-37 vertices in contact at frame 12. (The
-    PCG steps, which start from x_prev at the landing and stop near it, keep 0.08-0.22 and
-    touch 9-11: docs/speed/inner_solver.md, issue #13.)"""
+def test_the_drape_lands_without_stopping_dead():
+    """The sheet that lands on the sphere keeps falling around it: the part on the sphere
+    stops, the rest does not. Measured at resolution 11 (the default drop): kinetic energy at
+    frame 8 = 0.85 of the largest before it, 44 vertices in contact at frame 12. Its PCG
+    steps start from where each vertex was going (strain.solver.SETTLE_SPEED); from the
+    substep's start they kept 0.20 and touched 9 (exact Newton steps: 0.22 and 37, at frame 8
+    already stopped around the sphere; issue #32, docs/speed/motion_error.md)."""
     from cloth import metrics
     sim, cfg = make_sim("drape", cloth={"resolution": 11})
-    assert sim.settings.strain.linear_solver == "cholesky"
     ke = []
     for _ in range(12):
         sim.step_frame()
         ke.append(metrics.kinetic_energy(sim.model.velocities(), sim.model.mass))
-    assert ke[7] >= 0.3 * max(ke[:8])
-    assert sim.collider.last_contacts > 15
+    assert ke[7] >= 0.5 * max(ke[:8])
+    assert sim.collider.last_contacts > 30
 
 
 @pytest.mark.slow
 def test_the_default_drape_drapes():
     """The drape scene as a user runs it (`python main.py drape`, 25 x 25 vertices) hangs down
     around the sphere by 1.5 s: its final check (below the equator on every side it overhangs,
-    the limits held) passes. With the PCG steps it lay flat on the sphere's top in 6 of 7 drop
-    heights (docs/speed/drape_depth.md)."""
+    the limits held) passes. With the PCG steps started from the substep's start it lay flat
+    on the sphere's top in 4 of 7 drop heights (docs/speed/motion_error.md)."""
     sim, cfg = make_sim("drape")
     for _ in range(45):
         sim.step_frame()

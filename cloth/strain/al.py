@@ -832,14 +832,23 @@ def choose_start(method: ti.template(), from_prev, K, nv, nf, ns, mu, x: T, x_ha
                  x_trial: T, w_ptr: T, w_col: T, w_val: T, w_diag: T, face_verts: T,
                  Dm_inv: T, grain: T, rest_area: T, params: T, lam: T, g: T, grad: T, cm: T,
                  what: T, kappa: T, twist: T, contact: T, lam_c: T, stitch: T, lam_s: T,
-                 fric: T, lam_t: T, pinned: T):
+                 fric: T, lam_t: T, pinned: T, start: T):
     """Assemble the constraints at the Newton iteration's start (the caller left only their
-    values at x = x_hat). With ``from_prev``, start at the step's start x_prev = x_hat - h v
-    (kept in ``fric``) instead of at x_hat when its merit is lower. In the implicit step's
+    values at x = x_hat). With ``from_prev``, start at ``start`` instead of at x_hat when its
+    merit is lower: the step's start x_prev = x_hat - h v, each vertex moved on at its last
+    velocity when that is above the settle speed (``begin_solve``). In the implicit step's
     metric a cloth at rest is a fixed point, so x_prev is then the solution itself (one
     round, one Newton step), while x_hat lies a whole sag away (12-17 % strain past the band
     on the soft cloth) and Newton has to travel back across the constraints' curvature.
-    Pinned vertices stay at x_hat (their targets)."""
+    Pinned vertices stay at x_hat (their targets).
+
+    Why moved on: the default solve stops once the limits hold, so its answer lies near its
+    start. A sheet landing on a sphere (its landing vertices stopped by the collision pass,
+    the rest still falling: x_hat stretched, x_prev the lower merit) was held in the air from
+    x_prev, keeping 0.3 % of its kinetic energy through the landing (exact Newton steps keep
+    72 %; docs/speed/motion_error.md). x_hat as the start drapes too, but costs a resting
+    cloth 10x; a start halfway between, chosen by merit, was held like x_prev; running the
+    first round's Newton loop to its end instead of to INNER_RTOL draped 5 of 7 drops."""
     # One call site each for assemble_all and merit (a ti.func is inlined at every call, and
     # solve_al's compile time grows with its size): pass 0 evaluates x_hat's merit (from the
     # values), pass 1 assembles and evaluates x_prev, pass 2 assembles x_hat when it wins
@@ -851,7 +860,7 @@ def choose_start(method: ti.template(), from_prev, K, nv, nf, ns, mu, x: T, x_ha
             for n in range(nv):
                 x_trial[n] = x[n]
                 if attempt == 1 and pinned[n] == 0:
-                    x_trial[n] = ti.Vector([fric[n][0], fric[n][1], fric[n][2]])
+                    x_trial[n] = start[n]
             if attempt > 0:
                 assemble_all(method, nf, x_trial, face_verts, Dm_inv, grain, rest_area, params,
                              g, grad, cm, what, kappa, twist)
@@ -1010,7 +1019,7 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
                     choose_start(method, from_prev, K, nv, nf, ns, mu, x, x_hat, x_trial,
                                  w_ptr, w_col, w_val, w_diag, face_verts, Dm_inv, grain,
                                  rest_area, params, lam, g, grad, cm, what, kappa, twist,
-                                 contact, lam_c, stitch, lam_s, fric, lam_t, pinned)
+                                 contact, lam_c, stitch, lam_s, fric, lam_t, pinned, Wdx)
                     metric_gradient(nv, w_ptr, w_col, w_val, x, x_hat, Wdx)
                     continue
                 # Gradients and curvature at x (the step's end, or x again after a failed
@@ -1066,12 +1075,16 @@ def max_violation(K: int, nf: int, rest_area: A, g: A) -> float:
 
 
 @ti.kernel
-def begin_solve(nv: int, h: float, friction: int, clear: int, x_in: A, v_in: A, x: A, v: A,
-                x_hat: A, x_start: A, contact: A, contact_mu: A, fric: A, stats: A):
+def begin_solve(nv: int, h: float, friction: int, clear: int, extrapolate: int,
+                settle: float, x_in: A,
+                v_in: A, x: A, v: A, x_hat: A, x_start: A, contact: A, contact_mu: A, fric: A,
+                v_last: A, start: A, stats: A):
     """Set up a projection from the model's state (x_in, v_in): x = x_hat = x_start = x_in,
     v = v_in; fric = (x_prev, mu_f) per vertex, x_prev = x_hat - h v (the substep's start,
-    before dynamics), mu_f = 0 (no friction) unless ``friction``; with ``clear`` no contact
-    half-spaces. One launch instead of five (each costs ~0.1 ms: a tenth of a resting
+    before dynamics), mu_f = 0 (no friction) unless ``friction``; ``start`` (choose_start's
+    candidate) = x_prev, with ``extrapolate`` moved on by h v_last (the last projection's
+    velocity, ``finish_solve``) in a share that rises smoothly from 0 at ``settle`` m/s to
+    1 at 4 x settle; with ``clear`` no contact half-spaces. One launch instead of five (each costs ~0.1 ms: a tenth of a resting
     1.2k-face projection's host time)."""
     ti.loop_config(serialize=True)
     for n in range(nv):
@@ -1081,6 +1094,14 @@ def begin_solve(nv: int, h: float, friction: int, clear: int, x_in: A, v_in: A, 
         x_start[n] = x_in[n]
         xp = x_in[n] - h * v_in[n]
         fric[n] = ti.Vector([xp[0], xp[1], xp[2], contact_mu[n] if friction else 0.0])
+        start[n] = xp
+        if extrapolate:
+            # None of the velocity up to ``settle`` (m/s), all of it from 4 x settle on.
+            share = 1.0
+            if settle > 0.0:
+                t = ti.min(ti.max((v_last[n].norm() - settle) / (3.0 * settle), 0.0), 1.0)
+                share = t * t * (3.0 - 2.0 * t)
+            start[n] = xp + share * h * v_last[n]
         if clear:
             for j in ti.static(range(CONTACT_SLOTS)):
                 contact[n, j] = ti.Vector([0.0, 0.0, 0.0, NO_CONTACT])
@@ -1095,10 +1116,11 @@ def copy_vectors(n: int, src: A, dst: A):
 
 
 @ti.kernel
-def finish_solve(nv: int, h: float, cap: float, x: A, x_start: A, v: A, x_out: A, v_out: A):
+def finish_solve(nv: int, h: float, cap: float, x: A, x_start: A, v: A, x_out: A, v_out: A,
+                 v_last: A):
     """v += dx / h (METHOD 4): the projection's correction becomes a velocity change, of at
     most ``cap`` (m/s) per vertex when cap > 0; x and v are copied to x_out and v_out (the
-    model's state)."""
+    model's state) and v to v_last (the next projection's start, ``begin_solve``)."""
     ti.loop_config(serialize=True)
     for n in range(nv):
         if h > 0.0:
@@ -1108,3 +1130,4 @@ def finish_solve(nv: int, h: float, cap: float, x: A, x_start: A, v: A, x_out: A
             v[n] += dv
         x_out[n] = x[n]
         v_out[n] = v[n]
+        v_last[n] = v[n]

@@ -102,9 +102,10 @@ class Workspace:
         self.twist = ti.ndarray(vec9, (F, K))     # extra rank-1 curvature (svd only)
         self.curv = ti.ndarray(vec9, (F, 3))      # exact curvature per face (c_curvature.py)
         # Per-vertex vectors: positions (x), unconstrained x_hat, start of the call, line-search
-        # trial, Newton direction and PCG vectors, W (x - x_hat); Jacobi accumulators.
+        # trial, Newton direction and PCG vectors, W (x - x_hat) (before choose_start: the
+        # start candidate); Jacobi accumulators; the last projection's velocities.
         names = ("x", "v", "x_hat", "x_start", "x_trial", "b", "d", "r", "z", "p", "Ap",
-                 "Wdx", "acc", "force")
+                 "Wdx", "acc", "force", "v_last")
         for name in names:
             setattr(self, name, ti.ndarray(vec3, V))
         self.P_inv = ti.ndarray(ti.types.matrix(3, 3, float), V)

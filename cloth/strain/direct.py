@@ -54,7 +54,7 @@ def start(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: float,
           from_prev: int, tol: float, x: A, x_hat: A, x_trial: A, w_ptr: A, w_col: A,
           w_val: A, w_diag: A, pinned: A, face_verts: A, Dm_inv: A, grain: A, rest_area: A,
           params: A, lam: A, g: A, grad: A, cm: A, what: A, kappa: A, twist: A, contact: A,
-          lam_c: A, stitch: A, lam_s: A, fric: A, lam_t: A, stats: A):
+          lam_c: A, stitch: A, lam_s: A, fric: A, lam_t: A, start_x: A, stats: A):
     """Constraints at x_hat and the start violation; then, as in ``solve_al``, the start
     point (``choose_start``) unless x_hat is feasible already."""
     ti.loop_config(serialize=True)
@@ -68,7 +68,7 @@ def start(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: float,
             choose_start(method, 1, K, nv, nf, ns, mu, x, x_hat, x_trial, w_ptr, w_col, w_val,
                          w_diag, face_verts, Dm_inv, grain, rest_area, params, lam, g, grad,
                          cm, what, kappa, twist, contact, lam_c, stitch, lam_s, fric, lam_t,
-                         pinned)
+                         pinned, start_x)
 
 
 @ti.kernel
@@ -207,7 +207,7 @@ def _solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, active_set_model, ma
           metric.ptr, metric.col, metric.val, metric.diag, ws.pinned, ws.face_verts,
           ws.Dm_inv, ws.grain, ws.rest_area, ws.params, ws.lam, ws.g, ws.grad, ws.cm,
           ws.what, ws.kappa, ws.twist, ws.contact, ws.lam_c, ws.stitch, ws.lam_s, ws.fric,
-          ws.lam_t, ws.stats)
+          ws.lam_t, ws.Wdx, ws.stats)
     stats = ws.stats.to_numpy()
     if stats[ST_START_VIOL] < lim.tol:
         stats[ST_CONVERGED], stats[ST_VIOL] = 1, stats[ST_START_VIOL]

@@ -128,6 +128,16 @@ MULTIGRID_CG = {"mapping": 4, "svd": 4, "warp-weft": 8}
 # 2.5e-7 / 6.6e-8 / 1.1e-7 J; at 128 faces (mapping) 6 / 12 / 20 rested at 2.2e-6 / 3.8e-8 /
 # 1.6e-9 J at the same cost (2.5-2.7 ms a frame).
 FACTOR_CG, FACTOR_CG_MAX, FACTOR_CG_WORK = 6, 20, 6000
+# The projection's start moves each vertex on at its last velocity, in full from 4 x
+# SETTLE_SPEED (m/s), not at all below SETTLE_SPEED (al.begin_solve, al.choose_start): the
+# default solve stops once the limits hold, so it answers near its start, and from where the
+# vertices were a landing sheet was held in the air (drape: 0.3 % of its kinetic energy kept
+# through the landing, 3 of 7 drops draped); carried on at all speeds, the resting cloth kept
+# jittering (drape: 1.6-3.9e-3 J over frames 60-120 against 1-2e-5). Measured on hanging at
+# resolution 9, mean kinetic energy over frames 120-150 (svd / warp-weft / mapping): 0.05
+# m/s 5.7e-10 / 2.3e-6 / 1.2e-7 J, 0.1 m/s 5.7e-9 / 7.7e-8 / 1.2e-8 J (without: 2.9e-8 /
+# 3.6e-8 / 3.0e-9); drape at 0.1 m/s keeps 69 % through the landing and rests at 0.7-1.1e-5 J.
+SETTLE_SPEED = 0.1
 # Newton steps per AL round (``max_newton`` None): with the factor a step finds most of the
 # exact one, and a round needs fewer. Chosen on hanging at resolution 25 (mapping, ensembles
 # of 8 runs, KE over frames 121-150, two runs at a time, 2026-12-03, with the constraints
@@ -322,6 +332,12 @@ class StrainLimiter:
         self._stubs = None         # placeholder arrays for the preconditioners not in use
         self.precondition = "auto"
         self.precondition_contacts = False
+        # The start candidate beside x_hat (al.choose_start): the substep's start moved on at
+        # the last projection's velocity above ``settle_speed`` (True), or the start itself
+        # (False, the rule before issue #32's landing fix; kept for old-against-new runs).
+        self.start_extrapolate = True
+        self.settle_speed = SETTLE_SPEED
+        self._v_last_valid = False    # v_last belongs to this mesh's vertices
         self.multigrid_cg = None       # None: the method's MULTIGRID_CG
         self.factor_cg = None          # None: from the mesh size (FACTOR_CG_WORK)
         self.factor_max_faces = None   # None: FACTOR_MAX_FACES (a probe's override)
@@ -508,6 +524,7 @@ class StrainLimiter:
             self._ws = ws = Workspace(m)
             self._spare_patterns = []
         nv, nf = m.n_verts, m.n_faces
+        self._v_last_valid = False             # vertices renumbered: no last velocity
         ndarrays.put_rows(ws.lam, np.zeros((nf, ws.lam.shape[1])))
         ndarrays.put_rows(ws.lam_c, np.zeros((nv, ws.lam_c.shape[1])))   # vertices renumbered
         ndarrays.put_rows(ws.lam_t, np.zeros((nv, 3)))
@@ -672,8 +689,11 @@ class StrainLimiter:
         mid, K = METHOD_IDS[self.method], N_CONSTRAINTS[self.method]
         # Friction holds contact vertices against sliding over the substep (from x - h v).
         al.begin_solve(nv, float(h), int(contacts and h > 0 and self.friction),
-                       int(not contacts), m.state.x, m.state.v, ws.x, ws.v, ws.x_hat,
-                       ws.x_start, ws.contact, ws.contact_mu, ws.fric, ws.stats)
+                       int(not contacts),
+                       int(self.start_extrapolate and self._v_last_valid),
+                       float(self.settle_speed),
+                       m.state.x, m.state.v, ws.x, ws.v, ws.x_hat, ws.x_start, ws.contact,
+                       ws.contact_mu, ws.fric, ws.v_last, ws.Wdx, ws.stats)
         self.last_reverted = False
         if self.solver == "al":
             saved = None
@@ -713,7 +733,9 @@ class StrainLimiter:
         # every unconverged one raised the band error of 8-round svd from 3.6e-4 to 6.9e-2).
         kick = 0.5 * self.model.typical_edge() / h if (self.solver == "al" and not converged
                                                 and h > 0) else -1.0
-        al.finish_solve(nv, float(h), kick, ws.x, ws.x_start, ws.v, m.state.x, m.state.v)
+        al.finish_solve(nv, float(h), kick, ws.x, ws.x_start, ws.v, m.state.x, m.state.v,
+                        ws.v_last)
+        self._v_last_valid = h > 0
         self.last_iterations = int(rounds)
         self.last_violation_max = float(max(stats[ST_VIOL], 0.0))
         self.last_converged = bool(converged)
