@@ -13,13 +13,16 @@ linearisation leaves on curved bodies (issue #5; tested in tests/test_all_scenes
 The Simulator reads its settings from one ``cloth.settings.Settings`` (``self.settings``) and owns
 every live control: ``set_method``, ``set_bands``, ``set_iterations``, ``set_substeps``,
 ``set_material``, ``set_remesh``, ``set_self_collision``, ``hold_vertex`` / ``release_vertex`` and
-``reset``. Each takes effect at the next substep and keeps ``settings`` in step, so a window, a
-script and a test change a run the same way.
+``reset``. Each changes ``settings`` and nothing else; ``_follow`` then derives every copy kept
+elsewhere (the strain limiter's attributes and kernel parameters, the model's material, the
+stages switched on) from the new settings, in one place. A change takes effect at the next
+substep, and a window, a script and a test change a run the same way.
 
 Why one long module: it is the one owner of a run's live state (issue #15); the stages
 and the controls read and write the same objects, and every stage's module is imported here,
 one hop from the frame loop.
 """
+import dataclasses
 import sys
 import time
 from dataclasses import dataclass, field
@@ -101,17 +104,14 @@ class Simulator:
         self._untried = {"dynamics", "collision"}
         self.stages = [
             Stage("dynamics", self._dynamics_step),
-            Stage("collision", self._collide, enabled=bool(setup.obstacles) or setup.self_collision),
+            Stage("collision", self._collide),
             Stage("strain_limit", self._strain_limit, enabled=False),
             Stage("collision_final", self._collide_final, enabled=False),
             Stage("remesh", self._remesh, enabled=False, per_substep=False),
         ]
-        if self.settings.strain.method != "none":
-            self._make_strain_limiter()
-        if self.stage("collision").enabled:
+        if setup.obstacles or setup.self_collision:
             self._make_collider()
-        if self.settings.remesh.enabled:
-            self._make_remesher()
+        self._follow(self.settings)
         self._relax_initial_state()
         self.last_good = self.model.mesh_arrays()
         self.remesh_stats = {}
@@ -194,22 +194,10 @@ class Simulator:
                 return s
         raise KeyError(name)
 
-    def _make_strain_limiter(self, method=None):
-        """The strain limiter of ``settings.strain`` (with ``method`` instead of its own)."""
-        st = self.settings.strain
-        method = st.method if method is None else method
-        self.strain = StrainLimiter(
-            self.model, method=method, warp=tuple(st.warp), weft=tuple(st.weft),
-            bias=tuple(st.bias) if st.bias else None, solver=st.solver, tol=st.tol,
-            max_iters=st.iters, mapping_iso=st.isotropy, stitches=self.dynamics.stitches_np,
-            coupling=st.coupling, linear_solver=st.linear_solver, curvature=st.curvature,
-            stop=st.stop, kkt_velocity=st.kkt_velocity, newton_model=st.newton_model)
-        self.strain.precondition = st.precondition
-        self._enable_strain_limit(method != "none")
-
-    def _enable_strain_limit(self, on):
-        self.stage("strain_limit").enabled = on
-        self.stage("collision_final").enabled = on and bool(self.setup.obstacles)
+    def _make_strain_limiter(self, settings):
+        """The strain limiter of ``settings.strain`` (``StrainLimiter.configure``)."""
+        self.strain = StrainLimiter(self.model, stitches=self.dynamics.stitches_np)
+        self.strain.configure(settings.strain)
 
     def _dynamics_step(self):
         """The implicit step. Under coupling "implicit" its matrix then becomes the strain
@@ -256,12 +244,11 @@ class Simulator:
             self._project_limits(self.h, self.time + self.h, warm=False)
         self.collider.resolve_obstacles(self.h, self.time)
 
-    def _make_remesher(self):
-        rcfg = self.settings.to_dict()["remesh"]
+    def _make_remesher(self, settings):
+        rcfg = dataclasses.asdict(settings.remesh)
         params = remesh.RemeshParams(**{k: v for k, v in rcfg.items() if k != "enabled"})
         params.validate()
         self.remesher = (remesh, params)
-        self.stage("remesh").enabled = True
 
     def _remesh(self):
         remesh, params = self.remesher
@@ -341,37 +328,66 @@ class Simulator:
                                 bending=self.model.bending)
         self.dynamics = self._make_dynamics(self.dynamics.stitches_np)
         if self.strain is not None:
-            self._make_strain_limiter(self.strain.method)
+            self._make_strain_limiter(self.settings)
         if self.collider is not None:
-            on = self.collider.self_collision
             self._make_collider()
-            self.collider.set_self_collision(on)
+            self._follow(self.settings)
 
     # -- live controls: each takes effect at the next substep and keeps ``settings`` in step --
     def _change(self, section, **changes):
-        """Check ``changes`` against the schema (ConfigError names the key) and adopt them."""
-        self.settings = self.settings.replace(section, **changes)
-        return getattr(self.settings, section)
+        """Check ``changes`` against the schema (ConfigError names the key), derive every copy
+        from the new settings (``_follow``) and adopt them. A change the solvers refuse leaves
+        ``settings`` as it was."""
+        new = self.settings.replace(section, **changes)
+        self._follow(new)
+        self.settings = new
+        return getattr(new, section)
+
+    def _follow(self, settings):
+        """The one function that derives everything kept outside ``settings`` from it: the
+        strain limiter's attributes and kernel parameters (``StrainLimiter.configure``), the
+        model's material, the remesher, the collider's self-collision and which stages run
+        (``_enable_stages``). Cheap: called on every live change."""
+        st = settings.strain
+        if self.strain is not None:
+            self.strain.configure(st)
+        elif st.method != "none":
+            self._make_strain_limiter(settings)
+        # The material the scene built the model with (``SceneSetup.material``) is the
+        # settings' at the start; from then on the changed keys are copied.
+        for f in dataclasses.fields(self.model.material):
+            value = getattr(settings.material, f.name)
+            if value != getattr(self.settings.material, f.name):
+                setattr(self.model.material, f.name, float(value))
+        if settings.remesh.enabled and self.remesher is None:
+            self._make_remesher(settings)
+        on = getattr(settings.section("collision"), "self_collision", None)
+        if self.collider is not None and self.can_self_collide and on is not None and \
+                bool(on) != self.collider.self_collision:
+            self.collider.set_self_collision(bool(on))
+        self._enable_stages(settings)
+
+    def _enable_stages(self, settings):
+        """Switch on just the stages this scene and these settings use."""
+        limit = self.strain is not None and settings.strain.method != "none"
+        self.stage("collision").enabled = bool(self.setup.obstacles) or self.self_collision_on
+        self.stage("strain_limit").enabled = limit
+        self.stage("collision_final").enabled = limit and bool(self.setup.obstacles)
+        self.stage("remesh").enabled = bool(settings.remesh.enabled)
 
     def set_method(self, name):
         """Switch strain limiting (``svd``, ``warp-weft``, ``mapping`` or ``none``)."""
         if name not in STRAIN_METHODS:
             raise ValueError(f"unknown strain-limiting method '{name}': use one of "
                              f"{', '.join(STRAIN_METHODS)}")
-        if self.strain is None and name != "none":
-            self._make_strain_limiter(name)
-        elif self.strain is not None:
-            self.strain.set_method(name)
         self._change("strain", method=name)
-        self._enable_strain_limit(name != "none")
 
     def set_bands(self, warp=None, weft=None, bias=None):
         """Change the strain bands ([min, max], strain). ``bias="auto"`` makes the bias band
         follow the warp and weft bands again (``metrics.default_bias_band``)."""
-        if self.strain is None:
-            self._make_strain_limiter()
-        self.strain.set_bands(warp=warp, weft=weft, bias=bias)
         changes = {k: list(v) for k, v in (("warp", warp), ("weft", weft)) if v is not None}
+        if isinstance(bias, str) and bias != "auto":
+            raise ValueError(f"bias band must be [min, max] or \"auto\" (got {bias!r})")
         if bias is not None:
             changes["bias"] = [] if isinstance(bias, str) else list(bias)
         self._change("strain", **changes)
@@ -386,16 +402,12 @@ class Simulator:
     def set_iterations(self, n):
         """The AL round budget per projection."""
         self._change("strain", iters=int(n))
-        if self.strain is not None:
-            self.strain.max_iters = int(n)
 
     def set_strain_linear_solver(self, name):
         """The strain solve's Newton steps, live: "pcg" (the one-kernel default) or
         "cholesky" (exact steps; slower, but a cloth that lands on an obstacle keeps falling
         around it instead of stopping dead: docs/speed/drape_depth.md)."""
         self._change("strain", linear_solver=name)      # the schema refuses other names
-        if self.strain is not None:
-            self.strain.set_linear_solver(name)
 
     def set_substeps(self, n):
         """Time steps per frame (h = 1 / (fps x substeps))."""
@@ -408,14 +420,9 @@ class Simulator:
             if key in values and not float(values[key]) > 0:
                 raise ValueError(f"material.{key} must be > 0 N/m (got {values[key]})")
         self._change("material", **{k: float(v) for k, v in values.items()})
-        for key, value in values.items():
-            setattr(self.model.material, key, float(value))
 
     def set_remesh(self, on):
         """Switch the per-frame remeshing stage (its settings: ``settings.remesh``)."""
-        if on and self.remesher is None:
-            self._make_remesher()
-        self.stage("remesh").enabled = bool(on)
         self._change("remesh", enabled=bool(on))
 
     @property
@@ -424,11 +431,9 @@ class Simulator:
 
     def set_self_collision(self, on):
         """Switch cloth-cloth repulsion (scenes built with self-collision only)."""
-        if self.collider is None:
+        if self.collider is None or not self.can_self_collide:
             raise ValueError("this scene was built without self-collision")
-        self.collider.set_self_collision(on)
-        if not self.setup.obstacles:
-            self.stage("collision").enabled = bool(on)
+        self._change("collision", self_collision=bool(on))
 
     @property
     def self_collision_on(self):
@@ -470,7 +475,7 @@ class Simulator:
 
     @property
     def method(self):
-        return self.settings.strain.method if self.stage("strain_limit").enabled else "none"
+        return self.settings.strain.method
 
     # -- the frame loop -----------------------------------------------------------------------
     def _update_pins(self, t):
