@@ -1,13 +1,18 @@
 """The frame loop: a flat list of named stages, each switchable and timed (ARCSim style).
 
-    every substep:  pins -> dynamics -> collision -> strain_limit -> collision_final
-    every frame:    remesh -> metrics
+    every substep:  pins -> dynamics -> self_collision -> collision -> strain_limit
+                    -> collision_final -> contact_reproject
+    every frame:    remesh -> remesh_reproject -> metrics -> snapshot
 
-A scene enables only the stages it needs. With obstacles and strain limiting both on, the
-contacts are constraints of the strain projection (half-spaces found by the collision stage), so
-the projection cannot push cloth into a body and contact cannot undo the limits; the
+A scene enables only the stages it needs (``_enable_stages``). Every piece of work a frame does
+is one of them, timed on its own, so the stages' times add up to the frame's (``frame_ms``;
+metrics.csv has a column per stage). With obstacles and strain limiting both on, the contacts
+are constraints of the strain projection (half-spaces found by the collision stage), so the
+projection cannot push cloth into a body and contact cannot undo the limits; the
 ``collision_final`` stage then runs the obstacle pass once more to remove what the half-spaces'
-linearisation leaves on curved bodies (issue #5; tested in tests/test_all_scenes.py). Seams
+linearisation leaves on curved bodies (issue #5; tested in tests/test_all_scenes.py), and where
+it had to push further than the strain tolerance ``contact_reproject`` projects again. After an
+applied remesh ``remesh_reproject`` projects where the new mesh broke the limits. Seams
 (stitch pairs) are equality constraints of the same projection.
 
 The Simulator reads its settings from one ``cloth.settings.Settings`` (``self.settings``) and owns
@@ -29,14 +34,13 @@ from dataclasses import dataclass, field
 from typing import Callable, Optional
 
 import numpy as np
-import taichi as ti
 
 # Every stage's module (``sim.linear_solver = "direct"`` swaps in dynamics_sparse.py, imported
 # where it is built: it loads scipy).
 from . import compile_notice, ndarrays
 from . import metrics                                  # stage "metrics"
 from . import remesh                                   # stage "remesh"
-from .collision import THICKNESS, Collider            # stages "collision", "collision_final"
+from .collision import THICKNESS, Collider  # stages "self_collision", "collision", "collision_final"
 from .dynamics import DynamicsSettings, ImplicitEuler  # stage "dynamics"
 from .model import CapacityExceeded, ClothModel, Material, MeshArrays
 from .settings import STRAIN_METHODS, Settings
@@ -75,6 +79,7 @@ class Stage:
     enabled: bool = True
     per_substep: bool = True
     ms: float = 0.0            # time spent in the current frame
+    moves: bool = True         # changes the state (then checked for NaN after it runs)
 
 
 class Simulator:
@@ -101,14 +106,28 @@ class Simulator:
         self.strain = None
         self.collider = None
         self.remesher = None
-        self._untried = {"dynamics", "collision"}
+        self._untried = {"dynamics", "self_collision", "collision"}
+        self._contact_push = 0.0       # m: the last obstacle pass's largest push
+        self._remeshed = False         # the frame's remesh was applied
+        self._row = None               # (frame, the metrics row the "metrics" stage measured)
+        self.frame_ms = 0.0            # the last frame's wall time, every stage included
+        # The frame, flat: every piece of work a frame does is one of these, timed on its own
+        # (Stage.ms; the stages add up to ``frame_ms``). ``_enable_stages`` switches on just
+        # the stages a scene and its settings use.
         self.stages = [
+            Stage("pins", self._move_pins),
             Stage("dynamics", self._dynamics_step),
+            Stage("self_collision", self._self_collide),
             Stage("collision", self._collide),
-            Stage("strain_limit", self._strain_limit, enabled=False),
-            Stage("collision_final", self._collide_final, enabled=False),
-            Stage("remesh", self._remesh, enabled=False, per_substep=False),
+            Stage("strain_limit", self._strain_limit),
+            Stage("collision_final", self._collide_final),
+            Stage("contact_reproject", self._contact_reproject),
+            Stage("remesh", self._remesh, per_substep=False),
+            Stage("remesh_reproject", self._remesh_reproject, per_substep=False),
+            Stage("metrics", self._measure, per_substep=False, enabled=False, moves=False),
+            Stage("snapshot", self._snapshot, per_substep=False, moves=False),
         ]
+        self._metrics_stage = False    # ``set_metrics_stage``
         if setup.obstacles or setup.self_collision:
             self._make_collider()
         self._follow(self.settings)
@@ -136,6 +155,7 @@ class Simulator:
         self._mesh_changed()
         self.frame, self.time = 0, 0.0
         self._remesh_deferred = 0
+        self._remeshed, self._row, self.frame_ms = False, None, 0.0
         for s in self.stages:
             s.ms = 0.0
         self._relax_initial_state()
@@ -230,19 +250,29 @@ class Simulator:
                                  thickness=c.thickness if c is not None else THICKNESS,
                                  self_collision=self.setup.self_collision)
 
-    def _collide(self):
-        self.collider.resolve(self.h, self.time)
+    def _self_collide(self):
+        self.collider.resolve_self(self.h, self.time)
 
-    def _collide_final(self, max_rounds=3):
-        """The obstacle pass after the projection. Where it still has to move a vertex by more
-        than the strain tolerance (a vertex beyond the planes' reach pulled into a body, a
-        concave corner of it), project again with the contacts as they are now, and repeat."""
+    def _collide(self):
+        """The obstacle pass (with its continuous test)."""
+        self.collider.resolve_contacts(self.h, self.time)
+
+    def _collide_final(self):
+        """The obstacle pass after the projection (no continuous test: ``resolve_obstacles``);
+        how far it pushed decides whether ``contact_reproject`` has work."""
+        self._contact_push = self.collider.resolve_obstacles(self.h, self.time)
+
+    def _contact_reproject(self, max_rounds=3):
+        """Where the final obstacle pass had to move a vertex by more than the strain
+        tolerance (a vertex beyond the planes' reach pulled into a body, a concave corner of
+        it): project again with the contacts as they are now and run the obstacle pass again,
+        up to ``max_rounds`` times while it still pushes that far."""
         tol_m = self.strain.tol * self.model.typical_edge()
         for _ in range(max_rounds):
-            if self.collider.resolve_obstacles(self.h, self.time) <= tol_m:
+            if self._contact_push <= tol_m:
                 return
             self._project_limits(self.h, self.time + self.h, warm=False)
-        self.collider.resolve_obstacles(self.h, self.time)
+            self._contact_push = self.collider.resolve_obstacles(self.h, self.time)
 
     def _make_remesher(self, settings):
         rcfg = dataclasses.asdict(settings.remesh)
@@ -265,8 +295,10 @@ class Simulator:
                                                   face_data=face_data, frozen_verts=frozen)
         self.remesh_stats = stats
         stats["applied"] = stats["grown"] = False
+        self._remeshed = False
         if not self._apply_remesh(stats, params):
             return
+        self._remeshed = True
         stats["applied"] = True
         if len(stitches):
             self.dynamics.stitches_np = stats["vertex_map"][stitches].astype(np.int32)
@@ -286,16 +318,20 @@ class Simulator:
             self.strain.set_face_state(new_face_data)
         if self._held is not None:
             self._find_held_again()
-        # Flips and collapses change some triangles' deformation (splits do not: a split
-        # vertex sits at its edge's midpoint in both spaces), so the limits may no longer
-        # hold on the new mesh: project again where they do not, so that they hold at the
-        # end of every frame. With obstacles always (contacts are constraints of that
-        # projection, and a new vertex on a chord may lie inside a curved body).
-        if self.strain is not None and self.stage("strain_limit").enabled:
-            with_contacts = self.collider is not None and bool(self.collider.obstacles)
-            if with_contacts or self.strain.own_violation_max() > self.strain.tol:
-                self._project_limits(self.h, self.time)
-                stats["reprojected"] = True
+
+    def _remesh_reproject(self):
+        """After an applied remesh: flips and collapses change some triangles' deformation
+        (splits do not: a split vertex sits at its edge's midpoint in both spaces), so the
+        limits may no longer hold on the new mesh: project again where they do not, so that
+        they hold at the end of every frame. With obstacles always (contacts are constraints
+        of that projection, and a new vertex on a chord may lie inside a curved body)."""
+        if not self._remeshed:
+            return
+        self._remeshed = False
+        with_contacts = self.collider is not None and bool(self.collider.obstacles)
+        if with_contacts or self.strain.own_violation_max() > self.strain.tol:
+            self._project_limits(self.h, self.time)
+            self.remesh_stats["reprojected"] = True
 
     def _apply_remesh(self, stats, params):
         """Whether to apply this remesh: not when it changed nothing, nor when its operations
@@ -370,10 +406,22 @@ class Simulator:
     def _enable_stages(self, settings):
         """Switch on just the stages this scene and these settings use."""
         limit = self.strain is not None and settings.strain.method != "none"
-        self.stage("collision").enabled = bool(self.setup.obstacles) or self.self_collision_on
-        self.stage("strain_limit").enabled = limit
-        self.stage("collision_final").enabled = limit and bool(self.setup.obstacles)
-        self.stage("remesh").enabled = bool(settings.remesh.enabled)
+        obstacles = bool(self.setup.obstacles)
+        remesh = bool(settings.remesh.enabled)
+        on = {"pins": self.setup.pin_motion is not None, "dynamics": True,
+              "self_collision": self.self_collision_on, "collision": obstacles,
+              "strain_limit": limit, "collision_final": limit and obstacles,
+              "contact_reproject": limit and obstacles, "remesh": remesh,
+              "remesh_reproject": remesh and limit, "metrics": self._metrics_stage,
+              "snapshot": True}
+        for s in self.stages:
+            s.enabled = on[s.name]
+
+    def set_metrics_stage(self, on):
+        """Measure ``metrics_row`` inside every frame, as its stage "metrics" (a run that
+        writes metrics.csv: its cost is then part of the frame time)."""
+        self._metrics_stage = bool(on)
+        self.stage("metrics").enabled = self._metrics_stage
 
     def set_method(self, name):
         """Switch strain limiting (``svd``, ``warp-weft``, ``mapping`` or ``none``)."""
@@ -478,6 +526,13 @@ class Simulator:
         return self.settings.strain.method
 
     # -- the frame loop -----------------------------------------------------------------------
+    def _move_pins(self):
+        self._update_pins(self.time + self.h)
+
+    def _snapshot(self):
+        """Keep the frame's mesh and state (``last_good``: what a diverged run had last)."""
+        self.last_good = self.model.mesh_arrays()
+
     def _update_pins(self, t):
         """Move the scene's scripted pins to their targets at time t (a held vertex stays
         where it is held)."""
@@ -503,11 +558,13 @@ class Simulator:
         return rest0[np.argmin(d, axis=1)]
 
     def step_frame(self):
-        """Advance one frame (``substeps`` time steps and the per-frame stages)."""
+        """Advance one frame (``substeps`` time steps and the per-frame stages). Every stage
+        is timed on its own; ``frame_ms`` is the whole frame's wall time, which they add up
+        to."""
+        t0 = time.perf_counter()
         for s in self.stages:
             s.ms = 0.0
         for _ in range(self.substeps):
-            self._update_pins(self.time + self.h)
             for s in self.stages:
                 if s.enabled and s.per_substep:
                     self._run_stage(s)
@@ -516,7 +573,7 @@ class Simulator:
             if s.enabled and not s.per_substep:
                 self._run_stage(s)
         self.frame += 1
-        self.last_good = self.model.mesh_arrays()
+        self.frame_ms = 1000.0 * (time.perf_counter() - t0)
 
     def compile_work(self, stage, method=None):
         """(what, key, estimate in s) of the kernels a stage compiles at its first call: the
@@ -532,7 +589,7 @@ class Simulator:
         if stage == "dynamics":
             return ("the dynamics step", f"dynamics:{self.settings.sim.linear_solver}",
                     (8, None))
-        if stage == "collision":
+        if stage in ("collision", "self_collision"):
             return ("the collision pass", "collision", (6, None))
         return None
 
@@ -558,9 +615,10 @@ class Simulator:
                 s.run()
         else:
             s.run()
-        ti.sync()
+        # (all_finite waits for the stage's kernels; a stage that only reads syncs itself)
+        finite = self.model.all_finite(self.model.n_verts) if s.moves else True
         s.ms += 1000.0 * (time.perf_counter() - t0)
-        if not self.model.all_finite(self.model.n_verts):
+        if not finite:
             raise SimulationDiverged(self.frame + 1, s.name)
 
     # -- metrics ------------------------------------------------------------------------------
@@ -580,16 +638,33 @@ class Simulator:
         return np.max(np.maximum(own, 0.0), axis=1)
 
     def metrics_row(self):
-        """One row of metrics.csv for the current frame (column names fixed; see README)."""
+        """One row of metrics.csv for the current frame (column names fixed; see README):
+        ``ms_total`` is the frame's wall time and ``ms_<stage>`` each stage's share of it
+        (every stage, 0 when off). With the "metrics" stage on the rest was measured inside
+        the frame, else it is measured now."""
+        if self._row is not None and self._row[0] == self.frame:
+            values = self._row[1]
+        else:
+            values = self._metrics_values()
+        m = self.model
+        row = {"frame": self.frame, "time": round(self.time, 9), "vertices": m.n_verts,
+               "faces": m.n_faces, "ms_total": self.frame_ms}
+        for s in self.stages:
+            row[f"ms_{s.name}"] = s.ms
+        row.update(values)
+        return row
+
+    def _measure(self):
+        """Stage "metrics": the frame's row of metrics.csv, measured inside the frame."""
+        self._row = (self.frame + 1, self._metrics_values())
+
+    def _metrics_values(self):
+        """metrics_row's columns after the timings."""
         m = self.model
         x, v = m.positions(), m.velocities()
         st = metrics.face_strains(x, m.uv, m.faces, m.grain)
         area = m.rest_area
-        row = {"frame": self.frame, "time": round(self.time, 9), "vertices": m.n_verts,
-               "faces": m.n_faces,
-               "ms_total": sum(s.ms for s in self.stages)}
-        for s in self.stages:
-            row[f"ms_{s.name}"] = s.ms
+        row = {}
         row["kinetic_energy"] = metrics.kinetic_energy(v, m.mass)
         # Kinetic + elastic + gravitational (J): what metrics.energy_drift reads.
         row["total_energy"] = (row["kinetic_energy"] + self.dynamics.energy()

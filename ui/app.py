@@ -48,7 +48,10 @@ VIEW_WITH_PLOT = ((0.30, 0.70), (0.44, 0.97))
 # redraw it as it was; docs/teaching.md, Cost); the hovered face is looked up again as often
 # while the cloth moves under a still cursor, and at once when the cursor moves.
 PLOT_EVERY = 3
-SHORT = {"dynamics": "dyn", "strain_limit": "limit", "collision": "coll", "remesh": "remesh"}
+SHORT = {"pins": "pins", "dynamics": "dyn", "self_collision": "self", "collision": "coll",
+         "strain_limit": "limit", "collision_final": "coll2", "contact_reproject": "reproj",
+         "remesh": "remesh", "remesh_reproject": "reproj2", "metrics": "metrics",
+         "snapshot": "snap"}
 COLOR_LABELS = {"shading": "shading", "warp-strain": "warp strain", "weft-strain": "weft strain",
                 "bias-strain": "bias strain", "principal-strain": "max principal strain",
                 "violation": "own-limit violation", "size": "triangle size",
@@ -382,7 +385,8 @@ class App:
             if st.compare:
                 continue      # per-method numbers sit under each cloth
             stages = "  ".join(f"{SHORT.get(k, k)} {v:.1f}" for k, v in r["stage_ms"].items())
-            g.text(f"ms: {stages}")
+            for line in textwrap.wrap(f"ms: {stages}", 42):
+                g.text(line)
             for line in readout_lines(r):
                 g.text(line)
 

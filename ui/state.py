@@ -525,7 +525,7 @@ class AppState:
         out = {"frame": s.frame, "time": s.time, "faces": s.model.n_faces,
                "vertices": s.model.n_verts, "method": s.method,
                "stage_ms": {st_.name: st_.ms for st_ in s.stages if st_.enabled},
-               "sim_ms": sum(st_.ms for st_ in s.stages),
+               "sim_ms": s.frame_ms,
                "render_ms": self.render_ms, "fps": self.fps,
                "sl_iterations": s.strain.last_iterations if s.strain is not None
                and s.stage("strain_limit").enabled else 0,
