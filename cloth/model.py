@@ -22,7 +22,7 @@ from taichi.lang.util import to_numpy_type
 
 from . import bending as bending_energy, metrics, ndarrays
 from .metrics import dihedral_angles, signed_material_areas  # noqa: F401 (re-exported)
-from .settings import MATERIAL_PRESETS
+from .materials import MATERIAL_PRESETS
 
 _COTTON = MATERIAL_PRESETS["cotton"]
 
@@ -75,8 +75,7 @@ class Material:
     test (ASTM D1388: B = w c^3 with w the weight per area, N/m^2, and c the bending length)
     or a KES-FB2 bending test (its B is per unit width, N m^2/m) reports; isotropic (the same
     about warp and weft)."""
-    # Defaults: the "cotton" preset (cloth/settings.py MATERIAL_PRESETS, where the numbers
-    # and their sources live).
+    # Defaults: the "cotton" preset (cloth/materials.py, where its numbers and sources live).
     density: float = _COTTON["density"]          # kg/m^2 (areal density)
     k_warp: float = _COTTON["k_warp"]            # N/m, stretch stiffness along the warp
     k_weft: float = _COTTON["k_weft"]            # N/m, stretch stiffness along the weft

@@ -69,7 +69,7 @@ class AppState:
         self.module = module
         self.scene_name = cfg.get("scene", getattr(module, "__name__", "scene").split(".")[-1])
         self.compare = compare
-        self.color = cfg.get("output", {}).get("color", "shading")
+        self.color = cfg["output"]["color"]
         self.wireframe = False
         self.smooth = True
         self.paused = False
