@@ -110,3 +110,15 @@ def test_moving_pins_are_a_stage_of_the_scenes_that_have_them(scene, on):
     sim.step_frame()
     assert (sim.stage("pins").ms > 0) == bool(on)
     assert np.all(np.isfinite(sim.last_good.x))
+
+
+def test_the_window_read_out_shows_every_stage_and_they_add_up():
+    from ui.state import AppState
+    st = AppState.from_scene("drape", [{"cloth": {"resolution": 5}}])
+    st.tick()
+    st.tick()
+    r = st.readouts()
+    assert r["sim_ms"] == st.sim.frame_ms
+    assert set(r["stage_ms"]) == {s.name for s in st.sim.stages if s.enabled}
+    assert {"collision_final", "contact_reproject"} <= set(r["stage_ms"])
+    assert abs(sum(r["stage_ms"].values()) - r["sim_ms"]) <= 0.1 + 0.01 * r["sim_ms"]

@@ -71,6 +71,9 @@ def test_every_live_control_of_the_window_reaches_every_copy():
     for method in ("svd", "warp-weft", "none", "mapping"):
         assert st.switch_method(method), st.message
         check_copies(st)
+    # One check of a method's name, the schema's: the window shows its one line.
+    assert not st.switch_method("isotropic") and "strain.method" in st.message
+    assert st.sim.method == "mapping"
     for which in ("warp", "weft", "bias"):
         assert st.set_band(which, lo=-0.02, hi=0.03), st.message
         check_copies(st)

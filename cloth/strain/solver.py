@@ -225,6 +225,12 @@ def _rounds_default(solver):
     return AL_ROUNDS if solver == "al" else 2000
 
 
+def _check_method(name):
+    if name not in METHOD_NAMES:
+        raise StrainLimitError(f"unknown strain-limiting method '{name}': use one of "
+                               f"{', '.join(METHOD_NAMES)}")
+
+
 def _check_choices(solver, coupling, linear_solver, curvature, tol, stop, newton_model,
                    kkt_velocity, mapping_iso, precondition):
     """The limiter's checks of its settings (the constructor's and ``configure``'s), each
@@ -397,9 +403,7 @@ class StrainLimiter:
         leaves the limiter as it was. A changed method starts its multipliers cold; a changed
         coupling or Newton model re-derives the initial penalty and the inner stop
         (``MU_SCALE``, ``ACTIVE_SET_MU``, ``INNER_RTOL``)."""
-        if st.method not in METHOD_NAMES:
-            raise StrainLimitError(f"unknown strain-limiting method '{st.method}': use one of "
-                                   f"{', '.join(METHOD_NAMES)}")
+        _check_method(st.method)
         _check_choices(solver=st.solver, coupling=st.coupling, linear_solver=st.linear_solver,
                        curvature=st.curvature, tol=st.tol, stop=st.stop,
                        newton_model=st.newton_model, kkt_velocity=st.kkt_velocity,
@@ -428,9 +432,7 @@ class StrainLimiter:
         self._upload_params()
 
     def set_method(self, name):
-        if name not in METHOD_NAMES:
-            raise StrainLimitError(f"unknown strain-limiting method '{name}': use one of "
-                                   f"{', '.join(METHOD_NAMES)}")
+        _check_method(name)
         if name != self.method:
             # Multipliers belong to the constraints of one method: start the new one cold.
             ndarrays.zero(self._ws.lam)
