@@ -103,15 +103,13 @@ class AppState:
     def _install(self, sim, cfg):
         """Adopt ``sim`` (or build the three comparison simulators) for ``cfg``."""
         if self.compare:
-            self.sims, self.labels = [], []
+            self.sims = []
             for m in COMPARE_METHODS:
                 c = copy.deepcopy(cfg)
                 c["strain"]["method"] = m
                 self.sims.append(build_simulator(self.module, c))
-                self.labels.append(m)
         else:
             self.sims = [sim if sim is not None else build_simulator(self.module, cfg)]
-            self.labels = [self.sims[0].method]
         self.offsets = self._layout()
         self.grab = None
         self.selected = None
@@ -130,6 +128,11 @@ class AppState:
     @property
     def sim(self):
         return self.sims[0]
+
+    @property
+    def labels(self):
+        """Each simulator's method, as the views label them."""
+        return [s.method for s in self.sims]
 
     @property
     def settings(self):
@@ -262,7 +265,6 @@ class AppState:
             return False
         ok = self._each(lambda s: s.set_method(name))      # an unknown name: the message
         if ok:
-            self.labels = [name]
             line = self.sim.compile_pending()
             if line is not None:
                 # Shown for one window frame before the step that compiles (the window does
