@@ -54,6 +54,9 @@ def check_copies(st):
         assert p[buffers.P_ISO] == s.strain.isotropy
         kernel_pdas = s.strain.newton_model == "active-set" and s.strain.linear_solver == "pcg"
         assert p[buffers.P_PDAS] == float(kernel_pdas)
+        assert p[buffers.P_MARGIN] == (0.0 if s.strain.newton_model == "active-set"
+                                       else lim.active_margin)
+        assert p[buffers.P_INNER_RTOL] == (0.0 if kernel_pdas else lim.inner_rtol)
         exact = s.strain.curvature == "exact" and s.strain.method == "mapping"
         assert p[buffers.P_CURVATURE] == float(exact)
     # The window keeps no copy: it reads the simulator's settings.
