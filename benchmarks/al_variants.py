@@ -306,8 +306,9 @@ def main():
         sim._update_pins(sim.time + sim.h)
         sim.dynamics.step(sim.h)
         sim.dynamics.system_matrix(sim.h, sim.strain.system_metric())
-        if sim.stage("collision").enabled:
-            sim._collide()
+        for name in ("self_collision", "collision"):
+            if sim.stage(name).enabled:
+                sim.stage(name).run()
         if contacts:
             sim.collider.contact_planes(sim.time + sim.h, sim.strain.contact_planes,
                                         reach=0.5 * sim.model.typical_edge(),

@@ -54,15 +54,16 @@ def child(bending, solve, overrides=None, drops=DROPS):
     mod = scenes.get("drape")
     runs = []
     for drop in drops:
-        cfg = resolve(mod.DEFAULTS, [{"sim": {"bending": bending}, "cloth": {"drop": drop}}])
-        sim = Simulator(mod.build(cfg), cfg)
         # The scene itself now takes exact steps (scenes/drape.py): every other solve sets
-        # the PCG steps explicitly.
-        sim.strain.linear_solver = "cholesky" if solve == "cholesky" else "pcg"
+        # the PCG steps explicitly (settings: the simulator's one copy of them).
+        strain = {"linear_solver": "cholesky" if solve == "cholesky" else "pcg"}
         if solve.startswith("jacobi"):
-            sim.strain.precondition = "jacobi"
-            if solve != "jacobi":
-                sim.strain.max_cg = int(solve.split("-")[1])
+            strain["precondition"] = "jacobi"
+        cfg = resolve(mod.DEFAULTS, [{"sim": {"bending": bending}, "cloth": {"drop": drop},
+                                      "strain": strain}])
+        sim = Simulator(mod.build(cfg), cfg)
+        if solve.startswith("jacobi-"):
+            sim.strain.max_cg = int(solve.split("-")[1])
         for key, value in (overrides or {}).items():
             if not hasattr(sim.strain, key):
                 raise SystemExit(f"--probe: StrainLimiter has no setting '{key}'")

@@ -110,7 +110,8 @@ def run(scene, overrides, frames, label):
         rows.append(dict(
             frame=frame, faces=st["faces_out"],
             splits=st["splits"], flips=st["flips"], collapses=st["collapses"],
-            remesh_ms=st["ms"], remesh_cpu_ms=st["ms_cpu"], stage_ms=ms["remesh"],
+            remesh_ms=st["ms"], remesh_cpu_ms=st["ms_cpu"],
+            stage_ms=ms["remesh"] + ms["remesh_reproject"],     # the remesh and its projection
             frame_ms=sum(ms.values()), top=float(sim.model.positions()[:, 1].max()),
             reproj_ms=sim.strain.last_ms if limited else 0.0,
             reproj_rounds=sim.strain.last_iterations if limited else 0,

@@ -57,6 +57,9 @@ import taichi as ti
 from . import backend, ndarrays
 from .model import ClothModel
 from .ndarrays import A, T
+from .settings import COMMON_DEFAULTS
+
+_SIM = COMMON_DEFAULTS["sim"]
 
 
 # The model's arrays the kernels read, in the order the kernels take them (then x and v).
@@ -67,12 +70,12 @@ MESH_ARRAYS = ("vert_mass", "vert_pinned", "vert_pin_target", "face_verts", "fac
 
 @dataclass
 class DynamicsSettings:
-    gravity: tuple = (0.0, -9.81, 0.0)   # m/s^2
-    # Relative residual (preconditioned norm) that stops CG. 1e-4 moves the settled hanging
-    # cotton sheet by 0.06 mm against a 1e-9 solve at a fifth of the iterations (measured).
-    cg_tol: float = 1e-4
-    cg_max_iters: int = 500
-    stitch_stiffness: float = 0.0        # N/m of the zero-length stitch springs
+    """The dynamics' share of the ``sim`` settings; the defaults are the settings' (one place:
+    cloth/settings.py COMMON_DEFAULTS)."""
+    gravity: tuple = tuple(_SIM["gravity"])       # m/s^2
+    cg_tol: float = _SIM["cg_tol"]     # relative residual (preconditioned norm) that stops CG
+    cg_max_iters: int = _SIM["cg_iters"]
+    stitch_stiffness: float = _SIM["stitch_stiffness"]   # N/m of the zero-length stitch springs
 
     def validate(self):
         if not self.cg_tol > 0:

@@ -22,6 +22,9 @@ from taichi.lang.util import to_numpy_type
 
 from . import bending as bending_energy, metrics, ndarrays
 from .metrics import dihedral_angles, signed_material_areas  # noqa: F401 (re-exported)
+from .materials import MATERIAL_PRESETS
+
+_COTTON = MATERIAL_PRESETS["cotton"]
 
 
 class ModelError(ValueError):
@@ -72,13 +75,14 @@ class Material:
     test (ASTM D1388: B = w c^3 with w the weight per area, N/m^2, and c the bending length)
     or a KES-FB2 bending test (its B is per unit width, N m^2/m) reports; isotropic (the same
     about warp and weft)."""
-    density: float = 0.15          # kg/m^2 (areal density)
-    k_warp: float = 3000.0         # N/m, stretch stiffness along the warp
-    k_weft: float = 2000.0         # N/m, stretch stiffness along the weft
-    k_shear: float = 50.0          # N/m, in-plane shear stiffness
-    k_bend: float = 1.5e-5         # N m, flexural rigidity B (see BEND_CONSTANT)
-    damp_mass: float = 0.1         # 1/s, mass-proportional (air) damping
-    damp_stiff: float = 0.002      # s, stiffness-proportional damping
+    # Defaults: the "cotton" preset (cloth/materials.py, where its numbers and sources live).
+    density: float = _COTTON["density"]          # kg/m^2 (areal density)
+    k_warp: float = _COTTON["k_warp"]            # N/m, stretch stiffness along the warp
+    k_weft: float = _COTTON["k_weft"]            # N/m, stretch stiffness along the weft
+    k_shear: float = _COTTON["k_shear"]          # N/m, in-plane shear stiffness
+    k_bend: float = _COTTON["k_bend"]            # N m, flexural rigidity B (BEND_CONSTANT)
+    damp_mass: float = _COTTON["damp_mass"]      # 1/s, mass-proportional (air) damping
+    damp_stiff: float = _COTTON["damp_stiff"]    # s, stiffness-proportional damping
 
     def validate(self):
         for name in ("density", "k_warp", "k_weft"):

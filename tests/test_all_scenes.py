@@ -54,10 +54,12 @@ def test_scenes_enable_only_what_they_need():
         if sim.setup.self_collision:
             self_coll.add(name)
     # hanging runs the paper's experiment (mapping) by default.
-    assert stages["hanging"] == {"dynamics", "strain_limit"}
+    assert stages["hanging"] == {"dynamics", "strain_limit", "snapshot"}
     assert "collision" in stages["drape"] and "collision" in stages["tshirt"]
-    assert "collision" not in stages["pull"]
-    assert self_coll == {"tshirt"}
+    assert {"collision_final", "contact_reproject"} <= stages["drape"]
+    assert "collision" not in stages["pull"] and "pins" in stages["pull"]
+    assert {"self_collision" in stages[n] for n in stages} == {True, False}
+    assert {n for n in stages if "self_collision" in stages[n]} == self_coll == {"tshirt"}
 
 
 @pytest.mark.slow

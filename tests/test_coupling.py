@@ -131,14 +131,16 @@ def test_lumped_core_factor_bounds_the_matrix_and_preconditions_it():
     assert np.linalg.norm(A @ got - b) <= 1e-10 * np.linalg.norm(b)
 
 
-def _hanging(method, coupling, linear_solver="pcg", res=6):
+def _hanging(method, coupling, linear_solver="pcg", res=6, **strain):
+    """hanging at resolution ``res`` with these strain settings (``strain``: any other key of
+    the section)."""
     import scenes
     from cloth.simulator import Simulator
     from scenes.common import resolve
     mod = scenes.get("hanging")
     cfg = resolve(mod.DEFAULTS, [{"cloth": {"resolution": res},
                                   "strain": {"method": method, "coupling": coupling,
-                                             "linear_solver": linear_solver}}])
+                                             "linear_solver": linear_solver, **strain}}])
     return Simulator(mod.build(cfg), cfg)
 
 

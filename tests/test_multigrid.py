@@ -24,8 +24,8 @@ def _apply(nv: int, mg_int: A, mg_real: A, mg_block: A, r: A, z: A):
 def _built(res=13):
     """A hanging sheet after two frames and a multigrid of its pinned implicit-step matrix:
     (sim, the preconditioner, that matrix as scipy CSR)."""
-    sim = _hanging("mapping", "implicit", res=res)
-    sim.strain.precondition = "multigrid"
+    sim = _hanging("mapping", "implicit", res=res, precondition="multigrid")
+    assert sim.strain.precondition == "multigrid"
     sim.step_frame()
     sim.step_frame()
     pc = sim.strain._pc

@@ -47,6 +47,7 @@ def test_moving_pin_target_is_followed():
     sim, cfg = make_sim(cloth={"resolution": 9}, strain=FREE)
     speed = np.array([0.3, 0.0, 0.2])
     sim.setup.pin_motion = lambda t, uv, rest: rest + t * speed
+    sim.stage("pins").enabled = True      # the scene changed after the build: its stage too
     for _ in range(20):
         sim.step_frame()
     pinned = sim.model.pinned

@@ -48,7 +48,10 @@ VIEW_WITH_PLOT = ((0.30, 0.70), (0.44, 0.97))
 # redraw it as it was; docs/teaching.md, Cost); the hovered face is looked up again as often
 # while the cloth moves under a still cursor, and at once when the cursor moves.
 PLOT_EVERY = 3
-SHORT = {"dynamics": "dyn", "strain_limit": "limit", "collision": "coll", "remesh": "remesh"}
+SHORT = {"pins": "pins", "dynamics": "dyn", "self_collision": "self", "collision": "coll",
+         "strain_limit": "limit", "collision_final": "coll2", "contact_reproject": "reproj",
+         "remesh": "remesh", "remesh_reproject": "reproj2", "metrics": "metrics",
+         "snapshot": "snap"}
 COLOR_LABELS = {"shading": "shading", "warp-strain": "warp strain", "weft-strain": "weft strain",
                 "bias-strain": "bias strain", "principal-strain": "max principal strain",
                 "violation": "own-limit violation", "size": "triangle size",
@@ -325,8 +328,8 @@ class App:
             auto = g.checkbox("automatic bias band", st.auto_bias)
             if auto != st.auto_bias:
                 st.set_auto_bias(auto)
-            iters = g.slider_int("SL iterations", int(st.cfg["strain"]["iters"]), 1, 200)
-            if iters != st.cfg["strain"]["iters"]:
+            iters = g.slider_int("SL iterations", int(st.settings.strain.iters), 1, 200)
+            if iters != st.settings.strain.iters:
                 st.set_iterations(iters)
             exact = g.checkbox("exact Newton steps (slow)", st.exact_steps)
             if exact != st.exact_steps:
@@ -334,19 +337,19 @@ class App:
 
             # Dynamics.
             g.text("")
-            sub = g.slider_int("substeps", int(st.cfg["sim"]["substeps"]), 1, 20)
-            if sub != st.cfg["sim"]["substeps"]:
+            sub = g.slider_int("substeps", int(st.settings.sim.substeps), 1, 20)
+            if sub != st.settings.sim.substeps:
                 st.set_substeps(sub)
-            mat = st.cfg["material"]
+            mat = st.settings.material
             for key, lo, hi in (("k_warp", -1.0, 4.0), ("k_weft", -1.0, 4.0),
                                 ("k_shear", -2.0, 3.0), ("k_bend", -8.0, -3.0)):
-                old = np.log10(max(mat[key], 1e-12))
+                old = np.log10(max(getattr(mat, key), 1e-12))
                 new = g.slider_float(f"log10 {key}", old, lo, hi)
                 if moved(new, old):
                     st.set_material(key, 10 ** new)
             for key, hi in (("damp_mass", 2.0), ("damp_stiff", 0.02)):
-                new = g.slider_float(key, float(mat[key]), 0.0, hi)
-                if moved(new, mat[key]):
+                new = g.slider_float(key, float(getattr(mat, key)), 0.0, hi)
+                if moved(new, getattr(mat, key)):
                     st.set_material(key, new)
             if st.has_remesh:
                 on = g.checkbox("remeshing", st.remesh_on)
@@ -382,7 +385,8 @@ class App:
             if st.compare:
                 continue      # per-method numbers sit under each cloth
             stages = "  ".join(f"{SHORT.get(k, k)} {v:.1f}" for k, v in r["stage_ms"].items())
-            g.text(f"ms: {stages}")
+            for line in textwrap.wrap(f"ms: {stages}", 42):
+                g.text(line)
             for line in readout_lines(r):
                 g.text(line)
 
@@ -456,7 +460,7 @@ class App:
         if self.recorder is None:
             folder = os.path.join(self.out_dir, "recordings",
                                   f"{st.scene_name}_{time.strftime('%Y%m%d_%H%M%S')}")
-            self.recorder = Recorder(folder, st.cfg["sim"]["fps"])
+            self.recorder = Recorder(folder, st.settings.sim.fps)
             st.message = f"recording to {folder}/"
         else:
             path = self.recorder.close()

@@ -65,6 +65,7 @@ class HeadlessRun:
                 os.path.join(self.out, "video.mp4"), fps=self.cfg["sim"]["fps"],
                 macro_block_size=8, quality=7)
         self.metrics = io.MetricsWriter(os.path.join(self.out, "metrics.csv"))
+        self.sim.set_metrics_stage(True)     # its measuring is part of each frame's time
 
     def _clear_earlier_output(self):
         """Remove what an earlier run wrote here (only Loom's own file names), so the folder
@@ -133,8 +134,7 @@ class HeadlessRun:
                     return False
                 self._write_frame()
                 if progress:
-                    ms = sum(s.ms for s in self.sim.stages)
-                    progress.update(k + 1, f"{ms:.0f} ms/frame simulated")
+                    progress.update(k + 1, f"{self.sim.frame_ms:.0f} ms/frame simulated")
             return True
         finally:
             if progress:

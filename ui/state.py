@@ -5,7 +5,8 @@ One ``AppState`` holds one simulator, or three in the comparison view (the same 
 the methods svd, warp-weft and mapping side by side). Controls that change settings apply to
 every simulator; ``switch_method`` applies to the single view only. The state changes a
 simulator only through its public controls (``Simulator.set_*``, ``hold_vertex``, ``reset``);
-its own ``cfg`` is the app's record of the settings, from which the simulators are rebuilt.
+it keeps no copy of the settings: the controls read and write ``Simulator.settings``
+(``AppState.settings``), and the simulators are rebuilt from it.
 
     state = AppState.from_scene("hanging")
     state.switch_method("mapping"); state.set_band("warp", hi=0.02)
@@ -68,8 +69,7 @@ class AppState:
         self.module = module
         self.scene_name = cfg.get("scene", getattr(module, "__name__", "scene").split(".")[-1])
         self.compare = compare
-        self.base_cfg = copy.deepcopy(cfg)     # the scene's settings as started (reset target)
-        self.color = cfg.get("output", {}).get("color", "shading")
+        self.color = cfg["output"]["color"]
         self.wireframe = False
         self.smooth = True
         self.paused = False
@@ -85,7 +85,8 @@ class AppState:
         self.grab = None            # (sim index, vertex) while a vertex is held
         self.grab_target = None
         self._strain_cache = {}
-        self.auto_bias = not cfg.get("strain", {}).get("bias")
+        # The method the single view returns to from the comparison view (which runs all three).
+        self.single_method = cfg["strain"]["method"]
         self._install(sim, cfg)
 
     @classmethod
@@ -101,17 +102,14 @@ class AppState:
     # -- building -----------------------------------------------------------------------------
     def _install(self, sim, cfg):
         """Adopt ``sim`` (or build the three comparison simulators) for ``cfg``."""
-        self.cfg = cfg
         if self.compare:
-            self.sims, self.labels = [], []
+            self.sims = []
             for m in COMPARE_METHODS:
                 c = copy.deepcopy(cfg)
                 c["strain"]["method"] = m
                 self.sims.append(build_simulator(self.module, c))
-                self.labels.append(m)
         else:
             self.sims = [sim if sim is not None else build_simulator(self.module, cfg)]
-            self.labels = [self.sims[0].method]
         self.offsets = self._layout()
         self.grab = None
         self.selected = None
@@ -130,6 +128,24 @@ class AppState:
     @property
     def sim(self):
         return self.sims[0]
+
+    @property
+    def labels(self):
+        """Each simulator's method, as the views label them."""
+        return [s.method for s in self.sims]
+
+    @property
+    def settings(self):
+        """The settings in force (``Simulator.settings``: every simulator shares them, but for
+        the method in the comparison view). The panel reads its controls from here."""
+        return self.sim.settings
+
+    def _settings_dict(self):
+        """The nested dict the simulators are rebuilt from: the settings in force, with the
+        single view's method."""
+        cfg = self.settings.to_dict()
+        cfg["strain"]["method"] = self.single_method if self.compare else self.sim.method
+        return cfg
 
     def _each(self, fn):
         """Apply ``fn(sim)`` to every simulator; a ValueError becomes the panel message."""
@@ -202,7 +218,7 @@ class AppState:
                 s.reset()
         except Exception:       # anything unexpected: the slow, sure way
             traceback.print_exc()
-            self._install(None, copy.deepcopy(self.cfg))
+            self._install(None, self._settings_dict())
         self._strain_cache.clear()
 
     def switch_scene(self, name):
@@ -217,8 +233,7 @@ class AppState:
             return False
         cfg["scene"] = name
         self.module, self.scene_name = module, name
-        self.base_cfg = copy.deepcopy(cfg)
-        self.auto_bias = not cfg["strain"].get("bias")
+        self.single_method = cfg["strain"]["method"]
         self.message, self.failed = "", False
         self._install(None, cfg)
         return True
@@ -230,7 +245,9 @@ class AppState:
         on = bool(on)
         if on == self.compare:
             return True
-        cfg = copy.deepcopy(self.cfg)
+        cfg = self._settings_dict()
+        if on:
+            self.single_method = cfg["strain"]["method"]
         self.compare, self.message, self.failed = on, "", False
         try:
             self._install(None, cfg)
@@ -246,13 +263,8 @@ class AppState:
         if self.compare:
             self.message = "the comparison view runs all three methods"
             return False
-        if name not in STRAIN_METHODS:
-            self.message = f"unknown method '{name}'"
-            return False
-        ok = self._each(lambda s: s.set_method(name))
+        ok = self._each(lambda s: s.set_method(name))      # an unknown name: the message
         if ok:
-            self.cfg["strain"]["method"] = name
-            self.labels = [name]
             line = self.sim.compile_pending()
             if line is not None:
                 # Shown for one window frame before the step that compiles (the window does
@@ -333,77 +345,59 @@ class AppState:
         lo = old[0] if lo is None else min(float(lo), 0.0)
         hi = old[1] if hi is None else max(float(hi), 0.0)
         lo = max(lo, -0.9)
-        new = {which: (lo, hi)}
-        if which == "bias":
-            self.auto_bias = False
-        elif self.auto_bias:
-            new["bias"] = "auto"
-        ok = self._each(lambda s: s.set_bands(**new))
-        if ok:
-            for k, v in new.items():
-                self.cfg["strain"][k] = [] if v == "auto" else list(v)
+        ok = self._each(lambda s: s.set_bands(**{which: (lo, hi)}))
         self._strain_cache.clear()
         return ok
 
+    @property
+    def auto_bias(self):
+        """Whether the bias band follows the warp and weft bands (settings strain.bias = [])."""
+        return not self.settings.strain.bias
+
     def set_auto_bias(self, on=True):
-        self.auto_bias = bool(on)
-        if on:
-            self.cfg["strain"]["bias"] = []
-            return self._each(lambda s: s.set_bands(bias="auto"))
-        return True
+        """The bias band follows the warp and weft bands again, or (off) stays where it is
+        now, as an explicit band."""
+        bias = "auto" if on else self.bands()["bias"]
+        return self._each(lambda s: s.set_bands(bias=bias))
 
     def set_iterations(self, n):
-        n = max(1, int(n))
-        if self._each(lambda s: s.set_iterations(n)):
-            self.cfg["strain"]["iters"] = n
+        return self._each(lambda s: s.set_iterations(max(1, int(n))))
 
     @property
     def exact_steps(self):
-        return self.cfg["strain"]["linear_solver"] == "cholesky"
+        return self.settings.strain.linear_solver == "cholesky"
 
     def set_exact_steps(self, on):
         """Exact Newton steps in the strain solve (strain.linear_solver "cholesky") or the
         default PCG ones: several times slower, but a landing cloth keeps its motion."""
         solver = "cholesky" if on else "pcg"
-        if self._each(lambda s: s.set_strain_linear_solver(solver)):
-            self.cfg["strain"]["linear_solver"] = solver
-            return True
-        return False
+        return self._each(lambda s: s.set_strain_linear_solver(solver))
 
     # -- time step and material ---------------------------------------------------------------
     def set_substeps(self, n):
-        n = max(1, int(n))
-        if self._each(lambda s: s.set_substeps(n)):
-            self.cfg["sim"]["substeps"] = n
+        return self._each(lambda s: s.set_substeps(max(1, int(n))))
 
     def set_material(self, key, value):
         """Change a stiffness or damping live (the dynamics reads the material every step)."""
         if key not in MATERIAL_KEYS:
             raise ValueError(f"material key must be one of {MATERIAL_KEYS}")
         value = float(value)
-        ok = self._each(lambda s: s.set_material(**{key: value}))
-        if ok:
-            self.cfg["material"][key] = value
-        return ok
+        return self._each(lambda s: s.set_material(**{key: value}))
 
     # -- optional stages ----------------------------------------------------------------------
     @property
     def has_remesh(self):
-        return "remesh" in self.cfg
+        return "remesh" in self.settings
 
     @property
     def remesh_on(self):
-        return self.sim.stage("remesh").enabled
+        return self.settings.remesh.enabled
 
     def set_remesh(self, on):
         if not self.has_remesh:
             self.message = "this scene has no remeshing settings"
             return False
-
-        ok = self._each(lambda s: s.set_remesh(on))
-        if ok:
-            self.cfg["remesh"]["enabled"] = bool(on)
-        return ok
+        return self._each(lambda s: s.set_remesh(on))
 
     @property
     def has_self_collision(self):
@@ -530,7 +524,7 @@ class AppState:
         out = {"frame": s.frame, "time": s.time, "faces": s.model.n_faces,
                "vertices": s.model.n_verts, "method": s.method,
                "stage_ms": {st_.name: st_.ms for st_ in s.stages if st_.enabled},
-               "sim_ms": sum(st_.ms for st_ in s.stages),
+               "sim_ms": s.frame_ms,
                "render_ms": self.render_ms, "fps": self.fps,
                "sl_iterations": s.strain.last_iterations if s.strain is not None
                and s.stage("strain_limit").enabled else 0,

@@ -199,7 +199,7 @@ class TourRecorder:
             os.makedirs(os.path.join(self.out, sub), exist_ok=True)
             for p in glob.glob(os.path.join(self.out, sub, "*.png")):
                 os.remove(p)
-        fps = st.cfg["sim"]["fps"]
+        fps = st.settings.sim.fps
         captions = ["# Loom tour: the paper's Table 1 with the three methods\n"]
         total = len(METHODS) * self.settle
         progress = None if self.quiet else Progress(total)

@@ -67,20 +67,9 @@ SVD_ISO_GAP = 1e-3
 # letting round-off in D (~1e-16) matter.
 MAPPING_DELTA = 1e-6
 
-# Closure of the mapping family's feasible set at isotropy (METHOD 3.3 "the feasible set is not
-# closed there"). The paper's c_ij = |e_i . v_j| depends on the principal frame V, which is
-# arbitrary at eta1 = eta2 and turns by ~45 degrees under tiny changes of F near it, while the
-# projection drives stretched regions exactly there: a near-isotropic stretch with V at 45
-# degrees is the largest stretch the constraints allow (sqrt 2 eps). Measured on the tshirt
-# scene (mapping +-5 %, the first projection that failed, t = 0.1 s): the worst faces ended at
-# eta = (1.072, 1.063), V at 45 degrees, and the solve did not converge in 50 or 200 rounds
-# (violation 6.5e-3); svd and warp-weft from the same state converged in 8-9 rounds. Loom
-# blends c_ij towards the isotropic value 1/sqrt 2 (the permissive end of the closure) with the
-# weight w = D^2 / (D^2 + iso^2), D = eta1^2 - eta2^2; w c^2 keeps c~ continuous at D = 0 and
-# w dc (dc ~ 1/D) bounded. With iso = 0.01 (triangles whose principal stretches differ by less
-# than ~0.5 % strain) the same solve converged in 13 rounds, with 0.03 in 7. iso = 0 restores
-# the paper's constraint exactly (``strain.isotropy = 0``).
-MAPPING_ISO = 0.01
+# Closure of the mapping family's feasible set at isotropy: ``defaults.MAPPING_ISO`` (settings
+# strain.isotropy), why there.
+from .defaults import MAPPING_ISO  # noqa: E402,F401
 
 
 def _constraints_type(k):

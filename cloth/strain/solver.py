@@ -25,8 +25,7 @@ import taichi as ti
 
 from .. import backend, linalg, metrics, ndarrays
 from .. import system_matrix
-from .constraints import (MAPPING_DELTA, MAPPING_ISO, METHOD_IDS, METHODS, N_CONSTRAINTS,
-                          SVD_DELTA)
+from .constraints import MAPPING_DELTA, METHOD_IDS, METHODS, N_CONSTRAINTS, SVD_DELTA
 from . import al, buffers, pbd
 from .factor_precond import FactorPreconditioner, FactorStub
 from .multigrid import HAVE_PYAMG, MAX_COARSE, MultigridPreconditioner, MultigridStub
@@ -221,7 +220,49 @@ def _check_band(name, band, lower_limit=-1.0):
     return lo, hi
 
 
-from .defaults import AL_ROUNDS, KKT_VELOCITY, STOP  # noqa: E402 (the settings' defaults too)
+from ..settings import COMMON_DEFAULTS  # noqa: E402
+from .defaults import AL_ROUNDS  # noqa: E402
+
+# Every strain setting's one default (cloth/settings.py): the limiter's keyword defaults are
+# read from there, so a script, a test and a scene start from the same values.
+_DEFAULT = COMMON_DEFAULTS["strain"]
+PRECONDITIONERS = ("auto", "factor", "multigrid", "jacobi")
+
+
+def _rounds_default(solver):
+    """``max_iters`` None: the AL's round budget (settings strain.iters), or 2000 sweeps for
+    the per-triangle baselines."""
+    return AL_ROUNDS if solver == "al" else 2000
+
+
+def _check_method(name):
+    if name not in METHOD_NAMES:
+        raise StrainLimitError(f"unknown strain-limiting method '{name}': use one of "
+                               f"{', '.join(METHOD_NAMES)}")
+
+
+def _check_choices(solver, coupling, linear_solver, curvature, tol, stop, newton_model,
+                   kkt_velocity, mapping_iso, precondition):
+    """The limiter's checks of its settings (the constructor's and ``configure``'s), each
+    failure one ``StrainLimitError`` that names the fix."""
+    for what, value, allowed in (("strain-limiting solver", solver, SOLVERS),
+                                 ("strain coupling", coupling, COUPLINGS),
+                                 ("strain linear solver", linear_solver, LINEAR_SOLVERS),
+                                 ("strain curvature", curvature, CURVATURES),
+                                 ("strain stop rule", stop, STOPS),
+                                 ("strain newton_model", newton_model, NEWTON_MODELS),
+                                 ("strain precondition", precondition, PRECONDITIONERS)):
+        if value not in allowed:
+            raise StrainLimitError(f"unknown {what} '{value}': use one of "
+                                   f"{', '.join(allowed)}")
+    if not tol > 0:
+        raise StrainLimitError(f"tol must be > 0 (got {tol}); 1e-4 is 0.01 % strain")
+    if not kkt_velocity > 0:
+        raise StrainLimitError(f"kkt_velocity must be > 0 m/s (got {kkt_velocity}); "
+                               f"{_DEFAULT['kkt_velocity']} is 1 cm/s")
+    if not mapping_iso >= 0:
+        raise StrainLimitError(f"mapping_iso must be >= 0 (got {mapping_iso}); 0 is the "
+                               "paper's constraint")
 
 
 class StrainLimiter:
@@ -252,7 +293,7 @@ class StrainLimiter:
     on 1k-triangle projections it was not better than the fixed margin, so it is off by
     default. ``svd_delta`` (attribute, default ``constraints.SVD_DELTA``; 0 disables) is the
     regularisation of the svd family's principal-frame curvature. ``mapping_iso`` (default
-    ``constraints.MAPPING_ISO``; 0 = the paper's constraint) closes the mapping family's
+    settings strain.isotropy; 0 = the paper's constraint) closes the mapping family's
     feasible set at isotropy.
 
     Measured on the hanging scene (about 1k triangles, one substep per frame): the whole AL
@@ -266,39 +307,22 @@ class StrainLimiter:
     its value at the round's first step (None: per coupling, ``INNER_RTOL``; 0 turns it off).
     """
 
-    def __init__(self, model, method="mapping", warp=(-0.01, 0.01), weft=(-0.05, 0.05),
-                 bias=None, solver="al", tol=1e-4, max_iters=None, max_newton=None,
+    def __init__(self, model, method=_DEFAULT["method"], warp=tuple(_DEFAULT["warp"]),
+                 weft=tuple(_DEFAULT["weft"]), bias=None, solver=_DEFAULT["solver"],
+                 tol=_DEFAULT["tol"], max_iters=None, max_newton=None,
                  max_cg=None, cg_rtol=0.1, mu_scale=None, mu_grow=4.0, mu_max_scale=1e6,
-                 mapping_delta=MAPPING_DELTA, mapping_iso=MAPPING_ISO, jacobi_omega=1.0,
-                 active_margin=1e-2, inner_rtol=None,
-                 adaptive_margin=False, stitches=None, coupling="projection",
-                 linear_solver="pcg", curvature="model", stop=STOP,
-                 kkt_velocity=KKT_VELOCITY, newton_model="margin"):
-        if solver not in SOLVERS:
-            raise StrainLimitError(f"unknown strain-limiting solver '{solver}': use one of "
-                                   f"{', '.join(SOLVERS)}")
-        if coupling not in COUPLINGS:
-            raise StrainLimitError(f"unknown strain coupling '{coupling}': use one of "
-                                   f"{', '.join(COUPLINGS)}")
-        if linear_solver not in LINEAR_SOLVERS:
-            raise StrainLimitError(f"unknown strain linear solver '{linear_solver}': use one of "
-                                   f"{', '.join(LINEAR_SOLVERS)}")
-        if curvature not in CURVATURES:
-            raise StrainLimitError(f"unknown strain curvature '{curvature}': use one of "
-                                   f"{', '.join(CURVATURES)}")
-        if not tol > 0:
-            raise StrainLimitError(f"tol must be > 0 (got {tol}); 1e-4 is 0.01 % strain")
-        if stop not in STOPS:
-            raise StrainLimitError(f"unknown strain stop rule '{stop}': use one of "
-                                   f"{', '.join(STOPS)}")
-        if newton_model not in NEWTON_MODELS:
-            raise StrainLimitError(f"unknown strain newton_model '{newton_model}': use one of "
-                                   f"{', '.join(NEWTON_MODELS)}")
-        if not kkt_velocity > 0:
-            raise StrainLimitError(f"kkt_velocity must be > 0 m/s (got {kkt_velocity}); "
-                                   f"{KKT_VELOCITY} is 1 cm/s")
+                 mapping_delta=MAPPING_DELTA, mapping_iso=_DEFAULT["isotropy"],
+                 jacobi_omega=1.0, active_margin=1e-2, inner_rtol=None,
+                 adaptive_margin=False, stitches=None, coupling=_DEFAULT["coupling"],
+                 linear_solver=_DEFAULT["linear_solver"], curvature=_DEFAULT["curvature"],
+                 stop=_DEFAULT["stop"], kkt_velocity=_DEFAULT["kkt_velocity"],
+                 newton_model=_DEFAULT["newton_model"], precondition=_DEFAULT["precondition"]):
+        _check_choices(solver=solver, coupling=coupling, linear_solver=linear_solver,
+                       curvature=curvature, tol=tol, stop=stop, newton_model=newton_model,
+                       kkt_velocity=kkt_velocity, mapping_iso=mapping_iso,
+                       precondition=precondition)
         if max_iters is None:
-            max_iters = AL_ROUNDS if solver == "al" else 2000
+            max_iters = _rounds_default(solver)
         for name, val in (("max_iters", max_iters),
                           ("max_newton", 1 if max_newton is None else max_newton),
                           ("max_cg", 1 if max_cg is None else max_cg)):
@@ -312,9 +336,6 @@ class StrainLimiter:
         if not mapping_delta > 0:
             raise StrainLimitError(f"mapping_delta must be > 0 (got {mapping_delta}); "
                                    f"use {MAPPING_DELTA}")
-        if not mapping_iso >= 0:
-            raise StrainLimitError(f"mapping_iso must be >= 0 (got {mapping_iso}); 0 is the "
-                                   "paper's constraint")
         if not 0 < jacobi_omega <= 2:
             raise StrainLimitError(f"jacobi_omega must be in (0, 2] (got {jacobi_omega})")
         self.model = model
@@ -330,7 +351,7 @@ class StrainLimiter:
         self._system_ready = False
         self._pc = None            # Factor- or MultigridPreconditioner of the implicit metric
         self._stubs = None         # placeholder arrays for the preconditioners not in use
-        self.precondition = "auto"
+        self.precondition = precondition
         self.precondition_contacts = False
         # The start candidate beside x_hat (al.choose_start): the substep's start moved on at
         # the last projection's velocity above ``settle_speed`` (True), or the start itself
@@ -390,10 +411,44 @@ class StrainLimiter:
         self.last_reverted, self.reverted_count = False, 0
 
     # ---- settings ------------------------------------------------------------------------
+    def configure(self, st):
+        """Adopt the ``strain`` settings section ``st`` (``Settings.strain``): the one function
+        that derives the limiter's copies of the settings, its attributes and, through
+        ``_upload_params``, the kernels' ``params``. The Simulator calls it after every change
+        of its settings. Every value is checked before any is adopted, so a refused change
+        leaves the limiter as it was. A changed method starts its multipliers cold; a changed
+        coupling or Newton model re-derives the initial penalty and the inner stop
+        (``MU_SCALE``, ``ACTIVE_SET_MU``, ``INNER_RTOL``)."""
+        _check_method(st.method)
+        _check_choices(solver=st.solver, coupling=st.coupling, linear_solver=st.linear_solver,
+                       curvature=st.curvature, tol=st.tol, stop=st.stop,
+                       newton_model=st.newton_model, kkt_velocity=st.kkt_velocity,
+                       mapping_iso=st.isotropy, precondition=st.precondition)
+        warp, weft = _check_band("warp", st.warp), _check_band("weft", st.weft)
+        bias = _check_band("bias", st.bias) if st.bias else None
+        if int(st.iters) < 1:
+            raise StrainLimitError(f"max_iters must be >= 1 (got {st.iters})")
+        if (st.coupling, st.newton_model) != (self.coupling, self.newton_model):
+            self.mu_scale = _default_mu_scale(st.coupling, st.newton_model)
+        if st.coupling != self.coupling:
+            self.inner_rtol = INNER_RTOL[st.coupling]
+            self._system_ready = False
+        if st.method != self.method:
+            ndarrays.zero(self._ws.lam)   # multipliers belong to the constraints of one method
+        self.method, self.solver, self.tol = st.method, st.solver, float(st.tol)
+        self.max_iters = int(st.iters)
+        self.mapping_iso = float(st.isotropy)
+        self.coupling, self.linear_solver = st.coupling, st.linear_solver
+        self.curvature, self.newton_model = st.curvature, st.newton_model
+        self.stop, self.kkt_velocity = st.stop, float(st.kkt_velocity)
+        self.precondition = st.precondition
+        self.warp, self.weft = warp, weft
+        self._explicit_bias = bias is not None
+        self.bias = bias if bias is not None else metrics.default_bias_band(warp, weft)
+        self._upload_params()
+
     def set_method(self, name):
-        if name not in METHOD_NAMES:
-            raise StrainLimitError(f"unknown strain-limiting method '{name}': use one of "
-                                   f"{', '.join(METHOD_NAMES)}")
+        _check_method(name)
         if name != self.method:
             # Multipliers belong to the constraints of one method: start the new one cold.
             ndarrays.zero(self._ws.lam)
