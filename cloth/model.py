@@ -379,6 +379,11 @@ class ClothModel:
     def edges(self):
         return self._np_cache["edges"]
 
+    def edge_topology(self):
+        """(edge_verts, edge_faces, edge_opp) of the loaded mesh, as ``build_edges`` gives."""
+        c = self._np_cache
+        return c["edges"], c["edge_faces"], c["edge_opp"]
+
     def bend_pattern(self):
         """(rows, cols) of the isotropic bending matrix's entries, in the kernels' order
         (empty under the hinge energy): the block pattern needs them."""

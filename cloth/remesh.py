@@ -720,8 +720,36 @@ def _export(w, mesh, face_data):
     return out, data
 
 
+def mesh_sizing(mesh, params, obstacle_distance=None, edges=None):
+    """The vertex sizing metric (V, 2, 2) a remesh of ``mesh`` works with (``remesh`` takes it
+    as ``sizing``). ``edges``: ``build_edges(mesh.faces)`` if the caller has it already."""
+    face_M, area = face_sizing(mesh, params, obstacle_distance, edges)
+    return vertex_sizing(face_M, area, mesh.faces, len(mesh.uv), params)
+
+
+def pending_operations(mesh, Mv, frozen_verts=None, edges=None):
+    """What a remesh of ``mesh`` in the sizing ``Mv`` would start from, counted over the whole
+    mesh at once without making any operation (numpy, a few passes over the edges): the
+    edges longer than 1 in the metric (not between two frozen vertices), which the split
+    pass splits, plus the interior edges failing the anisotropic Delaunay test, which the
+    flip pass flips. Collapses are not counted (the candidates' exact check is per edge).
+    Measured on hanging (mapping, ~900 faces, frames 1-40): the split count equals the
+    remesh's splits in every frame; the flips counted are 0.3-1 times its flips (splits set
+    off more). ``Simulator._remesh`` defers a remesh by this count without making it."""
+    ev, ef, eo = build_edges(mesh.faces) if edges is None else edges
+    uv = mesh.uv
+    M3 = np.stack([Mv[:, 0, 0], Mv[:, 0, 1], Mv[:, 1, 1]], axis=1)
+    long = _edge_len2(uv, M3, ev[:, 0], ev[:, 1]) > 1.0
+    if frozen_verts is not None:
+        frozen = np.asarray(frozen_verts, bool)
+        long &= ~(frozen[ev[:, 0]] & frozen[ev[:, 1]])
+    inner = np.flatnonzero(ef[:, 1] >= 0)
+    bad = _flip_wanted_np(uv, M3, ev[inner, 0], ev[inner, 1], eo[inner, 0], eo[inner, 1])
+    return int(np.count_nonzero(long)) + int(np.count_nonzero(bad))
+
+
 def remesh(mesh: MeshArrays, params: RemeshParams = None, obstacle_distance=None,
-           face_data=None, frozen_verts=None, max_splits=None):
+           face_data=None, frozen_verts=None, max_splits=None, sizing=None, edges=None):
     """One remeshing pass. Returns (new MeshArrays, new face_data dict, stats dict).
 
     obstacle_distance: optional callable, (N, 3) world points -> (N,) signed distances.
@@ -730,6 +758,8 @@ def remesh(mesh: MeshArrays, params: RemeshParams = None, obstacle_distance=None
     frozen_verts: optional (V,) bool; these vertices (and pinned ones) are never removed or
         moved, and an edge between two frozen vertices is never split (keeps seams intact).
     max_splits: safety cap on splits per call (default 4 x the input vertex count + 1000).
+    sizing: the vertex metric (``mesh_sizing(mesh, params, obstacle_distance)``) if the caller has
+        computed it already; edges: ``build_edges(mesh.faces)`` likewise.
     ``mesh.extras`` is passed through unchanged (it is not transferred per vertex).
     stats: counts ``splits``, ``flips``, ``collapses``, ``faces_in/out``, ``verts_in/out``
     and times ``ms_sizing``, ``ms_ops``, ``ms`` (wall clock) and ``ms_cpu`` (process time)."""
@@ -741,9 +771,9 @@ def remesh(mesh: MeshArrays, params: RemeshParams = None, obstacle_distance=None
         np.asarray(frozen_verts, dtype=bool)
     _check_input(mesh, frozen, face_data)
 
-    edges = build_edges(mesh.faces)
-    face_M, area = face_sizing(mesh, params, obstacle_distance, edges)
-    Mv = vertex_sizing(face_M, area, mesh.faces, nv, params)
+    edges = build_edges(mesh.faces) if edges is None else edges
+    Mv = mesh_sizing(mesh, params, obstacle_distance, edges) if sizing is None else \
+        np.asarray(sizing, np.float64)
     t1 = time.perf_counter()
 
     w = _Work(mesh, Mv, frozen, params, edges)

@@ -9,7 +9,8 @@ import scipy.sparse as sp
 
 from cloth import bending, linalg, ndarrays, system_matrix
 from cloth.model import ClothModel, Material, MeshArrays, build_edges, signed_material_areas
-from cloth.remesh import RemeshParams, remesh, transfer_vertex_data
+from cloth.remesh import RemeshParams, mesh_sizing, pending_operations, remesh, \
+    transfer_vertex_data
 from cloth.sheet import make_sheet
 from tests.test_scenes import make_sim
 
@@ -231,7 +232,8 @@ def test_limits_hold_after_every_remesh_with_deferral_and_without():
                 run = 0
             else:
                 assert np.array_equal(sim.model.faces, before)
-                if ops:
+                if st.get("deferred"):              # made and deferred, or deferred unmade
+                    assert ops or not st["made"]
                     deferred += 1
                     run += 1
                     assert defer_ops > 0 and run <= 2
@@ -242,3 +244,41 @@ def test_limits_hold_after_every_remesh_with_deferral_and_without():
             assert np.array_equal(np.sort(sim.model.uv[sim.model.pinned], axis=0), pins)
         assert applied > 0
         assert (deferred > 0) == (defer_ops > 0), (defer_ops, deferred)
+
+
+def test_a_remesh_given_its_sizing_is_the_same_remesh():
+    """The simulator computes the sizing once (to count the pending operations) and hands it
+    to the remesh: the result must be the remesh that computes it itself."""
+    mesh = _sheet(9, clamp=False)
+    params = CASES["split"][1]
+    edges = build_edges(mesh.faces)
+    Mv = mesh_sizing(mesh, params, edges=edges)
+    a, _, sa = remesh(mesh, params)
+    b, _, sb = remesh(mesh, params, sizing=Mv, edges=edges)
+    assert sa["splits"] > 0
+    for k in ("uv", "x", "v", "faces", "pinned", "grain"):
+        assert np.array_equal(getattr(a, k), getattr(b, k)), k
+    # The count: every edge too long is split here (no cascade beyond them is needed on
+    # this sheet's first pass), plus the edges failing the Delaunay test.
+    n = pending_operations(mesh, Mv, edges=edges)
+    assert sa["splits"] <= n <= sa["splits"] + sa["flips"]
+
+
+def test_refinement_the_cloth_needs_now_is_not_deferred():
+    """A remesh that would split many edges is made and applied in its frame, however few
+    frames were deferred before it: here the sizing is made four times finer mid-run."""
+    sim, _ = make_sim(cloth={"resolution": 13}, strain={"method": "mapping"},
+                      remesh={"enabled": True, "size_min": 0.04, "size_max": 0.15,
+                              "defer_frames": 4})
+    made = []
+    for _ in range(12):
+        sim.step_frame()
+        made.append(sim.remesh_stats.get("made", True))
+    assert not all(made)                     # a settling cloth defers some unmade
+    faces = sim.model.n_faces
+    remesh_module, params = sim.remesher
+    params.size_max, params.size_min = 0.04, 0.01
+    sim._remesh_deferred = 0                 # the deferral budget untouched
+    sim.step_frame()
+    st = sim.remesh_stats
+    assert st["applied"] and st["splits"] > 0.05 * faces and sim.model.n_faces > faces
