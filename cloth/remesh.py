@@ -71,8 +71,23 @@ def _sym_eig2(M):
 
 
 def _compose(lam, V):
-    """V diag(lam) V^T for stacks."""
-    return (V * lam[:, None, :]) @ np.transpose(V, (0, 2, 1))
+    """V diag(lam) V^T for stacks (written out: numpy's stacked 2x2 products cost several
+    times the arithmetic)."""
+    a, b = V[:, :, 0], V[:, :, 1]                 # the eigenvectors (N, 2)
+    out = np.empty((len(lam), 2, 2))
+    out[:, 0, 0] = lam[:, 0] * a[:, 0] ** 2 + lam[:, 1] * b[:, 0] ** 2
+    out[:, 1, 1] = lam[:, 0] * a[:, 1] ** 2 + lam[:, 1] * b[:, 1] ** 2
+    out[:, 0, 1] = out[:, 1, 0] = lam[:, 0] * a[:, 0] * a[:, 1] + lam[:, 1] * b[:, 0] * b[:, 1]
+    return out
+
+
+def _gram(G):
+    """G^T G for stacks of (N, k, 2) matrices, written out: (N, 2, 2)."""
+    out = np.empty((len(G), 2, 2))
+    out[:, 0, 0] = np.einsum("ni,ni->n", G[:, :, 0], G[:, :, 0])
+    out[:, 1, 1] = np.einsum("ni,ni->n", G[:, :, 1], G[:, :, 1])
+    out[:, 0, 1] = out[:, 1, 0] = np.einsum("ni,ni->n", G[:, :, 0], G[:, :, 1])
+    return out
 
 
 def _inv2(A):
@@ -81,6 +96,14 @@ def _inv2(A):
     inv = np.stack([np.stack([A[:, 1, 1], -A[:, 0, 1]], 1),
                     np.stack([-A[:, 1, 0], A[:, 0, 0]], 1)], axis=1)
     return inv / det[:, None, None]
+
+
+def _times(c0, c1, B):
+    """[c0 c1] B for stacks: columns c0, c1 (N, k) and B (N, 2, 2); (N, k, 2)."""
+    out = np.empty(c0.shape + (2,))
+    for c in (0, 1):
+        out[:, :, c] = c0 * B[:, 0, c][:, None] + c1 * B[:, 1, c][:, None]
+    return out
 
 
 def face_sizing(mesh, params, obstacle_distance=None, edges=None):
@@ -112,16 +135,16 @@ def face_sizing(mesh, params, obstacle_distance=None, edges=None):
     S /= area[:, None, None]
     for _ in range(params.curvature_smoothing):
         S = _vertex_mean(S, area, faces, len(x))[faces].mean(axis=1)
-    M = S @ S / params.refine_angle ** 2
+    M = _gram(S) / params.refine_angle ** 2        # S S (S symmetric)
 
     # Velocity gradient (3x2): bounds the velocity difference across an edge.
-    Gv = np.stack([mesh.v[j] - mesh.v[i], mesh.v[k] - mesh.v[i]], axis=2) @ Dm_inv
-    M += np.transpose(Gv, (0, 2, 1)) @ Gv / params.refine_velocity ** 2
+    Gv = _times(mesh.v[j] - mesh.v[i], mesh.v[k] - mesh.v[i], Dm_inv)
+    M += _gram(Gv) / params.refine_velocity ** 2
 
     # Compression: principal stretches below 1 (from F^T F) ask for a finer mesh along their
     # direction, reaching size_min at a compressive strain of refine_compression.
-    F = np.stack([x[j] - x[i], x[k] - x[i]], axis=2) @ Dm_inv
-    lam, V = _sym_eig2(np.transpose(F, (0, 2, 1)) @ F)
+    F = _times(x[j] - x[i], x[k] - x[i], Dm_inv)
+    lam, V = _sym_eig2(_gram(F))
     comp = np.maximum(0.0, 1.0 - np.sqrt(np.maximum(lam, 0.0)))
     M += _compose(comp / (params.refine_compression * params.size_min ** 2), V)
 
