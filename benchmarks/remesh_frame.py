@@ -35,11 +35,18 @@ import time
 CASES = {
     "1k": {"label": "~1k faces (default sizes)", "set": {}},
     "4k": {"label": "~4k faces (remesh.size_max = 0.04)", "set": {"size_max": 0.04}},
+    # The same sheet unremeshed at about the same face counts (the grid's), for the 1.5x
+    # comparison of issue #34.
+    "1k-grid": {"label": "882 faces, not remeshed (resolution 22)", "set": None,
+                "resolution": 22},
+    "4k-grid": {"label": "4050 faces, not remeshed (resolution 46)", "set": None,
+                "resolution": 46},
 }
 # Rows of the table: (key, label, indent) in the order printed.
 ROWS = [("frame", "**frame** (sum of stages)", 0),
         ("stage_remesh", "remesh stage", 0),
         ("remesh_call", "remesh() (sizing, split / flip / collapse)", 1),
+        ("sizing", "sizing and pending count, before remesh()", 1),
         ("load", "model load (arrays refilled)", 1),
         ("bending", "bending matrix", 2),
         ("mesh_changed", "solvers' on_mesh_changed", 1),
@@ -57,6 +64,7 @@ ROWS = [("frame", "**frame** (sum of stages)", 0),
 COUNTS = [("frame_mean", "frame, mean over frames (ms)"), ("faces", "faces"), ("cg_iters", "dynamics CG iterations"),
           ("cg_ms_per_iter", "dynamics ms per CG iteration"),
           ("ops", "remesh operations (split + flip + collapse)"),
+          ("made", "remeshes made (share of frames)"),
           ("applied", "remeshes applied (share of frames)"),
           ("viol", "own violation after the frame (max over frames)")]
 
@@ -108,7 +116,19 @@ def probe(case, frames, resolution):
         finally:
             depth["remesh"] -= 1
     Simulator._remesh = remesh_stage
+    if hasattr(Simulator, "_remesh_reproject"):      # a tree with the re-projection its own stage
+        orig_reproject_stage = Simulator._remesh_reproject
+
+        def reproject_stage(self):
+            depth["remesh"] += 1
+            try:
+                return orig_reproject_stage(self)
+            finally:
+                depth["remesh"] -= 1
+        Simulator._remesh_reproject = reproject_stage
     wrap(module("cloth.remesh"), "remesh", "remesh_call")
+    for name in ("mesh_sizing", "pending_operations"):      # where a tree has them
+        wrap(module("cloth.remesh"), name, "sizing", only_in_remesh=True)
     wrap(module("cloth.model").ClothModel, "load", "load")
     # Every name a tree may build the bending matrix by (the rebuild, or the local update).
     bend = module("cloth.bending")
@@ -135,8 +155,10 @@ def probe(case, frames, resolution):
 
     from benchmarks.harness import configure
     from cloth.settings import Settings
-    ov = {"cloth": {"resolution": resolution}, "strain": {"method": "mapping"},
-          "remesh": dict(enabled=True, **CASES[case]["set"])}
+    ov = {"cloth": {"resolution": CASES[case].get("resolution", resolution)},
+          "strain": {"method": "mapping"}}
+    if CASES[case]["set"] is not None:
+        ov["remesh"] = dict(enabled=True, **CASES[case]["set"])
     _, cfg, setup = configure("hanging", [ov])
     sim = Simulator(setup, Settings(cfg))
     rows = []
@@ -151,7 +173,8 @@ def probe(case, frames, resolution):
         row["faces"] = int(sim.model.n_faces)
         row["cg_iters"] = int(sim.dynamics.last_cg_iters)
         row["ops"] = int(st.get("splits", 0) + st.get("flips", 0) + st.get("collapses", 0))
-        row["applied"] = int(st.get("applied", True))
+        row["applied"] = int(st.get("applied", True)) if st else 0
+        row["made"] = int(st.get("made", True)) if st else 0
         own = sim.own_violation()
         row["viol"] = float(np.max(own)) if own is not None and own.size else 0.0
         rows.append(row)
@@ -181,6 +204,7 @@ def summarise(runs, skip):
     out = {k: float(np.median([r.get(k, 0.0) for r in frames])) for k in keys}
     out["viol"] = max(r["viol"] for run in runs for r in run[1:])
     out["applied"] = float(np.mean([r.get("applied", 1) for r in frames]))
+    out["made"] = float(np.mean([r.get("made", 1) for r in frames]))
     it = np.array([r.get("cg_iters", 0) for r in frames], float)
     ms = np.array([r.get("dyn_step", 0.0) for r in frames])
     out["cg_ms_per_iter"] = float(np.median(ms[it > 0] / it[it > 0])) if np.any(it > 0) else 0.0
@@ -223,7 +247,7 @@ def write_report(path, results, trees, args, header):
                 cells.append(f"{v:.1e}")
             elif key == "frame_mean":
                 cells.append(f"{v:.1f}")
-            elif key in ("cg_ms_per_iter", "applied"):
+            elif key in ("cg_ms_per_iter", "applied", "made"):
                 cells.append(f"{v:.3f}" if key == "cg_ms_per_iter" else f"{100 * v:.0f} %")
             else:
                 cells.append(f"{v:.0f}")
@@ -309,7 +333,8 @@ def main():
               f"Commit: {commit()} (named *{args.name}*){base_line}  ",
               f"Machine: {machine()}  ",
               f"Scene: `hanging`, mapping, `--resolution {args.resolution}`, remeshed every "
-              f"frame, {args.frames} frames; medians over frames {args.skip}-{args.frames} of "
+              f"frame (the *grid* columns: the sheet not remeshed, at the resolution "
+              f"named), {args.frames} frames; medians over frames {args.skip}-{args.frames} of "
               f"{args.repeats} runs per tree, the trees alternating. Rows are indented under "
               "the stage they belong to; *anywhere* rows count their work in whichever stage "
               "it happens. Wall clock on a 2-core machine shared with other jobs."]

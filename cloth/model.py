@@ -187,7 +187,7 @@ class ClothModel:
       edge_verts, edge_faces, edge_opp (E, ivec2)  see ``build_edges``
       edge_rest_angle (E, rad), edge_rest_len (E, m), edge_bend_weight (E, 1):
       w_e, the edge's share of k_bend (BEND_CONSTANT); zero under isotropic bending
-      bend_ptr (V + 1, i32), bend_col (Q, i32), bend_val (Q):  the isotropic bending matrix
+      bend_ptr (n_verts + 1, i32), bend_col (Q, i32), bend_val (Q):  the isotropic bending matrix
       (cloth/bending.py) by rows, each row's diagonal first; ``n_bend`` entries, none (every
       row empty) under the hinge energy. Built by ``load`` from the mesh and its pins: faces
       with three pinned vertices are a clamp, held flat (``set_vertex_pin`` does not rebuild
@@ -327,9 +327,13 @@ class ClothModel:
         put(self.edge_opp, eo, pe)
         put(self.edge_rest_angle, rest_angle, pe)
         put(self.edge_bend_weight, weight, pe)
-        # Rows past n_verts stay empty: the padding repeats the last offset (the kernels loop
-        # over every row of bend_ptr).
-        put(self.bend_ptr, np.r_[bend_ptr, np.full(self.v_cap - nv, bend_ptr[-1])])
+        # The kernels loop over every row of bend_ptr, so it has exactly n_verts + 1 rows
+        # (not the capacity's: a remeshed cloth's arrays have room for its finest mesh, often
+        # ten times its vertices, and the empty rows cost the dynamics' CG ~30 % at 900
+        # faces). A new length is a new ndarray (the kernels take arrays as arguments).
+        if self.bend_ptr.shape[0] != nv + 1:
+            self.bend_ptr = ti.ndarray(ti.i32, nv + 1)
+        put(self.bend_ptr, bend_ptr)
         put(self.bend_col, bend_col, pq)
         put(self.bend_val, bend_val, pq)
         put(self.state.x, mesh.x, pv)
@@ -378,6 +382,11 @@ class ClothModel:
     @property
     def edges(self):
         return self._np_cache["edges"]
+
+    def edge_topology(self):
+        """(edge_verts, edge_faces, edge_opp) of the loaded mesh, as ``build_edges`` gives."""
+        c = self._np_cache
+        return c["edges"], c["edge_faces"], c["edge_opp"]
 
     def bend_pattern(self):
         """(rows, cols) of the isotropic bending matrix's entries, in the kernels' order

@@ -71,8 +71,23 @@ def _sym_eig2(M):
 
 
 def _compose(lam, V):
-    """V diag(lam) V^T for stacks."""
-    return (V * lam[:, None, :]) @ np.transpose(V, (0, 2, 1))
+    """V diag(lam) V^T for stacks (written out: numpy's stacked 2x2 products cost several
+    times the arithmetic)."""
+    a, b = V[:, :, 0], V[:, :, 1]                 # the eigenvectors (N, 2)
+    out = np.empty((len(lam), 2, 2))
+    out[:, 0, 0] = lam[:, 0] * a[:, 0] ** 2 + lam[:, 1] * b[:, 0] ** 2
+    out[:, 1, 1] = lam[:, 0] * a[:, 1] ** 2 + lam[:, 1] * b[:, 1] ** 2
+    out[:, 0, 1] = out[:, 1, 0] = lam[:, 0] * a[:, 0] * a[:, 1] + lam[:, 1] * b[:, 0] * b[:, 1]
+    return out
+
+
+def _gram(G):
+    """G^T G for stacks of (N, k, 2) matrices, written out: (N, 2, 2)."""
+    out = np.empty((len(G), 2, 2))
+    out[:, 0, 0] = np.einsum("ni,ni->n", G[:, :, 0], G[:, :, 0])
+    out[:, 1, 1] = np.einsum("ni,ni->n", G[:, :, 1], G[:, :, 1])
+    out[:, 0, 1] = out[:, 1, 0] = np.einsum("ni,ni->n", G[:, :, 0], G[:, :, 1])
+    return out
 
 
 def _inv2(A):
@@ -81,6 +96,14 @@ def _inv2(A):
     inv = np.stack([np.stack([A[:, 1, 1], -A[:, 0, 1]], 1),
                     np.stack([-A[:, 1, 0], A[:, 0, 0]], 1)], axis=1)
     return inv / det[:, None, None]
+
+
+def _times(c0, c1, B):
+    """[c0 c1] B for stacks: columns c0, c1 (N, k) and B (N, 2, 2); (N, k, 2)."""
+    out = np.empty(c0.shape + (2,))
+    for c in (0, 1):
+        out[:, :, c] = c0 * B[:, 0, c][:, None] + c1 * B[:, 1, c][:, None]
+    return out
 
 
 def face_sizing(mesh, params, obstacle_distance=None, edges=None):
@@ -112,16 +135,16 @@ def face_sizing(mesh, params, obstacle_distance=None, edges=None):
     S /= area[:, None, None]
     for _ in range(params.curvature_smoothing):
         S = _vertex_mean(S, area, faces, len(x))[faces].mean(axis=1)
-    M = S @ S / params.refine_angle ** 2
+    M = _gram(S) / params.refine_angle ** 2        # S S (S symmetric)
 
     # Velocity gradient (3x2): bounds the velocity difference across an edge.
-    Gv = np.stack([mesh.v[j] - mesh.v[i], mesh.v[k] - mesh.v[i]], axis=2) @ Dm_inv
-    M += np.transpose(Gv, (0, 2, 1)) @ Gv / params.refine_velocity ** 2
+    Gv = _times(mesh.v[j] - mesh.v[i], mesh.v[k] - mesh.v[i], Dm_inv)
+    M += _gram(Gv) / params.refine_velocity ** 2
 
     # Compression: principal stretches below 1 (from F^T F) ask for a finer mesh along their
     # direction, reaching size_min at a compressive strain of refine_compression.
-    F = np.stack([x[j] - x[i], x[k] - x[i]], axis=2) @ Dm_inv
-    lam, V = _sym_eig2(np.transpose(F, (0, 2, 1)) @ F)
+    F = _times(x[j] - x[i], x[k] - x[i], Dm_inv)
+    lam, V = _sym_eig2(_gram(F))
     comp = np.maximum(0.0, 1.0 - np.sqrt(np.maximum(lam, 0.0)))
     M += _compose(comp / (params.refine_compression * params.size_min ** 2), V)
 
@@ -720,8 +743,36 @@ def _export(w, mesh, face_data):
     return out, data
 
 
+def mesh_sizing(mesh, params, obstacle_distance=None, edges=None):
+    """The vertex sizing metric (V, 2, 2) a remesh of ``mesh`` works with (``remesh`` takes it
+    as ``sizing``). ``edges``: ``build_edges(mesh.faces)`` if the caller has it already."""
+    face_M, area = face_sizing(mesh, params, obstacle_distance, edges)
+    return vertex_sizing(face_M, area, mesh.faces, len(mesh.uv), params)
+
+
+def pending_operations(mesh, Mv, frozen_verts=None, edges=None):
+    """What a remesh of ``mesh`` in the sizing ``Mv`` would start from, counted over the whole
+    mesh at once without making any operation (numpy, a few passes over the edges): the
+    edges longer than 1 in the metric (not between two frozen vertices), which the split
+    pass splits, plus the interior edges failing the anisotropic Delaunay test, which the
+    flip pass flips. Collapses are not counted (the candidates' exact check is per edge).
+    Measured on hanging (mapping, ~900 faces, frames 1-40): the split count equals the
+    remesh's splits in every frame; the flips counted are 0.3-1 times its flips (splits set
+    off more). ``Simulator._remesh`` defers a remesh by this count without making it."""
+    ev, ef, eo = build_edges(mesh.faces) if edges is None else edges
+    uv = mesh.uv
+    M3 = np.stack([Mv[:, 0, 0], Mv[:, 0, 1], Mv[:, 1, 1]], axis=1)
+    long = _edge_len2(uv, M3, ev[:, 0], ev[:, 1]) > 1.0
+    if frozen_verts is not None:
+        frozen = np.asarray(frozen_verts, bool)
+        long &= ~(frozen[ev[:, 0]] & frozen[ev[:, 1]])
+    inner = np.flatnonzero(ef[:, 1] >= 0)
+    bad = _flip_wanted_np(uv, M3, ev[inner, 0], ev[inner, 1], eo[inner, 0], eo[inner, 1])
+    return int(np.count_nonzero(long)) + int(np.count_nonzero(bad))
+
+
 def remesh(mesh: MeshArrays, params: RemeshParams = None, obstacle_distance=None,
-           face_data=None, frozen_verts=None, max_splits=None):
+           face_data=None, frozen_verts=None, max_splits=None, sizing=None, edges=None):
     """One remeshing pass. Returns (new MeshArrays, new face_data dict, stats dict).
 
     obstacle_distance: optional callable, (N, 3) world points -> (N,) signed distances.
@@ -730,6 +781,8 @@ def remesh(mesh: MeshArrays, params: RemeshParams = None, obstacle_distance=None
     frozen_verts: optional (V,) bool; these vertices (and pinned ones) are never removed or
         moved, and an edge between two frozen vertices is never split (keeps seams intact).
     max_splits: safety cap on splits per call (default 4 x the input vertex count + 1000).
+    sizing: the vertex metric (``mesh_sizing(mesh, params, obstacle_distance)``) if the caller has
+        computed it already; edges: ``build_edges(mesh.faces)`` likewise.
     ``mesh.extras`` is passed through unchanged (it is not transferred per vertex).
     stats: counts ``splits``, ``flips``, ``collapses``, ``faces_in/out``, ``verts_in/out``
     and times ``ms_sizing``, ``ms_ops``, ``ms`` (wall clock) and ``ms_cpu`` (process time)."""
@@ -741,9 +794,9 @@ def remesh(mesh: MeshArrays, params: RemeshParams = None, obstacle_distance=None
         np.asarray(frozen_verts, dtype=bool)
     _check_input(mesh, frozen, face_data)
 
-    edges = build_edges(mesh.faces)
-    face_M, area = face_sizing(mesh, params, obstacle_distance, edges)
-    Mv = vertex_sizing(face_M, area, mesh.faces, nv, params)
+    edges = build_edges(mesh.faces) if edges is None else edges
+    Mv = mesh_sizing(mesh, params, obstacle_distance, edges) if sizing is None else \
+        np.asarray(sizing, np.float64)
     t1 = time.perf_counter()
 
     w = _Work(mesh, Mv, frozen, params, edges)

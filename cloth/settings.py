@@ -208,7 +208,9 @@ SCHEMA = {
         "collapse_rounds": Key("", "collapse passes per remesh", lo=0),
         "warm_multipliers": Key("", "carry the strain multipliers to the new faces"),
         "defer_ops": Key("per face", "a remesh with at most this many operations per face "
-                         "is deferred (the mesh kept); 0 applies every remesh", lo=0),
+                         "is deferred (the mesh kept; counted before the remesh is made as "
+                         "the edges to split and flip, and after it as its operations); 0 "
+                         "applies every remesh", lo=0),
         "defer_frames": Key("frames", "most frames in a row a remesh is deferred", lo=0),
     },
     "output": {

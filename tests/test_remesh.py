@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from cloth.model import MeshArrays, ModelError, build_edges, signed_material_areas
-from cloth.remesh import RemeshParams, _Work, _compose, _export, _sym_eig2, clamp_metric, \
-    face_sizing, remesh, vertex_sizing
+from cloth.remesh import RemeshParams, _Work, _compose, _export, _gram, _sym_eig2, _times, \
+    clamp_metric, face_sizing, remesh, vertex_sizing
 from cloth.sheet import make_sheet
 
 
@@ -101,6 +101,18 @@ def test_closed_form_eigen_matches_numpy(rng):
     lam, V = _sym_eig2(M)
     assert np.allclose(lam, np.linalg.eigvalsh(M), atol=1e-12)
     assert np.allclose(_compose(lam, V), M, atol=1e-12)
+
+
+def test_written_out_products_match_numpy(rng):
+    """The sizing's 2x2 products written out equal numpy's stacked matrix products."""
+    G = rng.standard_normal((50, 3, 2))
+    B = rng.standard_normal((50, 2, 2))
+    c0, c1 = rng.standard_normal((50, 3)), rng.standard_normal((50, 3))
+    assert np.allclose(_gram(G), np.transpose(G, (0, 2, 1)) @ G, rtol=0, atol=1e-13)
+    assert np.allclose(_times(c0, c1, B), np.stack([c0, c1], axis=2) @ B, rtol=0, atol=1e-13)
+    lam = rng.standard_normal((50, 2))
+    assert np.allclose(_compose(lam, B), (B * lam[:, None, :]) @ np.transpose(B, (0, 2, 1)),
+                       rtol=0, atol=1e-13)
 
 
 @pytest.mark.parametrize("smoothing", [0, 2])

@@ -9,7 +9,8 @@ import scipy.sparse as sp
 
 from cloth import bending, linalg, ndarrays, system_matrix
 from cloth.model import ClothModel, Material, MeshArrays, build_edges, signed_material_areas
-from cloth.remesh import RemeshParams, remesh, transfer_vertex_data
+from cloth.remesh import RemeshParams, mesh_sizing, pending_operations, remesh, \
+    transfer_vertex_data
 from cloth.sheet import make_sheet
 from tests.test_scenes import make_sim
 
@@ -154,7 +155,9 @@ def test_pattern_over_reused_arrays_equals_a_fresh_one():
 @pytest.mark.skipif(not linalg.HAVE_CHOLMOD, reason="the factor needs CHOLMOD")
 def test_factor_over_a_reused_pattern_equals_a_fresh_one():
     """The factor preconditioner made over a pattern in reused arrays (its symbolic analysis
-    deferred to the first refresh) uploads the same L as one made over a fresh pattern."""
+    deferred to the first refresh) uploads the same L as one made over a fresh pattern, and
+    so does one made in the arrays of a larger mesh's factor (the last mesh's, after a
+    remesh)."""
     from cloth.strain.factor_precond import FactorPreconditioner
     mesh = _sheet(9)
     model = ClothModel(mesh, Material(), capacity_factor=4.0)
@@ -165,21 +168,37 @@ def test_factor_over_a_reused_pattern_equals_a_fresh_one():
     mats = [system_matrix.pattern_of(model, reuse=old), system_matrix.pattern_of(model)]
     # A symmetric positive definite matrix in the pattern: every block coupled, made
     # diagonally dominant.
-    B = mats[1]
+    values = _spd_values(mats[1])
+    # A factor of a larger mesh, whose arrays the third one takes (padded rows beyond n).
+    big = system_matrix.pattern_of(ClothModel(_sheet(15), Material()))
+    spare = FactorPreconditioner(big)
+    spare.refresh(_spd_values(big))
+    n = mats[1].n
+    out = []
+    for M, old_fp in ((mats[0], None), (mats[1], None), (mats[1], spare)):
+        fp = FactorPreconditioner(M, spare=old_fp)
+        assert fp._chol is None                          # analysis deferred
+        fp.refresh(values)
+        if old_fp is not None:
+            assert fp.val is spare.val and fp.perm.shape[0] > n
+        nb = 2 * (fp.blocks - n) + n
+        out.append((fp.val.to_numpy()[:nb], fp.perm.to_numpy()[:n],
+                    fp.ptr.to_numpy()[:2 * (n + 1)], fp.idx.to_numpy()[:nb]))
+    for other in out[1:]:
+        for k in (1, 2, 3):
+            assert np.array_equal(out[0][k], other[k]), k
+        assert np.abs(out[0][0] - other[0]).max() <= 1e-12 * np.abs(out[0][0]).max()
+
+
+def _spd_values(B):
+    """Block values of a symmetric positive definite matrix in B's pattern: every block
+    coupled, made diagonally dominant."""
     R = B.to_scipy(ndarrays_ones(B)) * 0.01
     A = R + sp.identity(3 * B.n) * (abs(R).sum(axis=1).max() + 1.0)
     blocks = A.tobsr(blocksize=(3, 3))
     blocks.sort_indices()
-    values = blocks.data
-    assert len(values) == B.nnz
-    out = []
-    for M in mats:
-        fp = FactorPreconditioner(M)
-        assert fp._chol is None                          # analysis deferred
-        fp.refresh(values)
-        out.append((fp.val.to_numpy()[: fp.blocks + len(values)], fp.perm.to_numpy()))
-    assert np.array_equal(out[0][1], out[1][1])
-    assert np.abs(out[0][0] - out[1][0]).max() <= 1e-12 * np.abs(out[1][0]).max()
+    assert len(blocks.data) == B.nnz
+    return blocks.data
 
 
 def ndarrays_ones(B):
@@ -231,7 +250,8 @@ def test_limits_hold_after_every_remesh_with_deferral_and_without():
                 run = 0
             else:
                 assert np.array_equal(sim.model.faces, before)
-                if ops:
+                if st.get("deferred"):              # made and deferred, or deferred unmade
+                    assert ops or not st["made"]
                     deferred += 1
                     run += 1
                     assert defer_ops > 0 and run <= 2
@@ -244,3 +264,90 @@ def test_limits_hold_after_every_remesh_with_deferral_and_without():
             assert np.array_equal(np.sort(sim.model.uv[sim.model.pinned], axis=0), pins)
         assert applied > 0
         assert (deferred > 0) == (defer_ops > 0), (defer_ops, deferred)
+
+
+def test_a_remesh_given_its_sizing_is_the_same_remesh():
+    """The simulator computes the sizing once (to count the pending operations) and hands it
+    to the remesh: the result must be the remesh that computes it itself."""
+    mesh = _sheet(9, clamp=False)
+    params = CASES["split"][1]
+    edges = build_edges(mesh.faces)
+    Mv = mesh_sizing(mesh, params, edges=edges)
+    a, _, sa = remesh(mesh, params)
+    b, _, sb = remesh(mesh, params, sizing=Mv, edges=edges)
+    assert sa["splits"] > 0
+    for k in ("uv", "x", "v", "faces", "pinned", "grain"):
+        assert np.array_equal(getattr(a, k), getattr(b, k)), k
+    # The count: every edge too long is split here (no cascade beyond them is needed on
+    # this sheet's first pass), plus the edges failing the Delaunay test.
+    n = pending_operations(mesh, Mv, edges=edges)
+    assert sa["splits"] <= n <= sa["splits"] + sa["flips"]
+
+
+def test_refinement_the_cloth_needs_now_is_not_deferred():
+    """A remesh that would split many edges is made and applied in its frame, however few
+    frames were deferred before it: here the sizing is made four times finer mid-run."""
+    sim, _ = make_sim(cloth={"resolution": 13}, strain={"method": "mapping"},
+                      remesh={"enabled": True, "size_min": 0.04, "size_max": 0.15,
+                              "defer_frames": 4})
+    made = []
+    for _ in range(12):
+        sim.step_frame()
+        made.append(sim.remesh_stats.get("made", True))
+    assert not all(made)                     # a settling cloth defers some unmade
+    faces = sim.model.n_faces
+    remesh_module, params = sim.remesher
+    params.size_max, params.size_min = 0.04, 0.01
+    sim._remesh_deferred = 0                 # the deferral budget untouched
+    sim.step_frame()
+    st = sim.remesh_stats
+    assert st["applied"] and st["splits"] > 0.05 * faces and sim.model.n_faces > faces
+
+
+def test_scalar_csr_written_down_equals_the_sorted_one():
+    """The factor's scalar pattern of a remeshed cloth's block pattern, written down from the
+    block rows, is the one sorting every entry gives (rows, columns and value sources)."""
+    sim, _ = make_sim(cloth={"resolution": 13}, strain={"method": "mapping"},
+                      remesh={"enabled": True, "size_min": 0.04, "size_max": 0.15})
+    for _ in range(3):
+        sim.step_frame()
+    metric = sim.strain.system_metric()
+    ptr, col, n = metric.ptr_np.astype(np.int64), metric.col_np.astype(np.int64), metric.n
+    order, indices, indptr, r_idx, c_idx = linalg.scalar_csr(ptr, col, n)
+    sorted_order = np.lexsort((c_idx, r_idx))
+    assert np.array_equal(order, sorted_order)
+    assert np.array_equal(indices, c_idx[sorted_order])
+    # Unsorted block rows take the sort: the same matrix either way.
+    swap = np.arange(len(col))
+    first = np.flatnonzero(np.diff(ptr) >= 2)[0]
+    swap[[ptr[first], ptr[first] + 1]] = swap[[ptr[first] + 1, ptr[first]]]
+    o2, i2, p2, r2, c2 = linalg.scalar_csr(ptr, col[swap], n)
+    val = np.random.default_rng(0).normal(size=(len(col), 3, 3))
+    A = sp.csr_matrix((val.ravel()[order], indices, indptr), shape=(3 * n, 3 * n))
+    B = sp.csr_matrix((val[swap].ravel()[o2], i2, p2), shape=(3 * n, 3 * n))
+    assert abs(A - B).max() == 0 and np.all(np.diff(i2[p2[0]:p2[1]]) > 0)
+
+
+@pytest.mark.skipif(not linalg.HAVE_CHOLMOD, reason="the factor needs CHOLMOD")
+def test_a_lasting_mesh_gets_its_factor_before_its_first_solve():
+    """hanging remeshed with deferral: the mesh before each applied remesh lasted several
+    solves, so the first solve on the new mesh already uses a factor (made before it); where
+    the last mesh lasted fewer (every remesh applied: a mesh per solve) the factor waits for
+    FIRST_AFTER solves."""
+    from cloth.strain.factor_precond import FIRST_AFTER, LASTING_SOLVES
+    for defer_ops in (0.05, 0.0):
+        sim, _ = make_sim(cloth={"resolution": 13}, strain={"method": "mapping"},
+                          remesh={"enabled": True, "size_min": 0.04, "size_max": 0.15,
+                                  "defer_ops": defer_ops})
+        seen = {True: 0, False: 0}
+        after_remesh = False
+        for _ in range(30):
+            sim.step_frame()
+            pc = sim.strain._pc
+            if after_remesh and pc is not None and pc.solves == 1:
+                lasting = sim.strain._last_pattern_solves >= LASTING_SOLVES
+                assert pc.ready == lasting
+                assert pc.first_after == (0 if lasting else FIRST_AFTER)
+                seen[lasting] += 1
+            after_remesh = bool(sim.remesh_stats.get("applied"))
+        assert seen[defer_ops > 0] > 0, (defer_ops, seen)

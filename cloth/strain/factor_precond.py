@@ -32,9 +32,15 @@ from .buffers import PC_FACTOR
 
 # Refactorise the metric every REFRESH_SOLVES solves (it changes as the cloth deforms). The
 # first factor is made after FIRST_AFTER solves on a mesh: remeshing every frame makes a new
-# pattern each substep, and a factor made after its only solve would never be used.
+# pattern each substep, and a factor made after its only solve would never be used. A pattern
+# whose predecessor lasted LASTING_SOLVES solves or more (a remesh applied every few frames,
+# RemeshParams.defer_ops) gets its factor before its first solve instead: the solves without
+# it cost more than the factor. Measured on hanging (mapping, ~900 faces, remeshes applied
+# every 4-5 frames): the two frames after each remesh took 20-45 ms against 12-15 with the
+# factor (150-250 PCG iterations against ~55).
 REFRESH_SOLVES = 10
 FIRST_AFTER = 2
+LASTING_SOLVES = 3
 
 
 class RefreshedPreconditioner:
@@ -43,12 +49,21 @@ class RefreshedPreconditioner:
     a pattern, remade every REFRESH_SOLVES solves and whenever the pins change. A subclass
     sets ``mode`` (the kernel's PC_* switch) and implements ``refresh(values, pinned)``."""
 
-    def __init__(self, metric):
+    def __init__(self, metric, first_after=FIRST_AFTER):
         self.metric = metric
         self.ready = False
         self.solves_since = 0
         self.solves = 0                         # on this pattern
         self.pinned = None                      # the pinned mask it was made with
+        self.first_after = first_after          # 0: made before the pattern's first solve
+
+    def before_solve(self, pinned):
+        """Make it now, before the pattern's first solve, when ``first_after`` is 0 (the
+        metric's values are those this solve uses). Returns whether it did."""
+        if self.first_after > 0 or self.solves > 0 or self.ready:
+            return False
+        self._make(pinned)
+        return True
 
     def usable(self, pinned):
         """Whether the kernel may use it: it exists and was made with these pins (a vertex
@@ -63,15 +78,18 @@ class RefreshedPreconditioner:
         before FIRST_AFTER solves on this pattern. Returns whether it did."""
         self.solves_since += 1
         self.solves += 1
-        if self.solves < FIRST_AFTER or (self.ready and self.solves_since <
-                                          REFRESH_SOLVES):
+        if self.solves < self.first_after or (self.ready and self.solves_since <
+                                               REFRESH_SOLVES):
             return False
+        self._make(pinned)
+        return True
+
+    def _make(self, pinned):
         pinned = np.array(pinned[: self.metric.n], bool)
         self.refresh(pinned_values(self.metric, pinned), pinned)
         self.pinned = pinned
         self.solves_since = 0
         self.ready = True
-        return True
 
 
 class FactorPreconditioner(RefreshedPreconditioner):
@@ -85,19 +103,24 @@ class FactorPreconditioner(RefreshedPreconditioner):
     recompilation)."""
     mode = PC_FACTOR
 
-    def __init__(self, metric):
-        super().__init__(metric)
+    def __init__(self, metric, first_after=FIRST_AFTER, spare=None):
+        super().__init__(metric, first_after)
         # The symbolic analysis (ordering, lumped pattern) waits for the first ``refresh``:
         # it costs ~6 ms at 900 faces, and on a mesh remeshed every frame the factor is never
         # made (FIRST_AFTER), while this object is made for every new pattern.
         self._chol = None
         n = metric.n
-        self.perm = ti.ndarray(ti.i32, n)
-        self.ptr = ti.ndarray(ti.i32, 2 * (n + 1))
-        self.work = ti.ndarray(vec3, n)
-        self.capacity = 0                       # blocks in idx / val
-        self.idx = ti.ndarray(ti.i32, 1)
-        self.val = ti.ndarray(mat3, 1)
+        # The arrays of ``spare`` (the last mesh's factor) where they are long enough: the
+        # kernel reads only the rows of this n, and a Taichi array costs ~1-3 ms to make
+        # (five per remesh otherwise).
+        old = spare if isinstance(spare, FactorPreconditioner) else None
+        fits = old is not None and old.perm.shape[0] >= n and old.ptr.shape[0] >= 2 * (n + 1)
+        self.perm = old.perm if fits else ti.ndarray(ti.i32, n)
+        self.ptr = old.ptr if fits else ti.ndarray(ti.i32, 2 * (n + 1))
+        self.work = old.work if fits else ti.ndarray(vec3, n)
+        self.capacity = old.capacity if old is not None else 0     # blocks in idx / val
+        self.idx = old.idx if old is not None else ti.ndarray(ti.i32, 1)
+        self.val = old.val if old is not None else ti.ndarray(mat3, 1)
         self.blocks = 0                         # 3x3 blocks of L (the last factor)
 
     @property
@@ -132,9 +155,11 @@ class FactorPreconditioner(RefreshedPreconditioner):
         idx[:n_fwd], idx[n_fwd:n_fwd + n_bwd] = rows["idx"], cols["idx"]
         self.val.from_numpy(val)
         self.idx.from_numpy(idx)
-        self.ptr.from_numpy(np.concatenate([rows["ptr"], cols["ptr"] + n_fwd])
-                            .astype(np.int32))
-        self.perm.from_numpy((perm3[0::3] // 3).astype(np.int32))
+        # (Arrays taken from a larger mesh's factor keep their length: padded.)
+        ptr = np.concatenate([rows["ptr"], cols["ptr"] + n_fwd]).astype(np.int32)
+        self.ptr.from_numpy(np.r_[ptr, np.zeros(self.ptr.shape[0] - len(ptr), np.int32)])
+        perm = (perm3[0::3] // 3).astype(np.int32)
+        self.perm.from_numpy(np.r_[perm, np.zeros(self.perm.shape[0] - n, np.int32)])
         self.blocks = n_fwd + n
         self.ready = True
 

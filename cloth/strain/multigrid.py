@@ -44,7 +44,7 @@ import taichi as ti
 
 from ..system_matrix import mat3
 from .buffers import PC_MULTIGRID, T
-from .factor_precond import RefreshedPreconditioner
+from .factor_precond import FIRST_AFTER, RefreshedPreconditioner
 
 try:
     import pyamg
@@ -78,8 +78,8 @@ class MultigridPreconditioner(RefreshedPreconditioner):
     signature: no recompilation). The life cycle is ``RefreshedPreconditioner``'s."""
     mode = PC_MULTIGRID
 
-    def __init__(self, metric):
-        super().__init__(metric)
+    def __init__(self, metric, first_after=FIRST_AFTER):
+        super().__init__(metric, first_after)
         self.ints = ti.ndarray(ti.i32, 1)
         self.reals = ti.ndarray(float, 1)
         self.blocks = ti.ndarray(mat3, max(metric.n, 1))

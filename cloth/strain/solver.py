@@ -27,7 +27,7 @@ from .. import backend, linalg, metrics, ndarrays
 from .. import system_matrix
 from .constraints import MAPPING_DELTA, METHOD_IDS, METHODS, N_CONSTRAINTS, SVD_DELTA
 from . import al, buffers, pbd
-from .factor_precond import FactorPreconditioner, FactorStub
+from .factor_precond import FIRST_AFTER, LASTING_SOLVES, FactorPreconditioner, FactorStub
 from .multigrid import HAVE_PYAMG, MAX_COARSE, MultigridPreconditioner, MultigridStub
 from .c_curvature import C_STEP_F32, C_STEP_F64
 from .buffers import (PC_FACTOR, PC_JACOBI, PC_MULTIGRID, ST_CG, ST_CONVERGED, ST_ITERS,
@@ -350,6 +350,8 @@ class StrainLimiter:
         self._spare_patterns = []  # the last mesh's patterns, whose arrays a new one reuses
         self._system_ready = False
         self._pc = None            # Factor- or MultigridPreconditioner of the implicit metric
+        self._last_pattern_solves = 0   # solves the last mesh's preconditioner saw
+        self._spare_pc = None
         self._stubs = None         # placeholder arrays for the preconditioners not in use
         self.precondition = precondition
         self.precondition_contacts = False
@@ -589,6 +591,9 @@ class StrainLimiter:
         self._upload_params()                  # the contact scale follows the mesh
         self._retire_patterns()
         self._chol = None
+        if self._pc is not None:
+            self._last_pattern_solves = self._pc.solves
+            self._spare_pc = self._pc           # its arrays serve the next mesh's
         self._pc = None
         self._system_ready = False
         self._mesh_key = self._current_mesh_key()
@@ -875,6 +880,11 @@ class StrainLimiter:
         return int(self.curvature == "exact" and not self.exact_curvature
                    and self.method in EXACT_CURVATURE_FOR)
 
+    def forget_last_velocity(self):
+        """The next projection starts from the substep's start, not moved on at the last
+        projection's velocities (``settle_speed``): after a correction that is not motion."""
+        self._v_last_valid = False
+
     def multipliers(self):
         """The AL multipliers (faces, contacts, seams, friction) as numpy copies."""
         ws = self._ws
@@ -932,6 +942,7 @@ class StrainLimiter:
         step_tol = 0.01 * self.tol * m.typical_edge()
         pc = None if contacts and not self.precondition_contacts else \
             self._pcg_preconditioner(metric)
+        made_before = pc is not None and pc.before_solve(m.pinned[: m.n_verts])
         pc_mode = pc.mode if pc is not None and pc.usable(m.pinned[: m.n_verts]) else PC_JACOBI
         if self._stubs is None:
             self._stubs = {PC_FACTOR: FactorStub(), PC_MULTIGRID: MultigridStub()}
@@ -954,9 +965,9 @@ class StrainLimiter:
                    mg.blocks, ws.Wdx, ws.stats)
         stats = ws.stats.to_numpy()
         rounds, newton = int(stats[ST_ITERS]), int(stats[ST_NEWTON])
-        self.last_factorizations = 0
+        self.last_factorizations = int(made_before)
         if pc is not None:
-            self.last_factorizations = int(pc.after_solve(m.pinned))
+            self.last_factorizations += int(pc.after_solve(m.pinned))
         return rounds, newton, bool(stats[ST_CONVERGED] > 0), stats
 
     def _pcg_preconditioner(self, metric):
@@ -985,7 +996,12 @@ class StrainLimiter:
             return None
         cls = FactorPreconditioner if kind == "factor" else MultigridPreconditioner
         if not isinstance(self._pc, cls) or self._pc.metric is not metric:
-            self._pc = cls(metric)
+            # Made before its first solve when the last mesh's lasted (LASTING_SOLVES).
+            lasting = self._last_pattern_solves >= LASTING_SOLVES
+            first = 0 if lasting else FIRST_AFTER
+            self._pc = cls(metric, first, self._spare_pc) if cls is FactorPreconditioner \
+                else cls(metric, first)
+            self._spare_pc = None
         return self._pc
 
     def constraint_values(self):
