@@ -14,16 +14,17 @@ energy kept through the landing, KE(frame 8) / KE(frame 6) (the sheet touches th
 frame 6-7; the part in contact stops, the rest keeps falling).
 
 Each solve runs in its own process (all drops in one):
-- "default": PCG steps (the library's default; the drape scene itself takes exact steps since
-  issue #32), block Jacobi with contacts;
+- "default": PCG steps (the library's default and the drape scene's), block Jacobi with
+  contacts;
 - block-Jacobi PCG (``strain.precondition = "jacobi"``) with its per-method budget
   (``CG_BUDGET`` in cloth/strain/solver.py) and with a larger one (``StrainLimiter.max_cg``);
 - exact steps from a sparse Cholesky factorisation (``strain.linear_solver = "cholesky"``).
 
 A solve that stops before the minimiser keeps x near where it starts. The AL starts at the
 step's start x_prev when that has the lower merit (``al.choose_start``: a cloth at rest is
-then solved at once), which at a landing means the sheet keeps too little of its motion, and
-once it stops sliding, friction holds it where it is.
+then solved at once); from x_prev itself a landing sheet kept too little of its motion and,
+once it stopped sliding, friction held it where it was. Each vertex now starts moved on at
+its last velocity when faster than ``SETTLE_SPEED`` (cloth/strain/solver.py; issue #32).
 """
 import argparse
 import json
