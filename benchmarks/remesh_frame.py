@@ -107,25 +107,21 @@ def probe(case, frames, resolution):
 
     sim_mod = module("cloth.simulator")
     Simulator = sim_mod.Simulator
-    orig_remesh_stage = Simulator._remesh
 
-    def remesh_stage(self):
-        depth["remesh"] += 1
-        try:
-            return orig_remesh_stage(self)
-        finally:
-            depth["remesh"] -= 1
-    Simulator._remesh = remesh_stage
-    if hasattr(Simulator, "_remesh_reproject"):      # a tree with the re-projection its own stage
-        orig_reproject_stage = Simulator._remesh_reproject
+    def inside_remesh(name):
+        """Work inside Simulator.<name> counts as the remesh's (``only_in_remesh`` timers)."""
+        orig = getattr(Simulator, name)
 
-        def reproject_stage(self):
+        def stage(self):
             depth["remesh"] += 1
             try:
-                return orig_reproject_stage(self)
+                return orig(self)
             finally:
                 depth["remesh"] -= 1
-        Simulator._remesh_reproject = reproject_stage
+        setattr(Simulator, name, stage)
+    inside_remesh("_remesh")
+    if hasattr(Simulator, "_remesh_reproject"):      # a tree with the re-projection its own stage
+        inside_remesh("_remesh_reproject")
     wrap(module("cloth.remesh"), "remesh", "remesh_call")
     for name in ("mesh_sizing", "pending_operations"):      # where a tree has them
         wrap(module("cloth.remesh"), name, "sizing", only_in_remesh=True)
