@@ -1074,6 +1074,31 @@ def max_violation(K: int, nf: int, rest_area: A, g: A) -> float:
     return viol
 
 
+@ti.func
+def start_of(xp, v_last, h, extrapolate, settle):
+    """choose_start's candidate for one vertex: its substep start xp, with ``extrapolate``
+    moved on by h v_last in a share rising smoothly from 0 at ``settle`` m/s to 1 at
+    4 x settle."""
+    out = xp
+    if extrapolate:
+        share = 1.0
+        if settle > 0.0:
+            t = ti.min(ti.max((v_last.norm() - settle) / (3.0 * settle), 0.0), 1.0)
+            share = t * t * (3.0 - 2.0 * t)
+        out = xp + share * h * v_last
+    return out
+
+
+@ti.kernel
+def reset_start(nv: int, h: float, extrapolate: int, settle: float, fric: A, v_last: A,
+                start: A):
+    """``begin_solve``'s start candidates again (a projection solved again from its start:
+    the first solve used their array, ``Wdx``, for W (x - x_hat))."""
+    for n in range(nv):
+        xp = ti.Vector([fric[n][0], fric[n][1], fric[n][2]])
+        start[n] = start_of(xp, v_last[n], h, extrapolate, settle)
+
+
 @ti.kernel
 def begin_solve(nv: int, h: float, friction: int, clear: int, extrapolate: int,
                 settle: float, x_in: A,
@@ -1083,9 +1108,9 @@ def begin_solve(nv: int, h: float, friction: int, clear: int, extrapolate: int,
     v = v_in; fric = (x_prev, mu_f) per vertex, x_prev = x_hat - h v (the substep's start,
     before dynamics), mu_f = 0 (no friction) unless ``friction``; ``start`` (choose_start's
     candidate) = x_prev, with ``extrapolate`` moved on by h v_last (the last projection's
-    velocity, ``finish_solve``) in a share that rises smoothly from 0 at ``settle`` m/s to
-    1 at 4 x settle; with ``clear`` no contact half-spaces. One launch instead of five (each costs ~0.1 ms: a tenth of a resting
-    1.2k-face projection's host time)."""
+    velocity, ``finish_solve``; ``start_of``); with ``clear`` no contact half-spaces. One
+    launch instead of five (each costs ~0.1 ms: a tenth of a resting 1.2k-face projection's
+    host time)."""
     ti.loop_config(serialize=True)
     for n in range(nv):
         x[n] = x_in[n]
@@ -1094,14 +1119,7 @@ def begin_solve(nv: int, h: float, friction: int, clear: int, extrapolate: int,
         x_start[n] = x_in[n]
         xp = x_in[n] - h * v_in[n]
         fric[n] = ti.Vector([xp[0], xp[1], xp[2], contact_mu[n] if friction else 0.0])
-        start[n] = xp
-        if extrapolate:
-            # None of the velocity up to ``settle`` (m/s), all of it from 4 x settle on.
-            share = 1.0
-            if settle > 0.0:
-                t = ti.min(ti.max((v_last[n].norm() - settle) / (3.0 * settle), 0.0), 1.0)
-                share = t * t * (3.0 - 2.0 * t)
-            start[n] = xp + share * h * v_last[n]
+        start[n] = start_of(xp, v_last[n], h, extrapolate, settle)
         if clear:
             for j in ti.static(range(CONTACT_SLOTS)):
                 contact[n, j] = ti.Vector([0.0, 0.0, 0.0, NO_CONTACT])

@@ -361,6 +361,7 @@ class StrainLimiter:
         self.start_extrapolate = True
         self.settle_speed = SETTLE_SPEED
         self._v_last_valid = False    # v_last belongs to this mesh's vertices
+        self._start_args = (0.0, 0, 0.0)   # (h, extrapolate, settle) of the last begin_solve
         self.multigrid_cg = None       # None: the method's MULTIGRID_CG
         self.factor_cg = None          # None: from the mesh size (FACTOR_CG_WORK)
         self.factor_max_faces = None   # None: FACTOR_MAX_FACES (a probe's override)
@@ -748,10 +749,12 @@ class StrainLimiter:
         nv, nf = m.n_verts, m.n_faces
         mid, K = METHOD_IDS[self.method], N_CONSTRAINTS[self.method]
         # Friction holds contact vertices against sliding over the substep (from x - h v).
+        # (The start candidates live in Wdx until choose_start: solve_al has no argument
+        # left for an array of their own.)
+        self._start_args = (float(h), int(self.start_extrapolate and self._v_last_valid),
+                            float(self.settle_speed))
         al.begin_solve(nv, float(h), int(contacts and h > 0 and self.friction),
-                       int(not contacts),
-                       int(self.start_extrapolate and self._v_last_valid),
-                       float(self.settle_speed),
+                       int(not contacts), *self._start_args[1:],
                        m.state.x, m.state.v, ws.x, ws.v, ws.x_hat, ws.x_start, ws.contact,
                        ws.contact_mu, ws.fric, ws.v_last, ws.Wdx, ws.stats)
         self.last_reverted = False
@@ -896,6 +899,7 @@ class StrainLimiter:
         ws = self._ws
         self.last_fallback = True
         al.copy_vectors(self.model.n_verts, ws.x_start, ws.x)
+        al.reset_start(self.model.n_verts, *self._start_args, ws.fric, ws.v_last, ws.Wdx)
         for a, val in zip((ws.lam, ws.lam_c, ws.lam_s, ws.lam_t), multipliers):
             a.from_numpy(val)
 
