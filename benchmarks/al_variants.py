@@ -75,9 +75,8 @@ class Substep:
         ws, m = lim._ws, lim.model
         self.nv, self.nf, self.h, self.contacts = m.n_verts, m.n_faces, sim.h, contacts
         al.begin_solve(self.nv, float(sim.h), int(contacts and lim.friction),
-                       int(not contacts), 0, 0.0, 0, m.state.x, m.state.v, m.state.x_step,
-                       ws.x, ws.v, ws.x_hat, ws.x_start, ws.contact, ws.contact_mu, ws.fric,
-                       ws.v_last, ws.Wdx, ws.stats)
+                       int(not contacts), m.state.x, m.state.v, ws.x, ws.v, ws.x_hat,
+                       ws.x_start, ws.contact, ws.contact_mu, ws.fric, ws.stats)
         self.metric = lim._newton_metric(lim.coupling == "implicit" and lim._system_ready)
         mean = lim._mean_mass(self.metric)
         self.mu0, self.mu_max = lim.mu_scale * mean, lim.mu_max_scale * mean

@@ -1090,36 +1090,25 @@ def start_of(xp, v_last, h, extrapolate, settle):
 
 
 @ti.kernel
-def reset_start(nv: int, h: float, extrapolate: int, settle: float, use_step: int, fric: A,
-                x_step: A, v_last: A, start: A):
+def reset_start(nv: int, h: float, extrapolate: int, settle: float, fric: A, v_last: A,
+                start: A):
     """``begin_solve``'s start candidates again (a projection solved again from its start:
     the first solve used their array, ``Wdx``, for W (x - x_hat))."""
     for n in range(nv):
         xp = ti.Vector([fric[n][0], fric[n][1], fric[n][2]])
-        if use_step:
-            xp = x_step[n]
         start[n] = start_of(xp, v_last[n], h, extrapolate, settle)
 
 
 @ti.kernel
 def begin_solve(nv: int, h: float, friction: int, clear: int, extrapolate: int,
-                settle: float, use_step: int, x_in: A,
-                v_in: A, x_step: A, x: A, v: A, x_hat: A, x_start: A, contact: A,
-                contact_mu: A, fric: A, v_last: A, start: A, stats: A):
+                settle: float, x_in: A,
+                v_in: A, x: A, v: A, x_hat: A, x_start: A, contact: A, contact_mu: A, fric: A,
+                v_last: A, start: A, stats: A):
     """Set up a projection from the model's state (x_in, v_in): x = x_hat = x_start = x_in,
-    v = v_in; fric = (x_hat - h v, mu_f) per vertex (friction's anchor), mu_f = 0 (no
-    friction) unless ``friction``; ``start`` (choose_start's candidate) = the substep's
-    start (``x_step`` with ``use_step``, else x_hat - h v), with ``extrapolate`` moved on by
-    h v_last (the last projection's velocity, ``finish_solve``; ``start_of``); with
-    ``clear`` no contact half-spaces.
-
-    Why x_step: the collision pass between the dynamics and the projection moves x without
-    the matching v, so x_hat - h v is not where a contact vertex started. On the resting
-    drape it broke the limits by 17 % where the true start met them to 4e-6, and the solve
-    took 6-20 rounds a substep to undo it (61 -> 19 ms a projection, median; mean KE at
-    rest alike, 4e-5 J; /tmp scratch trace in the commit message). Friction's anchor stays
-    x_hat - h v: anchored at the true start the resting drape kept 5x the kinetic energy
-    (2.4e-4 J against 4.1e-5 J, frames 30-59). One
+    v = v_in; fric = (x_prev, mu_f) per vertex, x_prev = x_hat - h v (the substep's start,
+    before dynamics), mu_f = 0 (no friction) unless ``friction``; ``start`` (choose_start's
+    candidate) = x_prev, with ``extrapolate`` moved on by h v_last (the last projection's
+    velocity, ``finish_solve``; ``start_of``); with ``clear`` no contact half-spaces. One
     launch instead of five (each costs ~0.1 ms: a tenth of a resting 1.2k-face projection's
     host time)."""
     ti.loop_config(serialize=True)
@@ -1130,8 +1119,6 @@ def begin_solve(nv: int, h: float, friction: int, clear: int, extrapolate: int,
         x_start[n] = x_in[n]
         xp = x_in[n] - h * v_in[n]
         fric[n] = ti.Vector([xp[0], xp[1], xp[2], contact_mu[n] if friction else 0.0])
-        if use_step:
-            xp = x_step[n]
         start[n] = start_of(xp, v_last[n], h, extrapolate, settle)
         if clear:
             for j in ti.static(range(CONTACT_SLOTS)):

@@ -360,13 +360,8 @@ class StrainLimiter:
         # (False, the rule before issue #32's landing fix; kept for old-against-new runs).
         self.start_extrapolate = True
         self.settle_speed = SETTLE_SPEED
-        # The start candidate's base: the substep's true start, kept by the dynamics step
-        # (True), or x_hat - h v (False, the rule before; wrong wherever the collision pass
-        # moved a vertex: ClothModel.mark_step_start, al.begin_solve).
-        self.true_step_start = True
         self._v_last_valid = False    # v_last belongs to this mesh's vertices
-        # (h, extrapolate, settle, use_step) of the last begin_solve
-        self._start_args = (0.0, 0, 0.0, 0)
+        self._start_args = (0.0, 0, 0.0)   # (h, extrapolate, settle) of the last begin_solve
         self.multigrid_cg = None       # None: the method's MULTIGRID_CG
         self.factor_cg = None          # None: from the mesh size (FACTOR_CG_WORK)
         self.factor_max_faces = None   # None: FACTOR_MAX_FACES (a probe's override)
@@ -757,12 +752,11 @@ class StrainLimiter:
         # (The start candidates live in Wdx until choose_start: solve_al has no argument
         # left for an array of their own.)
         self._start_args = (float(h), int(self.start_extrapolate and self._v_last_valid),
-                            float(self.settle_speed),
-                            int(self.true_step_start and m.state.step_start_valid and h > 0))
+                            float(self.settle_speed))
         al.begin_solve(nv, float(h), int(contacts and h > 0 and self.friction),
                        int(not contacts), *self._start_args[1:],
-                       m.state.x, m.state.v, m.state.x_step, ws.x, ws.v, ws.x_hat, ws.x_start,
-                       ws.contact, ws.contact_mu, ws.fric, ws.v_last, ws.Wdx, ws.stats)
+                       m.state.x, m.state.v, ws.x, ws.v, ws.x_hat, ws.x_start, ws.contact,
+                       ws.contact_mu, ws.fric, ws.v_last, ws.Wdx, ws.stats)
         self.last_reverted = False
         if self.solver == "al":
             saved = None
@@ -905,8 +899,7 @@ class StrainLimiter:
         ws = self._ws
         self.last_fallback = True
         al.copy_vectors(self.model.n_verts, ws.x_start, ws.x)
-        al.reset_start(self.model.n_verts, *self._start_args, ws.fric, self.model.state.x_step,
-                       ws.v_last, ws.Wdx)
+        al.reset_start(self.model.n_verts, *self._start_args, ws.fric, ws.v_last, ws.Wdx)
         for a, val in zip((ws.lam, ws.lam_c, ws.lam_s, ws.lam_t), multipliers):
             a.from_numpy(val)
 
