@@ -60,7 +60,7 @@ def time_pieces(a):
     import taichi as ti
     from cloth.strain.buffers import B_MU0, B_PC_MODE
     piece = piece_kernel()
-    budget = a["budget"].to_numpy()
+    budget = a["budget"]
     order = ("method", "K", "nv", "nf", "ns", "mesh", "metric", "cons", "contacts", "vec",
              "pc")
     args = [a[k] for k in order[:5]] + [float(budget[B_MU0]), int(budget[B_PC_MODE])] + \

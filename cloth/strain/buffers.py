@@ -20,6 +20,7 @@ Design notes (measured on this 2-core CPU, Taichi 1.7.4, f64):
 - The constraint loop inside the Newton kernels runs over c < K at run time (not unrolled with
   ti.static): unrolling 8 constraints x 9 gradient entries made one kernel take 30 s to compile.
 """
+import numpy as np
 import taichi as ti
 
 from ..ndarrays import A, T  # noqa: F401 (the strain kernels import them from here)
@@ -150,7 +151,10 @@ class Workspace:
         self.params = ti.ndarray(float, N_PARAMS)  # bands (warp, weft, shear), margin, deltas
         self.stats = ti.ndarray(float, N_STATS)
         self.info = ti.ndarray(float, 8)          # the direct solver's per-kernel results
-        self.budget = ti.ndarray(float, N_BUDGET)  # solve_al's controls (B_* indices)
+        # solve_al's controls (B_* indices): a numpy array, which a CPU kernel reads in place
+        # (as a Taichi ndarray, its upload cost ~60 us a solve: a third of what the argpacks
+        # and the budget had added to a launch, measured on hanging at resolution 25).
+        self.budget = np.zeros(N_BUDGET)
         self.H = None                             # the Newton matrix's values (per pattern)
         self._packs = {}
         self.set_stitch_capacity(1)

@@ -945,7 +945,7 @@ class StrainLimiter:
             self._stubs = {PC_FACTOR: FactorStub(), PC_MULTIGRID: MultigridStub()}
         fp = pc if pc_mode == PC_FACTOR else self._stubs[PC_FACTOR]
         mg = pc if pc_mode == PC_MULTIGRID else self._stubs[PC_MULTIGRID]
-        budget = np.zeros(buffers.N_BUDGET)
+        budget = ws.budget
         budget[buffers.B_MU0], budget[buffers.B_MU_GROW] = mu, self.mu_grow
         budget[buffers.B_MU_MAX], budget[buffers.B_MAX_ROUNDS] = mu_max, self.max_iters
         budget[buffers.B_MAX_NEWTON] = self.newton_budget(pc_mode)
@@ -957,7 +957,6 @@ class StrainLimiter:
         budget[buffers.B_FROM_PREV] = float(self.coupling == "implicit" and
                                             metric is self._system)
         budget[buffers.B_PC_MODE] = pc_mode
-        ws.budget.from_numpy(budget)
         al.solve_al(mid, self._kernel_curvature(), K, m.n_verts, m.n_faces, len(self._stitches),
                     ws.budget, ws.mesh_pack(), ws.metric_pack(metric), ws.constraint_pack(),
                     ws.contact_pack(), ws.vector_pack(), ws.precond_pack(fp, mg), ws.stats)
