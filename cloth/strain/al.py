@@ -18,9 +18,7 @@ from .buffers import (B_ADAPTIVE, B_FROM_PREV, B_MAX_CG, B_MAX_NEWTON, B_MAX_ROU
                       VectorPack)
 from . import multigrid
 from .c_curvature import c_curvature_block, face_c_curvature
-from .constraints import MAPPING_PAIRS_BY_ALIGNMENT, METHOD_IDS, face_constraints
-
-SVD = METHOD_IDS["svd"]     # the method template argument's value for svd
+from .constraints import MAPPING_PAIRS_BY_ALIGNMENT, SVD, face_constraints
 
 
 # ---- constraint evaluation ---------------------------------------------------------------------

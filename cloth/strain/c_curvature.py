@@ -20,7 +20,7 @@ w_u = F e_u and w_v = F e_v at the iterate.
 """
 import taichi as ti
 
-from .constraints import MAPPING_PAIRS_BY_ALIGNMENT, sym_eig2, shape_rows
+from .constraints import MAPPING_PAIRS_BY_ALIGNMENT, SVD, WARP_WEFT, sym_eig2, shape_rows
 
 # Central-difference step in C (C ~ 1). f64: the mapping closure's curvature ~1/iso^2 = 1e4
 # then has ~1e-5 relative error. f32 cannot resolve it; the step there keeps the round-off
@@ -61,14 +61,14 @@ def weighted_strain(method: ti.template(), p, q, r, grain, params_w, weights, si
     params_w = (warp lo, hi, weft lo, hi, shear lo, hi); a band's lower and upper constraints
     are lo - strain and strain - hi."""
     total = 0.0
-    if ti.static(method == 0):
+    if ti.static(method == SVD):
         gap = ti.sqrt(0.25 * (p - r) * (p - r) + q * q)
         for j in ti.static(range(2)):
             sign = 1.0 if j == 0 else -1.0
             strain = ti.sqrt(ti.max(0.5 * (p + r) + sign * gap, 0.0)) - 1.0
             total += weights[2 * j] * (params_w[2 * j] - strain) \
                 + weights[2 * j + 1] * (strain - params_w[2 * j + 1])
-    elif ti.static(method == 1):
+    elif ti.static(method == WARP_WEFT):
         e_warp = ti.Vector([grain[0, 0], grain[1, 0]])
         e_weft = ti.Vector([grain[0, 1], grain[1, 1]])
         for t in ti.static(range(3)):
