@@ -75,8 +75,8 @@ class Substep:
         ws, m = lim._ws, lim.model
         self.nv, self.nf, self.h, self.contacts = m.n_verts, m.n_faces, sim.h, contacts
         al.begin_solve(self.nv, float(sim.h), int(contacts and lim.friction),
-                       int(not contacts), m.state.x, m.state.v, ws.x, ws.v, ws.x_hat,
-                       ws.x_start, ws.contact, ws.contact_mu, ws.fric, ws.stats)
+                       int(not contacts), 0, 0.0, ws.step_pack(m.state), ws.vector_pack(),
+                       ws.contact_pack(), ws.stats)
         self.metric = lim._newton_metric(lim.coupling == "implicit" and lim._system_ready)
         mean = lim._mean_mass(self.metric)
         self.mu0, self.mu_max = lim.mu_scale * mean, lim.mu_max_scale * mean
@@ -158,11 +158,8 @@ def solve(step, margin=1e-2, mu=1.0, kkt=None, pdas=False, host_exact=False, new
     nv, nf, K, mid, ns = step.nv, step.nf, step.K, step.mid, len(lim._stitches)
     m, m_max = step.mu0 * mu, step.mu_max
     _set_param(lim, P_MARGIN, margin)
-    direct.start(mid, K, nv, nf, ns, m, int(lim.coupling == "implicit"), tol, ws.x, ws.x_hat,
-                 ws.x_trial, metric.ptr, metric.col, metric.val, metric.diag, ws.pinned,
-                 ws.face_verts, ws.Dm_inv, ws.grain, ws.rest_area, ws.params, ws.lam, ws.g,
-                 ws.grad, ws.cm, ws.what, ws.kappa, ws.twist, ws.contact, ws.lam_c, ws.stitch,
-                 ws.lam_s, ws.fric, ws.lam_t, ws.stats)
+    packs = direct.packs(lim, metric)     # (mesh, metric, constraints, contacts, vectors)
+    direct.start(mid, K, nv, nf, ns, m, int(lim.coupling == "implicit"), tol, *packs, ws.stats)
     log = dict(rounds=0, newton=0, solves=0, alpha=[], first_step=[], converged=False)
     if ws.stats.to_numpy()[ST_START_VIOL] < tol:
         log["converged"] = True
@@ -208,11 +205,7 @@ def solve(step, margin=1e-2, mu=1.0, kkt=None, pdas=False, host_exact=False, new
             full = np.zeros((ws.d.shape[0], 3))
             full[:nv] = d.reshape(nv, 3)
             ws.d.from_numpy(full)
-            direct.line_search(mid, K, nv, nf, ns, m, ws.x, ws.x_hat, ws.x_trial, ws.d, ws.r,
-                               metric.ptr, metric.col, metric.val, metric.diag, ws.face_verts,
-                               ws.Dm_inv, ws.grain, ws.rest_area, ws.params, ws.lam, ws.g,
-                               ws.grad, ws.cm, ws.what, ws.kappa, ws.twist, ws.contact,
-                               ws.lam_c, ws.stitch, ws.lam_s, ws.fric, ws.lam_t, ws.info)
+            direct.line_search(mid, K, nv, nf, ns, m, *packs, ws.info)
             out = ws.info.to_numpy()
             log["alpha"].append(float(out[direct.I_ALPHA]))
             if out[direct.I_ALPHA] == 0.0 or (kkt is not None and d_max < 0.1 * kkt) or \
@@ -220,9 +213,8 @@ def solve(step, margin=1e-2, mu=1.0, kkt=None, pdas=False, host_exact=False, new
                 break
         if log["converged"]:
             break
-        direct.multipliers(K, nv, nf, ns, m, m_max, ws.x, ws.rest_area, ws.params, ws.lam,
-                           ws.g, ws.contact, ws.lam_c, ws.stitch, ws.lam_s, ws.fric,
-                           ws.lam_t, ws.info)
+        direct.multipliers(K, nv, nf, ns, m, m_max, ws.x, ws.mesh_pack(), ws.constraint_pack(),
+                           ws.contact_pack(), ws.info)
         out = ws.info.to_numpy()
         viol, comp = float(out[direct.I_VIOL]), float(out[direct.I_COMP])
         log["rounds"] += 1

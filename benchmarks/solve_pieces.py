@@ -58,14 +58,13 @@ def capture(resolution, method, frames):
 def time_pieces(a):
     """ms per piece (PIECES order) on the captured arguments ``a``."""
     import taichi as ti
+    from cloth.strain.buffers import B_MU0, B_PC_MODE
     piece = piece_kernel()
-    order = ("method", "K", "nv", "nf", "ns", "mu0", "params", "x", "x_hat", "x_trial",
-             "w_ptr", "w_col", "w_val", "w_diag", "pinned", "face_verts", "Dm_inv", "grain",
-             "rest_area", "lam", "g", "grad", "cm", "what", "kappa", "twist", "contact",
-             "lam_c", "stitch", "lam_s", "fric", "lam_t", "curv", "face_slot",
-             "stitch_slot", "H", "d", "r", "z", "p", "Ap", "P_inv", "pc_mode", "f_ptr",
-             "f_idx", "f_val", "f_perm", "f_work", "mg_int", "mg_real", "mg_block", "Wdx")
-    args = [a[k] for k in order]
+    budget = a["budget"]
+    order = ("method", "K", "nv", "nf", "ns", "mesh", "metric", "cons", "contacts", "vec",
+             "pc")
+    args = [a[k] for k in order[:5]] + [float(budget[B_MU0]), int(budget[B_PC_MODE])] + \
+        [a[k] for k in order[5:]]
     out = []
     reps = max(3, int(50 * 2000 / a["nf"]))
     for which in range(len(PIECES)):
@@ -92,51 +91,42 @@ def piece_kernel():
     import taichi as ti
 
     from cloth.strain import al
-    from cloth.strain.al import A
-    from cloth.strain.buffers import P_CONTACT_SCALE, P_CURVATURE, P_MARGIN, P_SVD_DELTA
+    from cloth.strain.buffers import (P_CONTACT_SCALE, P_CURVATURE, P_MARGIN, P_SVD_DELTA,
+                                      ConstraintPack, ContactPack, MeshPack, MetricPack,
+                                      PrecondPack, VectorPack)
 
     @ti.kernel
     def piece(which: int, reps: int, method: ti.template(), K: int, nv: int, nf: int, ns: int,
-              mu: float, params: A, x: A, x_hat: A, x_trial: A, w_ptr: A, w_col: A, w_val: A,
-              w_diag: A, pinned: A, face_verts: A, Dm_inv: A, grain: A, rest_area: A, lam: A,
-              g: A, grad: A, cm: A, what: A, kappa: A, twist: A, contact: A, lam_c: A,
-              stitch: A, lam_s: A, fric: A, lam_t: A, curv: A, face_slot: A, stitch_slot: A,
-              H: A, d: A, r: A, z: A, p: A, Ap: A, P_inv: A, pc_mode: int, f_ptr: A, f_idx: A,
-              f_val: A, f_perm: A, f_work: A, mg_int: A, mg_real: A, mg_block: A,
-              Wdx: A) -> float:
+              mu: float, pc_mode: int, mesh: MeshPack, metric: MetricPack, cons: ConstraintPack,
+              contacts: ContactPack, vec: VectorPack, pc: PrecondPack) -> float:
         ti.loop_config(serialize=True)
         acc = 0.0
         for _ in range(1):
-            use_twist = params[P_SVD_DELTA] > 0.0 and K == 4 and params[P_CURVATURE] == 0.0
-            margin, c_scale = params[P_MARGIN], params[P_CONTACT_SCALE]
+            use_twist = mesh.params[P_SVD_DELTA] > 0.0 and ti.static(method == al.SVD) and \
+                mesh.params[P_CURVATURE] == 0.0
+            margin, c_scale = mesh.params[P_MARGIN], mesh.params[P_CONTACT_SCALE]
             for n in range(nv):
-                d[n] = p[n]                                  # a direction to multiply with
+                vec.d[n] = vec.p[n]                          # a direction to multiply with
             for _rep in range(reps):
                 if which == 0:
-                    al.assemble_values(method, nf, x, face_verts, Dm_inv, grain, rest_area,
-                                       params, g)
+                    al.assemble_values(method, nf, vec.x, mesh, cons)
                 elif which == 1:
-                    al.assemble_all(method, nf, x, face_verts, Dm_inv, grain, rest_area, params,
-                                    g, grad, cm, what, kappa, twist)
+                    al.assemble_all(method, nf, vec.x, mesh, cons)
                 elif which == 2:
-                    acc += al.merit_constraints(K, nv, nf, ns, mu, x, lam, g, contact, lam_c,
-                                                stitch, lam_s, fric, lam_t)
+                    acc += al.merit_constraints(K, nv, nf, ns, mu, vec.x, cons, contacts)
                 elif which == 3:
-                    acc += al.metric_along(nv, w_ptr, w_col, w_val, x, x_hat, d, Wdx, Ap)[2]
+                    acc += al.metric_along(nv, vec.x, metric, vec)[2]
                 elif which == 4:
-                    al.residual(K, nv, nf, ns, mu, x, Wdx, pinned, face_verts, lam, g, grad,
-                                contact, lam_c, stitch, lam_s, fric, lam_t, r)
+                    al.residual(K, nv, nf, ns, mu, vec.x, mesh, cons, contacts, vec)
                 elif which == 5:
-                    al.newton_matrix(K, nv, nf, ns, mu, margin, c_scale, use_twist, False, x,
-                                     w_ptr, w_col, w_val, w_diag, pinned, face_verts, rest_area,
-                                     lam, g, grad, cm, what, kappa, twist, contact, lam_c, fric,
-                                     lam_t, curv, face_slot, stitch_slot, H)
+                    al.newton_matrix(K, nv, nf, ns, mu, margin, c_scale, use_twist, False,
+                                     vec.x, mesh, metric, cons, contacts)
                 elif which == 6:
                     for n in range(nv):
-                        Ap[n] = al.metric_times(n, w_ptr, w_col, H, p)
+                        vec.Ap[n] = al.metric_times(n, metric.w_ptr, metric.w_col, metric.H,
+                                                    vec.p)
                 else:
-                    acc += al.precondition(pc_mode, nv, P_inv, f_ptr, f_idx, f_val, f_perm,
-                                           f_work, mg_int, mg_real, mg_block, r, z)
+                    acc += al.precondition(pc_mode, nv, pc, vec.r, vec.z)
         return acc
 
     return piece

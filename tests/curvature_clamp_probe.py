@@ -13,7 +13,8 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 from cloth import backend  # noqa: E402
 
 backend.init("cpu", "f64")
-from cloth.strain.buffers import N_PARAMS, P_C_STEP, P_ISO  # noqa: E402
+from cloth.strain.buffers import (N_PARAMS, P_C_STEP, P_ISO, ConstraintPack,  # noqa: E402
+                                  MeshPack)
 from cloth.strain.c_curvature import C_STEP_F64, face_c_curvature  # noqa: E402
 from cloth.strain.constraints import MAPPING_ISO, METHOD_IDS  # noqa: E402
 from tests.test_constraints import random_triangles  # noqa: E402
@@ -22,14 +23,14 @@ A = ti.types.ndarray()
 
 
 @ti.kernel
-def fill(method: ti.template(), K: int, nf: int, x: A, face_verts: A, Dm_inv: A, grain: A,
-         rest_area: A, params: A, lam: A, g: A, mu: float, curv: A):
+def fill(method: ti.template(), K: int, nf: int, x: A, mesh: MeshPack, cons: ConstraintPack,
+         mu: float):
     ti.loop_config(serialize=True)
     for _ in range(1):
-        params_w = ti.Vector([params[k] for k in ti.static(range(6))])
+        params_w = ti.Vector([mesh.params[k] for k in ti.static(range(6))])
         for f in range(nf):
-            face_c_curvature(method, K, f, x, face_verts, Dm_inv, grain, rest_area, params_w,
-                             params[P_ISO], params[P_C_STEP], lam, g, mu, curv)
+            face_c_curvature(method, K, f, x, mesh, params_w, mesh.params[P_ISO],
+                             mesh.params[P_C_STEP], cons, mu)
 
 
 def main():
@@ -57,7 +58,12 @@ def main():
     lam.from_numpy(lam_np)
     g.from_numpy(np.zeros((n, 8)))
     curv = ti.ndarray(ti.types.vector(9, float), (n, 3))
-    fill(METHOD_IDS["mapping"], 8, n, x, fv, dm, gr, ra, pa, lam, g, 1.0, curv)
+    unused = ti.ndarray(float, 1)    # pack members face_c_curvature does not read
+    mesh = MeshPack(face_verts=fv, Dm_inv=dm, grain=gr, rest_area=ra, mass=unused,
+                    pinned=unused, params=pa)
+    cons = ConstraintPack(lam=lam, g=g, grad=unused, cm=unused, what=unused, kappa=unused,
+                          twist=unused, curv=curv)
+    fill(METHOD_IDS["mapping"], 8, n, x, mesh, cons, 1.0)
     c = curv.to_numpy()
     Hc = c[:, 1][:, [0, 1, 2, 1, 3, 4, 2, 4, 5]].reshape(-1, 3, 3)
     print(np.linalg.eigvalsh(Hc).min() / np.abs(Hc).max())

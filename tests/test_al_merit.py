@@ -7,64 +7,52 @@ import pytest
 import taichi as ti
 
 from cloth.ndarrays import A
-from cloth.strain import al
+from cloth.strain import al, direct
+from cloth.strain.buffers import ConstraintPack, ContactPack, MeshPack, MetricPack, VectorPack
 from cloth.strain.constraints import METHOD_IDS, N_CONSTRAINTS
 
 
 @ti.kernel
 def _merit_at(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: float, pos: A,
-              x_hat: A, w_ptr: A, w_col: A, w_val: A, w_diag: A, face_verts: A, Dm_inv: A,
-              grain: A, rest_area: A, params: A, lam: A, g: A, grad: A, cm: A, what: A,
-              kappa: A, twist: A, contact: A, lam_c: A, stitch: A, lam_s: A, fric: A,
-              lam_t: A) -> float:
+              mesh: MeshPack, metric: MetricPack, cons: ConstraintPack, contacts: ContactPack,
+              vec: VectorPack) -> float:
     total = 0.0
     ti.loop_config(serialize=True)
     for _ in range(1):
-        al.assemble_all(method, nf, pos, face_verts, Dm_inv, grain, rest_area, params, g,
-                        grad, cm, what, kappa, twist)
-        total = al.merit(K, nv, nf, ns, mu, pos, x_hat, w_ptr, w_col, w_val, w_diag, lam, g,
-                         contact, lam_c, stitch, lam_s, fric, lam_t)
+        al.assemble_all(method, nf, pos, mesh, cons)
+        total = al.merit(K, nv, nf, ns, mu, pos, vec.x_hat, metric, cons, contacts)
     return total
 
 
 @ti.kernel
 def _residual_at(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: float, pos: A,
-                 x_hat: A, w_ptr: A, w_col: A, w_val: A, w_diag: A, face_verts: A,
-                 Dm_inv: A, grain: A, rest_area: A, params: A, lam: A, g: A, grad: A, cm: A,
-                 what: A, kappa: A, twist: A, contact: A, lam_c: A, stitch: A, lam_s: A,
-                 fric: A, lam_t: A, pinned: A, r: A, Wdx: A):
+                 mesh: MeshPack, metric: MetricPack, cons: ConstraintPack,
+                 contacts: ContactPack, vec: VectorPack):
     ti.loop_config(serialize=True)
     for _ in range(1):
-        al.assemble_all(method, nf, pos, face_verts, Dm_inv, grain, rest_area, params, g,
-                        grad, cm, what, kappa, twist)
-        al.metric_gradient(nv, w_ptr, w_col, w_val, pos, x_hat, Wdx)
-        al.residual(K, nv, nf, ns, mu, pos, Wdx, pinned, face_verts, lam, g, grad, contact,
-                    lam_c, stitch, lam_s, fric, lam_t, r)
+        al.assemble_all(method, nf, pos, mesh, cons)
+        al.metric_gradient(nv, pos, metric, vec)
+        al.residual(K, nv, nf, ns, mu, pos, mesh, cons, contacts, vec)
 
 
 @ti.kernel
 def _line_merits(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: float,
-                 a: float, pos: A, x_hat: A, d: A, moved: A, Wdx: A, Wd: A, w_ptr: A,
-                 w_col: A, w_val: A, w_diag: A, face_verts: A, Dm_inv: A, grain: A,
-                 rest_area: A, params: A, lam: A, g: A, grad: A, cm: A, what: A, kappa: A,
-                 twist: A, contact: A, lam_c: A, stitch: A, lam_s: A, fric: A,
-                 lam_t: A) -> ti.types.vector(2, float):
-    """The merit at pos + a d two ways: directly, and as solve_al's line search forms it
-    (the quadratic from ``metric_along`` at pos, plus the constraint terms)."""
+                 a: float, pos: A, moved: A, mesh: MeshPack, metric: MetricPack,
+                 cons: ConstraintPack, contacts: ContactPack,
+                 vec: VectorPack) -> ti.types.vector(2, float):
+    """The merit at pos + a d (d = vec.d) two ways: directly, and as solve_al's line search
+    forms it (the quadratic from ``metric_along`` at pos, plus the constraint terms)."""
     out = ti.Vector([0.0, 0.0])
     ti.loop_config(serialize=True)
     for _ in range(1):
-        al.metric_gradient(nv, w_ptr, w_col, w_val, pos, x_hat, Wdx)
-        quad = al.metric_along(nv, w_ptr, w_col, w_val, pos, x_hat, d, Wdx, Wd)
+        al.metric_gradient(nv, pos, metric, vec)
+        quad = al.metric_along(nv, pos, metric, vec)
         for n in range(nv):
-            moved[n] = pos[n] + a * d[n]
-        al.assemble_all(method, nf, moved, face_verts, Dm_inv, grain, rest_area, params, g,
-                        grad, cm, what, kappa, twist)
-        out[0] = al.merit(K, nv, nf, ns, mu, moved, x_hat, w_ptr, w_col, w_val, w_diag, lam,
-                          g, contact, lam_c, stitch, lam_s, fric, lam_t)
-        out[1] = al.quad_at(quad, a) + al.merit_constraints(K, nv, nf, ns, mu, moved, lam, g,
-                                                            contact, lam_c, stitch, lam_s,
-                                                            fric, lam_t)
+            moved[n] = pos[n] + a * vec.d[n]
+        al.assemble_all(method, nf, moved, mesh, cons)
+        out[0] = al.merit(K, nv, nf, ns, mu, moved, vec.x_hat, metric, cons, contacts)
+        out[1] = al.quad_at(quad, a) + al.merit_constraints(K, nv, nf, ns, mu, moved, cons,
+                                                            contacts)
     return out
 
 
@@ -86,21 +74,15 @@ def test_residual_is_minus_the_merit_gradient(method):
     lam = ws.lam.to_numpy()
     assert np.count_nonzero(lam[:nf, :K]) > 0, "no active multipliers: the test sees nothing"
 
-    def arrays():
-        return (ws.face_verts, ws.Dm_inv, ws.grain, ws.rest_area, ws.params, ws.lam, ws.g,
-                ws.grad, ws.cm, ws.what, ws.kappa, ws.twist, ws.contact, ws.lam_c, ws.stitch,
-                ws.lam_s, ws.fric, ws.lam_t)
-
+    packs = direct.packs(lim, W)     # (mesh, metric, constraints, contacts, vectors)
     pos = ws.x_trial
 
     def merit_at(xs):
         pos.from_numpy(xs)
-        return _merit_at(mid, K, nv, nf, 0, mu, pos, ws.x_hat, W.ptr, W.col, W.val, W.diag,
-                         *arrays())
+        return _merit_at(mid, K, nv, nf, 0, mu, pos, *packs)
 
     pos.from_numpy(x0)
-    _residual_at(mid, K, nv, nf, 0, mu, pos, ws.x_hat, W.ptr, W.col, W.val, W.diag,
-                 *arrays(), ws.pinned, ws.r, ws.Wdx)
+    _residual_at(mid, K, nv, nf, 0, mu, pos, *packs)
     r = ws.r.to_numpy()[:nv]
     for trial in range(3):
         d = np.zeros_like(x0)
@@ -117,9 +99,8 @@ def test_residual_is_minus_the_merit_gradient(method):
     ws.d.from_numpy(d)
     for a in (1.0, 0.37):
         pos.from_numpy(x0)
-        direct, along = _line_merits(mid, K, nv, nf, 0, mu, a, pos, ws.x_hat, ws.d, ws.z,
-                                     ws.Wdx, ws.Ap, W.ptr, W.col, W.val, W.diag, *arrays())
-        assert abs(direct - along) <= 1e-12 * abs(direct), (a, direct, along)
+        merit, along = _line_merits(mid, K, nv, nf, 0, mu, a, pos, ws.z, *packs)
+        assert abs(merit - along) <= 1e-12 * abs(merit), (a, merit, along)
 
 
 @pytest.mark.parametrize("method", ["mapping", "svd", "warp-weft"])

@@ -9,7 +9,7 @@ import taichi as ti
 from cloth import linalg
 from cloth.strain import factor_precond
 from cloth.strain import al
-from cloth.strain.buffers import PC_FACTOR, PC_JACOBI, PC_MULTIGRID, A
+from cloth.strain.buffers import PC_FACTOR, PC_JACOBI, PC_MULTIGRID, A, PrecondPack
 from cloth.strain.multigrid import MultigridPreconditioner, MultigridStub
 from tests.test_coupling import _hanging, _saved_state, _tight_projection
 
@@ -18,13 +18,11 @@ pytestmark = pytest.mark.skipif(not linalg.HAVE_CHOLMOD,
 
 
 @ti.kernel
-def _apply(pc_mode: int, nv: int, P_inv: A, f_ptr: A, f_idx: A, f_val: A, f_perm: A,
-           f_work: A, mg_int: A, mg_real: A, mg_block: A, r: A, z: A) -> float:
+def _apply(pc_mode: int, nv: int, pc: PrecondPack, r: A, z: A) -> float:
     rz = 0.0
     ti.loop_config(serialize=True)
     for _ in range(1):
-        rz = al.precondition(pc_mode, nv, P_inv, f_ptr, f_idx, f_val, f_perm, f_work, mg_int,
-                             mg_real, mg_block, r, z)
+        rz = al.precondition(pc_mode, nv, pc, r, z)
     return rz
 
 
@@ -45,8 +43,7 @@ def test_kernel_applies_the_inverse_of_the_factored_matrix():
     r = rng.standard_normal((ws.r.shape[0], 3))
     ws.r.from_numpy(r)
     mg = MultigridStub()
-    rz = _apply(PC_FACTOR, nv, ws.P_inv, fp.ptr, fp.idx, fp.val, fp.perm, fp.work, mg.ints,
-                mg.reals, mg.blocks, ws.r, ws.z)
+    rz = _apply(PC_FACTOR, nv, ws.precond_pack(fp, mg), ws.r, ws.z)
     z = ws.z.to_numpy()[:nv].ravel()
     want = np.linalg.solve(factored.toarray(), r[:nv].ravel())
     assert np.abs(z - want).max() < 1e-9 * np.abs(want).max()

@@ -7,39 +7,37 @@ algorithm, in the order the kernel runs them.
 """
 import taichi as ti
 
-from .buffers import (CONTACT_SLOTS, CONVERGED, FEASIBLE_AS_GIVEN, LAST_TRY, N_STATS,
-                      NO_CONTACT, NO_SKIP, P_C_STEP, P_CONTACT_SCALE, P_CURVATURE, P_DELTA,
-                      P_INNER_RTOL, P_ISO, P_KKT_TOL, P_MARGIN, P_PDAS, P_SHEAR, P_SVD_DELTA, P_WARP,
-                      P_WEFT, PC_FACTOR, PC_JACOBI, PC_MULTIGRID, RUNNING, ST_CG, ST_COMP,
-                      ST_CONVERGED, ST_ITERS, ST_KKT, ST_NEWTON, ST_START_VIOL, ST_TRIALS,
-                      ST_VIOL, A, T)
+from .buffers import (B_ADAPTIVE, B_FROM_PREV, B_MAX_CG, B_MAX_NEWTON, B_MAX_ROUNDS, B_MU0,
+                      B_MU_GROW, B_MU_MAX, B_PC_MODE, B_RTOL, B_STEP_TOL, B_TOL, CONTACT_SLOTS,
+                      CONVERGED, FEASIBLE_AS_GIVEN, LAST_TRY, N_STATS, NO_CONTACT, NO_SKIP,
+                      P_C_STEP, P_CONTACT_SCALE, P_CURVATURE, P_DELTA, P_INNER_RTOL, P_ISO,
+                      P_KKT_TOL, P_MARGIN, P_PDAS, P_SHEAR, P_SVD_DELTA, P_WARP, P_WEFT,
+                      PC_FACTOR, PC_JACOBI, PC_MULTIGRID, RUNNING, ST_CG, ST_COMP, ST_CONVERGED,
+                      ST_ITERS, ST_KKT, ST_NEWTON, ST_START_VIOL, ST_TRIALS, ST_VIOL, A, T,
+                      ConstraintPack, ContactPack, MeshPack, MetricPack, PrecondPack, StepPack,
+                      VectorPack)
 from . import multigrid
 from .c_curvature import c_curvature_block, face_c_curvature
-from .constraints import MAPPING_PAIRS_BY_ALIGNMENT, METHOD_IDS, face_constraints
-
-SVD = METHOD_IDS["svd"]     # the method template argument's value for svd
+from .constraints import MAPPING_PAIRS_BY_ALIGNMENT, SVD, face_constraints
 
 
 # ---- constraint evaluation ---------------------------------------------------------------------
 @ti.func
-def eval_face(method: ti.template(), f, pos: T, face_verts: T, Dm_inv: T, grain: T,
-              rest_area: T, params: T):
+def eval_face(method: ti.template(), f, pos: T, mesh: T):
     """All constraints of face f at positions ``pos`` (mapping pairs ordered as
     families.MAPPING_PAIRS_BY_ALIGNMENT says)."""
-    ids = face_verts[f]
-    warp = ti.Vector([params[P_WARP], params[P_WARP + 1]])
-    weft = ti.Vector([params[P_WEFT], params[P_WEFT + 1]])
-    shear = ti.Vector([params[P_SHEAR], params[P_SHEAR + 1]])
-    delta = params[P_SVD_DELTA] if ti.static(method == 0) else params[P_DELTA]
-    return face_constraints(method, pos[ids[0]], pos[ids[1]], pos[ids[2]], Dm_inv[f],
-                            grain[f], ti.sqrt(rest_area[f]), warp, weft, shear, delta,
-                            params[P_ISO], MAPPING_PAIRS_BY_ALIGNMENT)
+    ids = mesh.face_verts[f]
+    warp = ti.Vector([mesh.params[P_WARP], mesh.params[P_WARP + 1]])
+    weft = ti.Vector([mesh.params[P_WEFT], mesh.params[P_WEFT + 1]])
+    shear = ti.Vector([mesh.params[P_SHEAR], mesh.params[P_SHEAR + 1]])
+    delta = mesh.params[P_SVD_DELTA] if ti.static(method == SVD) else mesh.params[P_DELTA]
+    return face_constraints(method, pos[ids[0]], pos[ids[1]], pos[ids[2]], mesh.Dm_inv[f],
+                            mesh.grain[f], ti.sqrt(mesh.rest_area[f]), warp, weft, shear,
+                            delta, mesh.params[P_ISO], MAPPING_PAIRS_BY_ALIGNMENT)
 
 
 @ti.func
-def assemble_all(method: ti.template(), nf, pos: T, face_verts: T, Dm_inv: T, grain: T,
-                 rest_area: T, params: T, g: T, grad: T, cm: T, what: T, kappa: T,
-                 twist: T):
+def assemble_all(method: ti.template(), nf, pos: T, mesh: T, cons: T):
     """Values, gradients and curvature models of every constraint at ``pos``. The
     constraints come in bound pairs (c even, c + 1) with opposite gradients and the same cm
     and w^ (constraints.py): only the even member's are stored (``pair_grad``). Why: writing
@@ -47,10 +45,10 @@ def assemble_all(method: ti.template(), nf, pos: T, face_verts: T, Dm_inv: T, gr
     mapping: 0.35 ms, of which 0.15 ms with the stores left out), and an assembly runs at
     every line-search trial."""
     for f in range(nf):
-        out = eval_face(method, f, pos, face_verts, Dm_inv, grain, rest_area, params)
+        out = eval_face(method, f, pos, mesh)
         for c in ti.static(range(out.g.n)):
-            g[f, c] = out.g[c]
-            kappa[f, c] = out.kappa[c]
+            cons.g[f, c] = out.g[c]
+            cons.kappa[f, c] = out.kappa[c]
             if ti.static(c % 2 == 0):
                 grad_c = ti.Vector([0.0] * 9)
                 cm_c, what_c = ti.Vector([0.0] * 3), ti.Vector([0.0] * 3)
@@ -59,23 +57,21 @@ def assemble_all(method: ti.template(), nf, pos: T, face_verts: T, Dm_inv: T, gr
                 for m in ti.static(range(3)):
                     cm_c[m] = out.cm[c, m]
                     what_c[m] = out.what[c, m]
-                grad[f, c] = grad_c
-                cm[f, c] = cm_c
-                what[f, c] = what_c
-            if ti.static(method == 0):
+                cons.grad[f, c] = grad_c
+                cons.cm[f, c] = cm_c
+                cons.what[f, c] = what_c
+            if ti.static(method == SVD):
                 tw_c = ti.Vector([0.0] * 9)
                 for m in ti.static(range(9)):
                     tw_c[m] = out.twist[c, m]
-                twist[f, c] = tw_c
+                cons.twist[f, c] = tw_c
 
 
 @ti.kernel
-def assemble(method: ti.template(), nf: int, pos: A, face_verts: A, Dm_inv: A, grain: A,
-             rest_area: A, params: A, g: A, grad: A, cm: A, what: A, kappa: A, twist: A):
+def assemble(method: ti.template(), nf: int, pos: A, mesh: MeshPack, cons: ConstraintPack):
     ti.loop_config(serialize=True)
     for _ in range(1):
-        assemble_all(method, nf, pos, face_verts, Dm_inv, grain, rest_area, params, g, grad,
-                     cm, what, kappa, twist)
+        assemble_all(method, nf, pos, mesh, cons)
 
 
 # ---- augmented Lagrangian pieces (METHOD 4, paper eqs. 25-27) ----------------------------------
@@ -128,22 +124,22 @@ def stitch_g(stitch: T, pos: T, s):
 
 
 @ti.func
-def friction_state(n, mu, x: T, contact: T, lam_c: T, fric: T, lam_t: T):
+def friction_state(n, mu, x: T, contacts: T):
     """Coulomb friction of vertex n against its nearest contact plane, as an AL term: the
     tangential displacement over the substep c_t = P (x - x_prev) (P = I - n n^T) is held at
     zero by a multiplier inside the disc of radius mu_f (lam_c1 + lam_c2) (the cone: the
     normal multipliers are the normal impulses, times h). Returns (P, y, radius) with
     y = P (lam_t + mu c_t); the friction force is -clamp(y, radius) (sticking inside the
     disc, sliding on its rim). radius = 0 where there is no contact or no friction."""
-    f = fric[n]
+    f = contacts.fric[n]
     radius = 0.0
     P = ti.Matrix.identity(float, 3)
     y = ti.Vector([0.0, 0.0, 0.0])
-    if f[3] > 0.0 and contact[n, 0][3] > 0.5 * NO_CONTACT:
-        cn = contact_normal(contact, n, 0)
+    if f[3] > 0.0 and contacts.contact[n, 0][3] > 0.5 * NO_CONTACT:
+        cn = contact_normal(contacts.contact, n, 0)
         P = ti.Matrix.identity(float, 3) - cn.outer_product(cn)
-        radius = f[3] * (lam_c[n, 0] + lam_c[n, 1])
-        y = P @ (lam_t[n] + mu * (x[n] - ti.Vector([f[0], f[1], f[2]])))
+        radius = f[3] * (contacts.lam_c[n, 0] + contacts.lam_c[n, 1])
+        y = P @ (contacts.lam_t[n] + mu * (x[n] - ti.Vector([f[0], f[1], f[2]])))
     return P, y, radius
 
 
@@ -178,14 +174,13 @@ def pair_grad(grad: T, f, c):
 
 
 @ti.func
-def assemble_values(method: ti.template(), nf, pos: T, face_verts: T, Dm_inv: T, grain: T,
-                    rest_area: T, params: T, g: T):
+def assemble_values(method: ti.template(), nf, pos: T, mesh: T, cons: T):
     """The values only of every constraint at ``pos`` (a fifth of ``assemble_all``'s cost at
     1.2k faces, mapping: the gradients are not computed)."""
     for f in range(nf):
-        out = eval_face(method, f, pos, face_verts, Dm_inv, grain, rest_area, params)
+        out = eval_face(method, f, pos, mesh)
         for c in ti.static(range(out.g.n)):
-            g[f, c] = out.g[c]
+            cons.g[f, c] = out.g[c]
 
 
 @ti.func
@@ -199,35 +194,34 @@ def metric_times(n, w_ptr: T, w_col: T, w_val: T, p: T):
 
 
 @ti.func
-def merit(K, nv, nf, ns, mu, pos: T, x_hat: T, w_ptr: T, w_col: T, w_val: T, w_diag: T, lam: T, g: T, contact: T,
-          lam_c: T, stitch: T, lam_s: T, fric: T, lam_t: T):
+def merit(K, nv, nf, ns, mu, pos: T, x_hat: T, metric: T, cons: T, contacts: T):
     """L_A = 1/2 (x - x_hat)^T W (x - x_hat) + sum (mu/2) max(0, g + lam/mu)^2 - lam^2/(2 mu),
     the slack variables of eq. 25 eliminated, with g as last assembled (at ``pos``), over the
     strain and contact constraints; plus lam_s.c + (mu/2)|c|^2 for the seams' equalities and
     the friction term (``merit_constraints``)."""
     quad = 0.0
     for n in range(nv):
-        quad += 0.5 * (pos[n] - x_hat[n]).dot(metric_row(n, w_ptr, w_col, w_val, pos, x_hat))
-    return quad + merit_constraints(K, nv, nf, ns, mu, pos, lam, g, contact, lam_c, stitch,
-                                    lam_s, fric, lam_t)
+        quad += 0.5 * (pos[n] - x_hat[n]).dot(metric_row(n, metric.w_ptr, metric.w_col,
+                                                         metric.w_val, pos, x_hat))
+    return quad + merit_constraints(K, nv, nf, ns, mu, pos, cons, contacts)
 
 
 @ti.func
-def merit_constraints(K, nv, nf, ns, mu, pos: T, lam: T, g: T, contact: T, lam_c: T,
-                      stitch: T, lam_s: T, fric: T, lam_t: T):
+def merit_constraints(K, nv, nf, ns, mu, pos: T, cons: T, contacts: T):
     """The constraint terms of ``merit`` (all but the metric's quadratic), at ``pos``."""
     total = 0.0
     for n in range(nv):
         for j in ti.static(range(CONTACT_SLOTS)):
-            t = ti.max(0.0, contact_g(contact, pos, n, j) + lam_c[n, j] / mu)
-            total += 0.5 * mu * t * t - 0.5 * lam_c[n, j] * lam_c[n, j] / mu
+            lam_c = contacts.lam_c[n, j]
+            t = ti.max(0.0, contact_g(contacts.contact, pos, n, j) + lam_c / mu)
+            total += 0.5 * mu * t * t - 0.5 * lam_c * lam_c / mu
     for k in range(ns):
-        cs = stitch_g(stitch, pos, k)
-        total += lam_s[k].dot(cs) + 0.5 * mu * cs.norm_sqr()
+        cs = stitch_g(contacts.stitch, pos, k)
+        total += contacts.lam_s[k].dot(cs) + 0.5 * mu * cs.norm_sqr()
     for n in range(nv):
         # Friction: max over the disc of lam'.c_t - |lam' - lam_t|^2 / (2 mu), up to a
         # constant; its gradient is clamp(y, radius).
-        _P, y, radius = friction_state(n, mu, pos, contact, lam_c, fric, lam_t)
+        _P, y, radius = friction_state(n, mu, pos, contacts)
         if radius > 0.0:
             ny = y.norm()
             if ny <= radius:
@@ -236,30 +230,31 @@ def merit_constraints(K, nv, nf, ns, mu, pos: T, lam: T, g: T, contact: T, lam_c
                 total += (radius * ny - 0.5 * radius * radius) / mu
     for f in range(nf):
         for c in range(K):
-            t = ti.max(0.0, g[f, c] + lam[f, c] / mu)
-            total += 0.5 * mu * t * t - 0.5 * lam[f, c] * lam[f, c] / mu
+            lam = cons.lam[f, c]
+            t = ti.max(0.0, cons.g[f, c] + lam / mu)
+            total += 0.5 * mu * t * t - 0.5 * lam * lam / mu
     return total
 
 
 @ti.func
-def metric_gradient(nv, w_ptr: T, w_col: T, w_val: T, x: T, x_hat: T, Wdx: T):
-    """Wdx = W (x - x_hat), the gradient of the merit's quadratic term (``residual`` reads
-    it; solve_al's line search keeps it up to date along its steps)."""
+def metric_gradient(nv, pos: T, metric: T, vec: T):
+    """vec.Wdx = W (pos - x_hat), the gradient of the merit's quadratic term (``residual``
+    reads it; solve_al's line search keeps it up to date along its steps)."""
     for n in range(nv):
-        Wdx[n] = metric_row(n, w_ptr, w_col, w_val, x, x_hat)
+        vec.Wdx[n] = metric_row(n, metric.w_ptr, metric.w_col, metric.w_val, pos, vec.x_hat)
 
 
 @ti.func
-def metric_along(nv, w_ptr: T, w_col: T, w_val: T, x: T, x_hat: T, d: T, Wdx: T, Wd: T):
-    """Wd = W d, and the coefficients (e.We, d.We, d.Wd) of the merit's quadratic term along
-    x + a d (e = x - x_hat, We = W e from Wdx): 1/2 (e + a d)^T W (e + a d) = 1/2 e.We +
-    a d.We + a^2/2 d.Wd for symmetric W (``quad_at``)."""
+def metric_along(nv, pos: T, metric: T, vec: T):
+    """vec.Ap = W d (d = vec.d), and the coefficients (e.We, d.We, d.Wd) of the merit's
+    quadratic term along pos + a d (e = pos - x_hat, We = W e from vec.Wdx): 1/2 (e + a d)^T
+    W (e + a d) = 1/2 e.We + a d.We + a^2/2 d.Wd for symmetric W (``quad_at``)."""
     eWe, dWe, dWd = 0.0, 0.0, 0.0
     for n in range(nv):
-        Wd[n] = metric_times(n, w_ptr, w_col, w_val, d)
-        eWe += (x[n] - x_hat[n]).dot(Wdx[n])
-        dWe += d[n].dot(Wdx[n])
-        dWd += d[n].dot(Wd[n])
+        vec.Ap[n] = metric_times(n, metric.w_ptr, metric.w_col, metric.w_val, vec.d)
+        eWe += (pos[n] - vec.x_hat[n]).dot(vec.Wdx[n])
+        dWe += vec.d[n].dot(vec.Wdx[n])
+        dWd += vec.d[n].dot(vec.Ap[n])
     return ti.Vector([eWe, dWe, dWd])
 
 
@@ -270,33 +265,32 @@ def quad_at(quad, a):
 
 
 @ti.func
-def residual(K, nv, nf, ns, mu, x: T, Wdx: T, pinned: T, face_verts: T, lam: T, g: T,
-             grad: T, contact: T, lam_c: T, stitch: T, lam_s: T, fric: T, lam_t: T, r: T):
-    """r = -grad L_A = -W (x - x_hat) - sum max(0, lam + mu g) grad g; zero at pins. W (x -
-    x_hat) is read from Wdx (``metric_gradient``)."""
+def residual(K, nv, nf, ns, mu, x: T, mesh: T, cons: T, contacts: T, vec: T):
+    """vec.r = -grad L_A at x = -W (x - x_hat) - sum max(0, lam + mu g) grad g; zero at pins.
+    W (x - x_hat) is read from vec.Wdx (``metric_gradient``)."""
     for n in range(nv):
-        r[n] = -Wdx[n]
+        vec.r[n] = -vec.Wdx[n]
         for j in ti.static(range(CONTACT_SLOTS)):
-            s = lam_c[n, j] + mu * contact_g(contact, x, n, j)
+            s = contacts.lam_c[n, j] + mu * contact_g(contacts.contact, x, n, j)
             if s > 0.0:
-                r[n] += s * contact_normal(contact, n, j)      # grad (d - n.x) = -n
+                vec.r[n] += s * contact_normal(contacts.contact, n, j)  # grad (d - n.x) = -n
     for f in range(nf):
-        ids = face_verts[f]
+        ids = mesh.face_verts[f]
         for c in range(K):
-            s = lam[f, c] + mu * g[f, c]
+            s = cons.lam[f, c] + mu * cons.g[f, c]
             if s > 0.0:
-                scatter(r, ids, pair_grad(grad, f, c), -s)
+                scatter(vec.r, ids, pair_grad(cons.grad, f, c), -s)
     for k in range(ns):
-        force = lam_s[k] + mu * stitch_g(stitch, x, k)
-        r[stitch[k][0]] -= force
-        r[stitch[k][1]] += force
+        force = contacts.lam_s[k] + mu * stitch_g(contacts.stitch, x, k)
+        vec.r[contacts.stitch[k][0]] -= force
+        vec.r[contacts.stitch[k][1]] += force
     for n in range(nv):
-        _P, y, radius = friction_state(n, mu, x, contact, lam_c, fric, lam_t)
+        _P, y, radius = friction_state(n, mu, x, contacts)
         if radius > 0.0:
-            r[n] -= clamp_disc(y, radius)
+            vec.r[n] -= clamp_disc(y, radius)
     for n in range(nv):
-        if pinned[n] == 1:
-            r[n] = ti.Vector([0.0, 0.0, 0.0])
+        if mesh.pinned[n] == 1:
+            vec.r[n] = ti.Vector([0.0, 0.0, 0.0])
 
 
 @ti.func
@@ -314,23 +308,20 @@ def near_weight(s, near):
 
 
 @ti.func
-def fill_c_curvature(method: ti.template(), K, nf, mu, x: T, face_verts: T, Dm_inv: T,
-                     grain: T, rest_area: T, params: T, lam: T, g: T, curv: T):
+def fill_c_curvature(method: ti.template(), K, nf, mu, x: T, mesh: T, cons: T):
     """The exact constraint curvature of every face at x (c_curvature.py), when the
     params ask for it (P_CURVATURE); the Newton matrix then uses it instead of the model.
     (The direct path's kernels; solve_al compiles it in only with ``exact``.)"""
-    if params[P_CURVATURE] > 0.0:
-        params_w = ti.Vector([params[k] for k in ti.static(range(6))])
+    if mesh.params[P_CURVATURE] > 0.0:
+        params_w = ti.Vector([mesh.params[k] for k in ti.static(range(6))])
         for f in range(nf):
-            face_c_curvature(method, K, f, x, face_verts, Dm_inv, grain, rest_area, params_w,
-                             params[P_ISO], params[P_C_STEP], lam, g, mu, curv)
+            face_c_curvature(method, K, f, x, mesh, params_w, mesh.params[P_ISO],
+                             mesh.params[P_C_STEP], cons, mu)
 
 
 @ti.func
-def newton_matrix(K, nv, nf, ns, mu, margin, c_scale, use_twist, exact, x: T, w_ptr: T,
-                  w_col: T, w_val: T, w_diag: T, pinned: T, face_verts: T, rest_area: T,
-                  lam: T, g: T, grad: T, cm: T, what: T, kappa: T, twist: T, contact: T,
-                  lam_c: T, fric: T, lam_t: T, curv: T, face_slot: T, stitch_slot: T, H: T):
+def newton_matrix(K, nv, nf, ns, mu, margin, c_scale, use_twist, exact, x: T, mesh: T,
+                  metric: T, cons: T, contacts: T):
     """The projected-Newton matrix of L_A at x, written out in W's block pattern (which
     must hold every face and seam pair: ``system_matrix.build_pattern``):
 
@@ -356,23 +347,24 @@ def newton_matrix(K, nv, nf, ns, mu, margin, c_scale, use_twist, exact, x: T, w_
         # H = W row by row, each row just before the first face that adds to it: the rows are
         # then in cache when the face's blocks land (measured at 64.8k faces, where H is 40
         # MB: 22 against 30 ms for the whole matrix, the same values).
-        ids = face_verts[f]
+        ids = mesh.face_verts[f]
         last = ti.max(ids[0], ti.max(ids[1], ids[2]))
         while copied <= last:
-            for k in range(w_ptr[copied], w_ptr[copied + 1]):
-                H[k] = w_val[k]
+            for k in range(metric.w_ptr[copied], metric.w_ptr[copied + 1]):
+                metric.H[k] = metric.w_val[k]
             copied += 1
-        near = mu * margin * ti.sqrt(rest_area[f])
+        near = mu * margin * ti.sqrt(mesh.rest_area[f])
         # The face's constraint terms, summed first; symmetric, so only the blocks (a, b) with
         # a <= b are formed (Hf's lower block triangle stays unused).
         Hf = ti.Matrix.zero(float, 9, 9)
         any_near = False
         for c in range(K):
-            s = lam[f, c] + mu * g[f, c]
+            s = cons.lam[f, c] + mu * cons.g[f, c]
             if s + near > 0.0:
                 any_near = True
                 # The pair's shared entries (the sign of grad drops out of grad grad^T).
-                gr, cmv, w = grad[f, c - c % 2], cm[f, c - c % 2], what[f, c - c % 2]
+                e = c - c % 2
+                gr, cmv, w = cons.grad[f, e], cons.cm[f, e], cons.what[f, e]
                 sc = ti.max(s, 0.0)
                 if exact:
                     sc = 0.0       # the exact curvature is added per face below
@@ -384,14 +376,14 @@ def newton_matrix(K, nv, nf, ns, mu, margin, c_scale, use_twist, exact, x: T, w_
                                 Hf[3 * a + i, 3 * b + j] += wmu * gr[3 * a + i] * gr[3 * b + j]
                 if sc > 0.0:
                     # Curvature of ||F e||: (cm_a cm_b) kappa (I - w w^T) per block (a, b).
-                    proj = sc * kappa[f, c] * (I - w.outer_product(w))
+                    proj = sc * cons.kappa[f, c] * (I - w.outer_product(w))
                     for a in ti.static(range(3)):
                         for b in ti.static(range(a, 3)):
                             for i in ti.static(range(3)):
                                 for j in ti.static(range(3)):
                                     Hf[3 * a + i, 3 * b + j] += cmv[a] * cmv[b] * proj[i, j]
                     if use_twist:
-                        tw = twist[f, c]
+                        tw = cons.twist[f, c]
                         for a in ti.static(range(3)):
                             for b in ti.static(range(a, 3)):
                                 for i in ti.static(range(3)):
@@ -403,47 +395,48 @@ def newton_matrix(K, nv, nf, ns, mu, margin, c_scale, use_twist, exact, x: T, w_
                 for b in ti.static(range(a, 3)):
                     blk = ti.Matrix([[Hf[3 * a + i, 3 * b + j] for j in ti.static(range(3))]
                                      for i in ti.static(range(3))])
-                    H[face_slot[f, 3 * a + b]] += blk
+                    metric.H[metric.face_slot[f, 3 * a + b]] += blk
                     if ti.static(a < b):
-                        H[face_slot[f, 3 * b + a]] += blk.transpose()
+                        metric.H[metric.face_slot[f, 3 * b + a]] += blk.transpose()
         if exact:
             for a in ti.static(range(3)):
                 for b in ti.static(range(3)):
-                    H[face_slot[f, 3 * a + b]] += c_curvature_block(curv, f, a, b)
+                    slot = metric.face_slot[f, 3 * a + b]
+                    metric.H[slot] += c_curvature_block(cons.curv, f, a, b)
     while copied < nv:
-        for k in range(w_ptr[copied], w_ptr[copied + 1]):
-            H[k] = w_val[k]
+        for k in range(metric.w_ptr[copied], metric.w_ptr[copied + 1]):
+            metric.H[k] = metric.w_val[k]
         copied += 1
     for n in range(nv):
         for j in ti.static(range(CONTACT_SLOTS)):
-            if lam_c[n, j] + mu * (contact_g(contact, x, n, j) + margin * c_scale) > 0.0:
-                cn = contact_normal(contact, n, j)
-                H[w_diag[n]] += mu * cn.outer_product(cn)
+            gc = contact_g(contacts.contact, x, n, j)
+            if contacts.lam_c[n, j] + mu * (gc + margin * c_scale) > 0.0:
+                cn = contact_normal(contacts.contact, n, j)
+                metric.H[metric.w_diag[n]] += mu * cn.outer_product(cn)
         # Friction: mu P sticking; on the rim, the curvature of radius |y| (mu radius / |y|
         # times P off the sliding direction).
-        P, y, radius = friction_state(n, mu, x, contact, lam_c, fric, lam_t)
+        P, y, radius = friction_state(n, mu, x, contacts)
         if radius > 0.0:
             ny = y.norm()
             if ny <= radius:
-                H[w_diag[n]] += mu * P
+                metric.H[metric.w_diag[n]] += mu * P
             else:
                 yh = y / ny
-                H[w_diag[n]] += (mu * radius / ny) * (P - yh.outer_product(yh))
+                metric.H[metric.w_diag[n]] += (mu * radius / ny) * (P - yh.outer_product(yh))
     for k in range(ns):
-        H[stitch_slot[k, 0]] += mu * I
-        H[stitch_slot[k, 1]] += -mu * I
-        H[stitch_slot[k, 2]] += -mu * I
-        H[stitch_slot[k, 3]] += mu * I
+        metric.H[metric.stitch_slot[k, 0]] += mu * I
+        metric.H[metric.stitch_slot[k, 1]] += -mu * I
+        metric.H[metric.stitch_slot[k, 2]] += -mu * I
+        metric.H[metric.stitch_slot[k, 3]] += mu * I
     for i in range(nv):
-        for k in range(w_ptr[i], w_ptr[i + 1]):
-            j = w_col[k]
-            if pinned[i] == 1 or pinned[j] == 1:
-                H[k] = I if i == j else ti.Matrix.zero(float, 3, 3)
+        for k in range(metric.w_ptr[i], metric.w_ptr[i + 1]):
+            j = metric.w_col[k]
+            if mesh.pinned[i] == 1 or mesh.pinned[j] == 1:
+                metric.H[k] = I if i == j else ti.Matrix.zero(float, 3, 3)
 
 
 @ti.func
-def precondition(pc_mode, nv, P_inv: T, f_ptr: T, f_idx: T, f_val: T, f_perm: T, f_work: T,
-                 mg_int: T, mg_real: T, mg_block: T, r: T, z: T):
+def precondition(pc_mode, nv, pc: T, r: T, z: T):
     """z = P^-1 r; returns r.z. P by ``pc_mode``: PC_JACOBI, H's 3x3 diagonal blocks (their
     inverses in P_inv); PC_MULTIGRID, the aggregation multigrid of multigrid.py (arrays
     mg_int, mg_real, mg_block); PC_FACTOR, a sparse Cholesky factor P H~ P^T = L L^T of a matrix like H, in 3x3
@@ -454,26 +447,26 @@ def precondition(pc_mode, nv, P_inv: T, f_ptr: T, f_idx: T, f_val: T, f_perm: T,
     vector."""
     if pc_mode == PC_FACTOR:
         for k in range(nv):
-            f_work[k] = r[f_perm[k]]
-        diag = f_ptr[2 * nv + 1]
+            pc.f_work[k] = r[pc.f_perm[k]]
+        diag = pc.f_ptr[2 * nv + 1]
         for i in range(nv):                      # L y = P r, by block rows
-            acc = f_work[i]
-            for q in range(f_ptr[i], f_ptr[i + 1]):
-                acc -= f_val[q] @ f_work[f_idx[q]]
-            f_work[i] = f_val[diag + i] @ acc
+            acc = pc.f_work[i]
+            for q in range(pc.f_ptr[i], pc.f_ptr[i + 1]):
+                acc -= pc.f_val[q] @ pc.f_work[pc.f_idx[q]]
+            pc.f_work[i] = pc.f_val[diag + i] @ acc
         for jj in range(nv):                     # L^T w = y, by block columns of L
             j = nv - 1 - jj
-            acc = f_work[j]
-            for q in range(f_ptr[nv + 1 + j], f_ptr[nv + 2 + j]):
-                acc -= f_val[q] @ f_work[f_idx[q]]
-            f_work[j] = f_val[diag + j].transpose() @ acc
+            acc = pc.f_work[j]
+            for q in range(pc.f_ptr[nv + 1 + j], pc.f_ptr[nv + 2 + j]):
+                acc -= pc.f_val[q] @ pc.f_work[pc.f_idx[q]]
+            pc.f_work[j] = pc.f_val[diag + j].transpose() @ acc
         for k in range(nv):
-            z[f_perm[k]] = f_work[k]
+            z[pc.f_perm[k]] = pc.f_work[k]
     elif pc_mode == PC_MULTIGRID:
-        multigrid.apply(nv, mg_int, mg_real, mg_block, r, z)
+        multigrid.apply(nv, pc.mg_int, pc.mg_real, pc.mg_block, r, z)
     else:
         for n in range(nv):
-            z[n] = P_inv[n] @ r[n]
+            z[n] = pc.P_inv[n] @ r[n]
     rz = 0.0
     for n in range(nv):
         rz += r[n].dot(z[n])
@@ -482,37 +475,28 @@ def precondition(pc_mode, nv, P_inv: T, f_ptr: T, f_idx: T, f_val: T, f_perm: T,
 
 @ti.func
 def newton_direction(method: ti.template(), exact: ti.template(), K, nv, nf, ns, mu, max_cg,
-                     rtol, margin, use_twist, x: T, w_ptr: T, w_col: T, w_val: T, w_diag: T,
-                     pinned: T, face_verts: T, Dm_inv: T, grain: T, rest_area: T, params: T,
-                     lam: T, g: T, grad: T, cm: T, what: T, kappa: T, twist: T, contact: T,
-                     lam_c: T, fric: T, lam_t: T, c_scale, curv: T, face_slot: T,
-                     stitch_slot: T, H: T, b: T, d: T, r: T, z: T, p: T, Ap: T, P_inv: T,
-                     pc_mode, f_ptr: T, f_idx: T, f_val: T, f_perm: T, f_work: T,
-                     mg_int: T, mg_real: T, mg_block: T, x_trial: T):
-    """pcg_direction's matrix and PCG solve, with r = -grad L_A already in r (and the
-    active-set re-solves when params[P_PDAS] is set; x_trial is their scratch)."""
+                     rtol, margin, use_twist, c_scale, pc_mode, mesh: T, metric: T, cons: T,
+                     contacts: T, vec: T, pc: T):
+    """pcg_direction's matrix and PCG solve at vec.x, with r = -grad L_A already in vec.r
+    (and the active-set re-solves when params[P_PDAS] is set; vec.x_trial is their
+    scratch)."""
     if ti.static(exact):
-        fill_c_curvature(method, K, nf, mu, x, face_verts, Dm_inv, grain, rest_area, params,
-                         lam, g, curv)
-    newton_matrix(K, nv, nf, ns, mu, margin, c_scale, use_twist, exact, x, w_ptr, w_col, w_val,
-                  w_diag, pinned, face_verts, rest_area, lam, g, grad, cm, what, kappa, twist,
-                  contact, lam_c, fric, lam_t, curv, face_slot, stitch_slot, H)
+        fill_c_curvature(method, K, nf, mu, vec.x, mesh, cons)
+    newton_matrix(K, nv, nf, ns, mu, margin, c_scale, use_twist, exact, vec.x, mesh, metric,
+                  cons, contacts)
     rr = 0.0
     for n in range(nv):
         if pc_mode == PC_JACOBI:
-            P_inv[n] = H[w_diag[n]].inverse()       # pinned rows: the identity
-        b[n] = r[n]
-        d[n] = ti.Vector([0.0, 0.0, 0.0])
-        rr += r[n].dot(r[n])
-    it = pcg_loop(False, K, nv, nf, mu, max_cg, rtol, rr, w_ptr, w_col, pinned, face_verts,
-                  grad, contact, lam_c, x, x_trial, kappa, H, d, r, z, p, Ap, P_inv, pc_mode,
-                  f_ptr, f_idx, f_val, f_perm, f_work, mg_int, mg_real, mg_block)
-    slope = -dot(b, d, nv)
-    if params[P_PDAS] > 0.0:
-        slope, it = pdas_resolves(K, nv, nf, mu, max_cg, rtol, it, x, w_ptr, w_col, w_diag,
-                                  pinned, face_verts, lam, g, grad, kappa, contact, lam_c, H,
-                                  b, d, r, z, p, Ap, P_inv, pc_mode, f_ptr, f_idx, f_val,
-                                  f_perm, f_work, mg_int, mg_real, mg_block, x_trial)
+            pc.P_inv[n] = metric.H[metric.w_diag[n]].inverse()   # pinned rows: the identity
+        vec.b[n] = vec.r[n]
+        vec.d[n] = ti.Vector([0.0, 0.0, 0.0])
+        rr += vec.r[n].dot(vec.r[n])
+    it = pcg_loop(False, K, nv, nf, mu, max_cg, rtol, rr, pc_mode, mesh, metric, cons,
+                  contacts, vec, pc, vec.x_trial, cons.kappa)
+    slope = -dot(vec.b, vec.d, nv)
+    if mesh.params[P_PDAS] > 0.0:
+        slope, it = pdas_resolves(K, nv, nf, mu, max_cg, rtol, it, pc_mode, mesh, metric, cons,
+                                  contacts, vec, pc, cons.kappa, vec.x_trial)
     return slope, it
 
 
@@ -538,19 +522,19 @@ def face_step(face_verts: T, v: T, f):
 
 
 @ti.func
-def pdas_changes(K, nv, nf, mu, face_verts: T, pinned: T, lam: T, g: T, grad: T,
-                 contact: T, lam_c: T, x: T, d: T, prev: T, first, flip: T):
-    """How many constraints the linearised step d switches relative to the set the last solve
-    used (the set active at x when ``first``, else the one predicted from ``prev``); writes
-    flip[f, c] = (active after d) - (active at x) in {-1, 0, 1} for the faces (the contacts'
-    are recomputed where needed: ``pdas_contact_flip``)."""
+def pdas_changes(K, nv, nf, mu, mesh: T, cons: T, contacts: T, vec: T, prev: T, first,
+                 flip: T):
+    """How many constraints the linearised step d = vec.d switches relative to the set the
+    last solve used (the set active at x = vec.x when ``first``, else the one predicted from
+    ``prev``); writes flip[f, c] = (active after d) - (active at x) in {-1, 0, 1} for the faces
+    (the contacts' are recomputed where needed: ``pdas_contact_flip``)."""
     changes = 0
     for f in range(nf):
-        jd = face_step(face_verts, d, f)
-        jp = face_step(face_verts, prev, f)
+        jd = face_step(mesh.face_verts, vec.d, f)
+        jp = face_step(mesh.face_verts, prev, f)
         for c in range(K):
-            t = g[f, c] + lam[f, c] / mu
-            gr = pair_grad(grad, f, c)
+            t = cons.g[f, c] + cons.lam[f, c] / mu
+            gr = pair_grad(cons.grad, f, c)
             now = 1 if t > 0.0 else 0
             new = 1 if t + gr.dot(jd) > 0.0 else 0
             old = now
@@ -560,12 +544,12 @@ def pdas_changes(K, nv, nf, mu, face_verts: T, pinned: T, lam: T, g: T, grad: T,
                 changes += 1
             flip[f, c] = float(new - now)
     for n in range(nv):
-        if pinned[n] == 0:
+        if mesh.pinned[n] == 0:
             for j in ti.static(range(CONTACT_SLOTS)):
-                cn = contact_normal(contact, n, j)
-                t = (lam_c[n, j] + mu * contact_g(contact, x, n, j)) / mu
+                cn = contact_normal(contacts.contact, n, j)
+                t = (contacts.lam_c[n, j] + mu * contact_g(contacts.contact, vec.x, n, j)) / mu
                 now = 1 if t > 0.0 else 0
-                new = 1 if t - cn.dot(d[n]) > 0.0 else 0
+                new = 1 if t - cn.dot(vec.d[n]) > 0.0 else 0
                 old = now
                 if not first:
                     old = 1 if t - cn.dot(prev[n]) > 0.0 else 0
@@ -585,39 +569,38 @@ def pdas_contact_flip(mu, contact: T, lam_c: T, x: T, prev: T, n, j):
 
 
 @ti.func
-def pdas_times(K, nv, nf, mu, w_ptr: T, w_col: T, pinned: T, face_verts: T, grad: T,
-               contact: T, lam_c: T, x: T, prev: T, flip: T, H: T, p: T, Ap: T):
-    """Ap = (H + mu sum_c flip_c J_c^T J_c) p: the Newton matrix with the Gauss-Newton terms of
-    the predicted set in place of those of the set active at x (``flip``, ``prev``)."""
+def pdas_times(K, nv, nf, mu, mesh: T, metric: T, cons: T, contacts: T, vec: T, prev: T,
+               flip: T):
+    """vec.Ap = (H + mu sum_c flip_c J_c^T J_c) vec.p: the Newton matrix with the Gauss-Newton
+    terms of the predicted set in place of those of the set active at x (``flip``,
+    ``prev``)."""
     for n in range(nv):
-        Ap[n] = metric_times(n, w_ptr, w_col, H, p)
+        vec.Ap[n] = metric_times(n, metric.w_ptr, metric.w_col, metric.H, vec.p)
     for f in range(nf):
-        ids = face_verts[f]
-        jp = face_step(face_verts, p, f)
+        ids = mesh.face_verts[f]
+        jp = face_step(mesh.face_verts, vec.p, f)
         for pair in range(K // 2):
             # A bound pair shares its gradient up to sign; at most one of the two is active.
             c = 2 * pair
             w = flip[f, c] + flip[f, c + 1]
             if w != 0.0:
-                gr = grad[f, c]
-                scatter(Ap, ids, gr, mu * w * gr.dot(jp))
+                gr = cons.grad[f, c]
+                scatter(vec.Ap, ids, gr, mu * w * gr.dot(jp))
     for n in range(nv):
-        if pinned[n] == 1:
-            Ap[n] = ti.Vector([0.0, 0.0, 0.0])
+        if mesh.pinned[n] == 1:
+            vec.Ap[n] = ti.Vector([0.0, 0.0, 0.0])
         else:
             for j in ti.static(range(CONTACT_SLOTS)):
-                fl, _t = pdas_contact_flip(mu, contact, lam_c, x, prev, n, j)
+                fl, _t = pdas_contact_flip(mu, contacts.contact, contacts.lam_c, vec.x, prev,
+                                           n, j)
                 if fl != 0.0:
-                    cn = contact_normal(contact, n, j)
-                    Ap[n] += (mu * fl * cn.dot(p[n])) * cn
+                    cn = contact_normal(contacts.contact, n, j)
+                    vec.Ap[n] += (mu * fl * cn.dot(vec.p[n])) * cn
 
 
 @ti.func
-def pdas_resolves(K, nv, nf, mu, max_cg, rtol, it, x: T, w_ptr: T, w_col: T, w_diag: T,
-                  pinned: T, face_verts: T, lam: T, g: T, grad: T, flip: T, contact: T,
-                  lam_c: T, H: T, b: T, d: T, r: T, z: T, p: T, Ap: T, P_inv: T, pc_mode,
-                  f_ptr: T, f_idx: T, f_val: T, f_perm: T, f_work: T, mg_int: T, mg_real: T,
-                  mg_block: T, prev: T):
+def pdas_resolves(K, nv, nf, mu, max_cg, rtol, it, pc_mode, mesh: T, metric: T, cons: T,
+                  contacts: T, vec: T, pc: T, flip: T, prev: T):
     """The active-set Newton step (cloth/strain/active_set.py, here in the kernels with PCG):
     d holds the step with the set active at x (H's own, margin 0) and b = -grad L_A. While
     the step switches constraints on or off, solve again with the Gauss-Newton terms and
@@ -628,34 +611,32 @@ def pdas_resolves(K, nv, nf, mu, max_cg, rtol, it, x: T, w_ptr: T, w_col: T, w_d
     total = it
     k = 1
     while k < PDAS_SOLVES:
-        if pdas_changes(K, nv, nf, mu, face_verts, pinned, lam, g, grad, contact, lam_c, x,
-                        d, prev, k == 1, flip) == 0:
+        if pdas_changes(K, nv, nf, mu, mesh, cons, contacts, vec, prev, k == 1, flip) == 0:
             break
         for n in range(nv):
-            prev[n] = d[n]
+            prev[n] = vec.d[n]
         # rhs = b - mu sum_c flip_c t_c J_c^T (faces; contacts' J = -n).
         for n in range(nv):
-            r[n] = b[n]
+            vec.r[n] = vec.b[n]
         for f in range(nf):
-            ids = face_verts[f]
+            ids = mesh.face_verts[f]
             for c in range(K):
                 if flip[f, c] != 0.0:
-                    t = g[f, c] + lam[f, c] / mu
-                    scatter(r, ids, pair_grad(grad, f, c), -mu * flip[f, c] * t)
+                    t = cons.g[f, c] + cons.lam[f, c] / mu
+                    scatter(vec.r, ids, pair_grad(cons.grad, f, c), -mu * flip[f, c] * t)
         for n in range(nv):
-            if pinned[n] == 1:
-                r[n] = ti.Vector([0.0, 0.0, 0.0])
+            if mesh.pinned[n] == 1:
+                vec.r[n] = ti.Vector([0.0, 0.0, 0.0])
             else:
                 for j in ti.static(range(CONTACT_SLOTS)):
-                    fl, t = pdas_contact_flip(mu, contact, lam_c, x, prev, n, j)
+                    fl, t = pdas_contact_flip(mu, contacts.contact, contacts.lam_c, vec.x,
+                                              prev, n, j)
                     if fl != 0.0:
-                        r[n] += (mu * fl * t) * contact_normal(contact, n, j)
-        total += pdas_pcg(K, nv, nf, mu, max_cg, rtol, w_ptr, w_col, pinned, face_verts,
-                          grad, contact, lam_c, x, prev, flip, H, d, r, z, p, Ap, P_inv,
-                          pc_mode, f_ptr, f_idx, f_val, f_perm, f_work, mg_int, mg_real,
-                          mg_block)
+                        vec.r[n] += (mu * fl * t) * contact_normal(contacts.contact, n, j)
+        total += pdas_pcg(K, nv, nf, mu, max_cg, rtol, pc_mode, mesh, metric, cons, contacts,
+                          vec, pc, prev, flip)
         k += 1
-    slope = -dot(b, d, nv)
+    slope = -dot(vec.b, vec.d, nv)
     if k > 1 and not slope < 0.0:
         # Back to the first solve: the set active at x (no flips).
         for f in range(nf):
@@ -663,105 +644,84 @@ def pdas_resolves(K, nv, nf, mu, max_cg, rtol, it, x: T, w_ptr: T, w_col: T, w_d
                 flip[f, c] = 0.0
         for n in range(nv):
             prev[n] = ti.Vector([0.0, 0.0, 0.0])
-            r[n] = b[n]
-        total += pdas_pcg(K, nv, nf, mu, max_cg, rtol, w_ptr, w_col, pinned, face_verts,
-                          grad, contact, lam_c, x, prev, flip, H, d, r, z, p, Ap, P_inv,
-                          pc_mode, f_ptr, f_idx, f_val, f_perm, f_work, mg_int, mg_real,
-                          mg_block)
-        slope = -dot(b, d, nv)
+            vec.r[n] = vec.b[n]
+        total += pdas_pcg(K, nv, nf, mu, max_cg, rtol, pc_mode, mesh, metric, cons, contacts,
+                          vec, pc, prev, flip)
+        slope = -dot(vec.b, vec.d, nv)
     return slope, total
 
 
 @ti.func
-def pdas_pcg(K, nv, nf, mu, max_cg, rtol, w_ptr: T, w_col: T, pinned: T, face_verts: T,
-             grad: T, contact: T, lam_c: T, x: T, prev: T, flip: T, H: T, d: T, r: T, z: T,
-             p: T, Ap: T, P_inv: T, pc_mode, f_ptr: T, f_idx: T, f_val: T, f_perm: T,
-             f_work: T, mg_int: T, mg_real: T, mg_block: T):
+def pdas_pcg(K, nv, nf, mu, max_cg, rtol, pc_mode, mesh: T, metric: T, cons: T, contacts: T,
+             vec: T, pc: T, prev: T, flip: T):
     """PCG from d = 0 on ``pdas_times``' matrix with the rhs in r (H's preconditioner)."""
     rr = 0.0
     for n in range(nv):
-        d[n] = ti.Vector([0.0, 0.0, 0.0])
-        rr += r[n].dot(r[n])
-    return pcg_loop(True, K, nv, nf, mu, max_cg, rtol, rr, w_ptr, w_col, pinned, face_verts,
-                    grad, contact, lam_c, x, prev, flip, H, d, r, z, p, Ap, P_inv, pc_mode,
-                    f_ptr, f_idx, f_val, f_perm, f_work, mg_int, mg_real, mg_block)
+        vec.d[n] = ti.Vector([0.0, 0.0, 0.0])
+        rr += vec.r[n].dot(vec.r[n])
+    return pcg_loop(True, K, nv, nf, mu, max_cg, rtol, rr, pc_mode, mesh, metric, cons,
+                    contacts, vec, pc, prev, flip)
 
 
 @ti.func
-def pcg_loop(flipped: ti.template(), K, nv, nf, mu, max_cg, rtol, rr, w_ptr: T, w_col: T,
-             pinned: T, face_verts: T, grad: T, contact: T, lam_c: T, x: T, prev: T,
-             flip: T, H: T, d: T, r: T, z: T, p: T, Ap: T, P_inv: T, pc_mode, f_ptr: T,
-             f_idx: T, f_val: T, f_perm: T, f_work: T, mg_int: T, mg_real: T, mg_block: T):
+def pcg_loop(flipped: ti.template(), K, nv, nf, mu, max_cg, rtol, rr, pc_mode, mesh: T,
+             metric: T, cons: T, contacts: T, vec: T, pc: T, prev: T, flip: T):
     """The PCG iterations of a Newton step, from d = 0 with the residual in r (|r|^2 = rr)
-    to |r| <= rtol |r0|: on H, or with ``flipped`` on ``pdas_times``' matrix (H with the
-    predicted set's Gauss-Newton terms). Returns the iterations."""
-    rz = precondition(pc_mode, nv, P_inv, f_ptr, f_idx, f_val, f_perm, f_work, mg_int,
-                      mg_real, mg_block, r, z)
+    to |r| <= rtol |r0| (d, r and the work vectors z, p, Ap in ``vec``): on H, or with
+    ``flipped`` on ``pdas_times``' matrix (H with the predicted set's Gauss-Newton terms;
+    ``prev``, ``flip``). Returns the iterations."""
+    rz = precondition(pc_mode, nv, pc, vec.r, vec.z)
     for n in range(nv):
-        p[n] = z[n]
+        vec.p[n] = vec.z[n]
     stop = rtol * rtol * rr
     it = 0
     while it < max_cg and rr > stop:
         pAp = 0.0
         if ti.static(flipped):
-            pdas_times(K, nv, nf, mu, w_ptr, w_col, pinned, face_verts, grad, contact, lam_c,
-                       x, prev, flip, H, p, Ap)
+            pdas_times(K, nv, nf, mu, mesh, metric, cons, contacts, vec, prev, flip)
             for n in range(nv):
-                pAp += p[n].dot(Ap[n])
+                pAp += vec.p[n].dot(vec.Ap[n])
         else:
             for n in range(nv):
-                Ap[n] = metric_times(n, w_ptr, w_col, H, p)
-                pAp += p[n].dot(Ap[n])
+                vec.Ap[n] = metric_times(n, metric.w_ptr, metric.w_col, metric.H, vec.p)
+                pAp += vec.p[n].dot(vec.Ap[n])
         if pAp <= 0.0:
             break
         alpha = rz / pAp
         rr = 0.0
         for n in range(nv):
-            d[n] += alpha * p[n]
-            r[n] -= alpha * Ap[n]
-            rr += r[n].dot(r[n])
-        rz_new = precondition(pc_mode, nv, P_inv, f_ptr, f_idx, f_val, f_perm, f_work,
-                              mg_int, mg_real, mg_block, r, z)
+            vec.d[n] += alpha * vec.p[n]
+            vec.r[n] -= alpha * vec.Ap[n]
+            rr += vec.r[n].dot(vec.r[n])
+        rz_new = precondition(pc_mode, nv, pc, vec.r, vec.z)
         it += 1
         beta = rz_new / rz
         rz = rz_new
         for n in range(nv):
-            p[n] = z[n] + beta * p[n]
+            vec.p[n] = vec.z[n] + beta * vec.p[n]
     return it
 
 
 @ti.func
 def pcg_direction(method: ti.template(), exact: ti.template(), K, nv, nf, ns, mu, max_cg, rtol,
-                  margin, use_twist,
-                  x: T, Wdx: T,
-                  w_ptr: T, w_col: T, w_val: T, w_diag: T, pinned: T, face_verts: T, Dm_inv: T,
-                  grain: T, rest_area: T, params: T, lam: T, g: T, grad: T,
-                  cm: T, what: T, kappa: T, twist: T, contact: T, lam_c: T, stitch: T,
-                  lam_s: T, fric: T, lam_t: T, c_scale, curv: T, face_slot: T, stitch_slot: T,
-                  H: T, b: T, d: T, r: T, z: T, p: T, Ap: T, P_inv: T, pc_mode, f_ptr: T,
-                  f_idx: T, f_val: T, f_perm: T, f_work: T, mg_int: T, mg_real: T,
-                  mg_block: T, skip_rr, x_trial: T):
-    """Projected-Newton direction: solve H d = -grad L_A (H from ``newton_matrix``) by PCG
-    with H's 3x3 diagonal blocks as preconditioner (block Jacobi), from d = 0 to
+                  margin, use_twist, c_scale, pc_mode, skip_rr, mesh: T, metric: T, cons: T,
+                  contacts: T, vec: T, pc: T):
+    """Projected-Newton direction at vec.x: solve H d = -grad L_A (H from ``newton_matrix``)
+    by PCG with H's 3x3 diagonal blocks as preconditioner (block Jacobi), from d = 0 to
     |r| <= rtol |grad L_A| (an inexact Newton step: measured on the hanging scene, rtol = 0.1
     needs as many Newton steps as 1e-3 with about half the CG iterations). Leaves
     b = -grad L_A; returns (slope grad L_A . d, CG iterations, |grad L_A|^2). With
     |grad L_A|^2 <= skip_rr no step is computed (d = 0, slope 0)."""
-    residual(K, nv, nf, ns, mu, x, Wdx, pinned, face_verts, lam, g, grad, contact, lam_c, stitch,
-             lam_s, fric, lam_t, r)
-    rr0 = dot(r, r, nv)
+    residual(K, nv, nf, ns, mu, vec.x, mesh, cons, contacts, vec)
+    rr0 = dot(vec.r, vec.r, nv)
     slope, it = 0.0, 0
     if rr0 > skip_rr:
         slope, it = newton_direction(method, exact, K, nv, nf, ns, mu, max_cg, rtol, margin,
-                                     use_twist, x, w_ptr, w_col, w_val, w_diag, pinned,
-                                     face_verts, Dm_inv, grain, rest_area, params, lam, g,
-                                     grad, cm, what, kappa, twist, contact, lam_c, fric, lam_t,
-                                     c_scale, curv, face_slot, stitch_slot, H, b, d, r, z, p,
-                                     Ap, P_inv, pc_mode, f_ptr, f_idx, f_val, f_perm,
-                                     f_work, mg_int, mg_real, mg_block, x_trial)
+                                     use_twist, c_scale, pc_mode, mesh, metric, cons, contacts,
+                                     vec, pc)
     else:
         for n in range(nv):
-            d[n] = ti.Vector([0.0, 0.0, 0.0])
+            vec.d[n] = ti.Vector([0.0, 0.0, 0.0])
     return slope, it, rr0
 
 
@@ -789,8 +749,8 @@ def vertex_violation(nv, ns, pos: T, contact: T, stitch: T, c_scale):
 
 
 @ti.func
-def update_multipliers(K, nv, nf, ns, mu, mu_max, x: T, rest_area: T, lam: T, g: T,
-                       contact: T, lam_c: T, stitch: T, lam_s: T, fric: T, lam_t: T, c_scale):
+def update_multipliers(K, nv, nf, ns, mu, mu_max, c_scale, x: T, mesh: T, cons: T,
+                       contacts: T):
     """The multiplier step of eq. 27, lam <- max(0, lam + mu g) (capped at mu_max sqrt(a), so
     an infeasible problem cannot grow it without bound across calls), for the strain,
     contact, seam and friction multipliers, with g as last assembled (at x). Returns the
@@ -798,41 +758,38 @@ def update_multipliers(K, nv, nf, ns, mu, mu_max, x: T, rest_area: T, lam: T, g:
     units."""
     viol, comp = 0.0, 0.0
     for f in range(nf):
-        sqa = ti.sqrt(rest_area[f])
+        sqa = ti.sqrt(mesh.rest_area[f])
         for c in range(K):
-            new = ti.min(ti.max(0.0, lam[f, c] + mu * g[f, c]), mu_max * sqa)
-            viol = ti.max(viol, g[f, c] / sqa)
-            comp = ti.max(comp, ti.abs(new - lam[f, c]) / (mu * sqa))
-            lam[f, c] = new
+            new = ti.min(ti.max(0.0, cons.lam[f, c] + mu * cons.g[f, c]), mu_max * sqa)
+            viol = ti.max(viol, cons.g[f, c] / sqa)
+            comp = ti.max(comp, ti.abs(new - cons.lam[f, c]) / (mu * sqa))
+            cons.lam[f, c] = new
     for n in range(nv):
         for j in ti.static(range(CONTACT_SLOTS)):
-            gc = contact_g(contact, x, n, j)
-            new = ti.min(ti.max(0.0, lam_c[n, j] + mu * gc), mu_max * c_scale)
+            gc = contact_g(contacts.contact, x, n, j)
+            new = ti.min(ti.max(0.0, contacts.lam_c[n, j] + mu * gc), mu_max * c_scale)
             viol = ti.max(viol, gc / c_scale)
-            comp = ti.max(comp, ti.abs(new - lam_c[n, j]) / (mu * c_scale))
-            lam_c[n, j] = new
+            comp = ti.max(comp, ti.abs(new - contacts.lam_c[n, j]) / (mu * c_scale))
+            contacts.lam_c[n, j] = new
     for k in range(ns):
-        cs = stitch_g(stitch, x, k)
-        new = lam_s[k] + mu * cs               # equality: either sign
+        cs = stitch_g(contacts.stitch, x, k)
+        new = contacts.lam_s[k] + mu * cs               # equality: either sign
         cap = mu_max * c_scale
         if new.norm() > cap:
             new *= cap / new.norm()
         viol = ti.max(viol, cs.norm() / c_scale)
-        lam_s[k] = new
+        contacts.lam_s[k] = new
     for n in range(nv):
         # Friction multipliers: the trial, clamped to the cone of the new normal
         # multipliers (zero where there is no contact).
-        _P, y, radius = friction_state(n, mu, x, contact, lam_c, fric, lam_t)
-        lam_t[n] = clamp_disc(y, radius)
+        _P, y, radius = friction_state(n, mu, x, contacts)
+        contacts.lam_t[n] = clamp_disc(y, radius)
     return viol, comp
 
 
 @ti.func
-def choose_start(method: ti.template(), from_prev, K, nv, nf, ns, mu, x: T, x_hat: T,
-                 x_trial: T, w_ptr: T, w_col: T, w_val: T, w_diag: T, face_verts: T,
-                 Dm_inv: T, grain: T, rest_area: T, params: T, lam: T, g: T, grad: T, cm: T,
-                 what: T, kappa: T, twist: T, contact: T, lam_c: T, stitch: T, lam_s: T,
-                 fric: T, lam_t: T, pinned: T, start: T):
+def choose_start(method: ti.template(), from_prev, K, nv, nf, ns, mu, mesh: T, metric: T,
+                 cons: T, contacts: T, vec: T, start: T):
     """Assemble the constraints at the Newton iteration's start (the caller left only their
     values at x = x_hat). With ``from_prev``, start at ``start`` instead of at x_hat when its
     merit is lower: the step's start x_prev = x_hat - h v, each vertex moved on at its last
@@ -858,37 +815,25 @@ def choose_start(method: ti.template(), from_prev, K, nv, nf, ns, mu, x: T, x_ha
     for attempt in range(3):
         if (from_prev and (attempt < 2 or take == 0)) or (not from_prev and attempt == 2):
             for n in range(nv):
-                x_trial[n] = x[n]
-                if attempt == 1 and pinned[n] == 0:
-                    x_trial[n] = start[n]
+                vec.x_trial[n] = vec.x[n]
+                if attempt == 1 and mesh.pinned[n] == 0:
+                    vec.x_trial[n] = start[n]
             if attempt > 0:
-                assemble_all(method, nf, x_trial, face_verts, Dm_inv, grain, rest_area, params,
-                             g, grad, cm, what, kappa, twist)
+                assemble_all(method, nf, vec.x_trial, mesh, cons)
             if attempt < 2:
-                L = merit(K, nv, nf, ns, mu, x_trial, x_hat, w_ptr, w_col, w_val, w_diag, lam,
-                          g, contact, lam_c, stitch, lam_s, fric, lam_t)
+                L = merit(K, nv, nf, ns, mu, vec.x_trial, vec.x_hat, metric, cons, contacts)
                 if attempt == 0:
                     L_hat = L
                 elif L < L_hat:
                     take = 1
                     for n in range(nv):
-                        x[n] = x_trial[n]
+                        vec.x[n] = vec.x_trial[n]
 
 
 @ti.kernel
 def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: int, ns: int,
-             mu0: float,
-             mu_grow: float,
-             mu_max: float, max_rounds: int, max_newton: int, max_cg: int, rtol: float,
-             tol: float, step_tol: float, adaptive: int, from_prev: int, params: A, x: A,
-             x_hat: A,
-             x_trial: A, w_ptr: A, w_col: A, w_val: A, w_diag: A, pinned: A, face_verts: A, Dm_inv: A, grain: A,
-             rest_area: A, lam: A, g: A, grad: A, cm: A, what: A, kappa: A,
-             twist: A, contact: A, lam_c: A, stitch: A, lam_s: A, fric: A, lam_t: A, curv: A,
-             face_slot: A, stitch_slot: A, H: A, b: A, d: A, r: A, z: A, p: A, Ap: A,
-             P_inv: A, pc_mode: int, f_ptr: A, f_idx: A, f_val: A, f_perm: A, f_work: A,
-             mg_int: A, mg_real: A, mg_block: A, Wdx: A,
-             stats: A):
+             budget: A, mesh: MeshPack, metric: MetricPack, cons: ConstraintPack,
+             contacts: ContactPack, vec: VectorPack, pc: PrecondPack, stats: A):
     """The whole AL projection (METHOD 4) in one launch (measured: with one launch per
     phase, Python's argument handling cost as much as the solve): rounds of inexact
     minimisation of L_A by projected Newton + PCG with a backtracking (Armijo) line search,
@@ -897,14 +842,23 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
     mu_max), until the largest violation and the largest |delta lambda| / mu
     (complementarity) are below tol (strain units). Stops early, with every multiplier kept,
     if x (= x_hat) is already feasible. Fills stats (rounds, violation, converged, CG,
-    Newton steps, complementarity, line-search trials)."""
+    Newton steps, complementarity, line-search trials). The solve's controls (penalty,
+    budgets, tolerances, preconditioner) are read from ``budget`` (buffers.B_*)."""
     ti.loop_config(serialize=True)
     for _ in range(1):
-        use_twist = params[P_SVD_DELTA] > 0.0 and ti.static(method == SVD) and \
-            params[P_CURVATURE] == 0.0
-        margin = params[P_MARGIN]
-        c_scale = params[P_CONTACT_SCALE]
-        mu = mu0
+        use_twist = mesh.params[P_SVD_DELTA] > 0.0 and ti.static(method == SVD) and \
+            mesh.params[P_CURVATURE] == 0.0
+        margin = mesh.params[P_MARGIN]
+        c_scale = mesh.params[P_CONTACT_SCALE]
+        mu_grow, mu_max = budget[B_MU_GROW], budget[B_MU_MAX]
+        max_rounds = ti.cast(budget[B_MAX_ROUNDS], ti.i32)
+        max_newton = ti.cast(budget[B_MAX_NEWTON], ti.i32)
+        max_cg = ti.cast(budget[B_MAX_CG], ti.i32)
+        rtol, tol, step_tol = budget[B_RTOL], budget[B_TOL], budget[B_STEP_TOL]
+        adaptive = budget[B_ADAPTIVE] > 0.0
+        from_prev = ti.cast(budget[B_FROM_PREV], ti.i32)
+        pc_mode = ti.cast(budget[B_PC_MODE], ti.i32)
+        mu = budget[B_MU0]
         rounds, newton, cg_total, trials = 0, 0, 0, 0
         viol, comp = 0.0, 0.0
         converged = RUNNING
@@ -913,17 +867,17 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
         # computed with the new multipliers, must then move no vertex further than kkt_tol.
         # That step is the distance to the minimiser as far as the Newton model sees it, so
         # the stop bounds stationarity, not only feasibility (issue #32).
-        kkt_tol = params[P_KKT_TOL]
+        kkt_tol = mesh.params[P_KKT_TOL]
         # The active-set step's matrix is the merit's Hessian: each round's Newton loop runs
         # to a tenth of the kkt tolerance before the multipliers move, and the penalty grows
         # only when the violation stalls (direct.py's INNER_FRACTION and STALL, measured there).
-        pdas = params[P_PDAS] > 0.0
+        pdas = mesh.params[P_PDAS] > 0.0
         inner_kkt = kkt_tol * (PDAS_INNER_FRACTION if pdas else 1.0)
         last_viol = 1e30
         proposed = 0
         kkt = 0.0
         for n in range(nv):
-            x_trial[n] = x[n]
+            vec.x_trial[n] = vec.x[n]
         first = 1
         # The merit at x, kept from the line search that reached x until the multipliers or
         # the penalty change (saves one merit evaluation per Newton step).
@@ -938,23 +892,17 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
                 if first == 0:
                     skip = NO_SKIP
                     if inner > 0:
-                        skip = params[P_INNER_RTOL] ** 2 * rr_first
+                        skip = mesh.params[P_INNER_RTOL] ** 2 * rr_first
                     slope, cg_it, rr = pcg_direction(method, exact, K, nv, nf, ns, mu, max_cg,
-                                                     rtol, margin, use_twist, x, Wdx, w_ptr,
-                                                     w_col, w_val, w_diag, pinned, face_verts,
-                                                     Dm_inv, grain, rest_area, params, lam, g,
-                                                     grad, cm, what, kappa, twist, contact,
-                                                     lam_c, stitch, lam_s, fric, lam_t,
-                                                     c_scale, curv, face_slot, stitch_slot, H,
-                                                     b, d, r, z, p, Ap, P_inv, pc_mode, f_ptr,
-                                                     f_idx, f_val, f_perm, f_work, mg_int,
-                                                     mg_real, mg_block, skip, x_trial)
+                                                     rtol, margin, use_twist, c_scale, pc_mode,
+                                                     skip, mesh, metric, cons, contacts, vec,
+                                                     pc)
                     if inner == 0:
                         rr_first = rr
                     cg_total += cg_it
                     newton += 1
                     inner += 1
-                    d_max = max_norm(nv, d)
+                    d_max = max_norm(nv, vec.d)
                     if inner == 1:
                         kkt = d_max
                         if proposed == 1 and d_max <= kkt_tol:
@@ -968,13 +916,12 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
                 # with bending: 40 MB at 64.8k faces). Wdx follows x along accepted steps.
                 quad = ti.Vector([0.0, 0.0, 0.0])
                 if first == 0:
-                    quad = metric_along(nv, w_ptr, w_col, w_val, x, x_hat, d, Wdx, Ap)
+                    quad = metric_along(nv, vec.x, metric, vec)
                     if L_known == 1:
                         L0 = L_x
                     else:
-                        L0 = quad_at(quad, 0.0) + merit_constraints(
-                            K, nv, nf, ns, mu, x, lam, g, contact, lam_c, stitch, lam_s, fric,
-                            lam_t)
+                        L0 = quad_at(quad, 0.0) + merit_constraints(K, nv, nf, ns, mu, vec.x,
+                                                                    cons, contacts)
                 # Trials assemble the constraint values only; the gradients and curvature are
                 # assembled once, at the point reached (measured at 64.8k faces: 5 against 20
                 # ms an assembly, and up to 2-3 trials a Newton step there).
@@ -984,48 +931,44 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
                     if tries == LAST_TRY or first == 1:
                         a = 0.0
                     for n in range(nv):
-                        x_trial[n] = x[n]
+                        vec.x_trial[n] = vec.x[n]
                         if a > 0.0:
-                            x_trial[n] += a * d[n]
+                            vec.x_trial[n] += a * vec.d[n]
                     if a == 0.0 and first == 0:
                         break               # no step passed: x stays
                     # (first == 1: x_hat's values decide whether there is anything to do and,
                     # with from_prev, where to start; choose_start assembles the start.)
-                    assemble_values(method, nf, x_trial, face_verts, Dm_inv, grain, rest_area,
-                                    params, g)
+                    assemble_values(method, nf, vec.x_trial, mesh, cons)
                     if a == 0.0:
                         break
                     trials += 1
-                    L = quad_at(quad, a) + merit_constraints(
-                        K, nv, nf, ns, mu, x_trial, lam, g, contact, lam_c, stitch, lam_s,
-                        fric, lam_t)
+                    L = quad_at(quad, a) + merit_constraints(K, nv, nf, ns, mu, vec.x_trial,
+                                                             cons, contacts)
                     if L <= L0 + 1e-4 * a * slope:
                         for n in range(nv):
-                            step = ti.max(step, (x_trial[n] - x[n]).norm())
-                            x[n] = x_trial[n]
-                            Wdx[n] += a * Ap[n]
+                            step = ti.max(step, (vec.x_trial[n] - vec.x[n]).norm())
+                            vec.x[n] = vec.x_trial[n]
+                            vec.Wdx[n] += a * vec.Ap[n]
                         L_x, L_known = L, 1
                         break
                     alpha *= 0.5
                     tries += 1
                 if first == 1:
                     first = 0
-                    viol = ti.max(violation_of(K, nf, rest_area, g),
-                                  vertex_violation(nv, ns, x, contact, stitch, c_scale))
+                    viol = ti.max(violation_of(K, nf, mesh.rest_area, cons.g),
+                                  vertex_violation(nv, ns, vec.x, contacts.contact,
+                                                   contacts.stitch, c_scale))
                     stats[ST_START_VIOL] = viol
                     if viol < tol:
                         converged = FEASIBLE_AS_GIVEN
                         break
-                    choose_start(method, from_prev, K, nv, nf, ns, mu, x, x_hat, x_trial,
-                                 w_ptr, w_col, w_val, w_diag, face_verts, Dm_inv, grain,
-                                 rest_area, params, lam, g, grad, cm, what, kappa, twist,
-                                 contact, lam_c, stitch, lam_s, fric, lam_t, pinned, Wdx)
-                    metric_gradient(nv, w_ptr, w_col, w_val, x, x_hat, Wdx)
+                    choose_start(method, from_prev, K, nv, nf, ns, mu, mesh, metric, cons,
+                                 contacts, vec, vec.Wdx)
+                    metric_gradient(nv, vec.x, metric, vec)
                     continue
                 # Gradients and curvature at x (the step's end, or x again after a failed
                 # search, whose trials overwrote the values).
-                assemble_all(method, nf, x, face_verts, Dm_inv, grain, rest_area, params, g,
-                             grad, cm, what, kappa, twist)
+                assemble_all(method, nf, vec.x, mesh, cons)
                 if adaptive:
                     # Trust the exact active set more after a full step, widen it after a
                     # short one (``adaptive_margin``).
@@ -1037,9 +980,8 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
                     break
             if converged != RUNNING:
                 break
-            viol, comp = update_multipliers(K, nv, nf, ns, mu, mu_max, x, rest_area, lam, g,
-                                            contact, lam_c, stitch, lam_s, fric, lam_t,
-                                            c_scale)
+            viol, comp = update_multipliers(K, nv, nf, ns, mu, mu_max, c_scale, vec.x, mesh,
+                                            cons, contacts)
             L_known = 0
             rounds += 1
             if viol < tol and comp < tol:
@@ -1101,28 +1043,30 @@ def reset_start(nv: int, h: float, extrapolate: int, settle: float, fric: A, v_l
 
 @ti.kernel
 def begin_solve(nv: int, h: float, friction: int, clear: int, extrapolate: int,
-                settle: float, x_in: A,
-                v_in: A, x: A, v: A, x_hat: A, x_start: A, contact: A, contact_mu: A, fric: A,
-                v_last: A, start: A, stats: A):
+                settle: float, io: StepPack, vec: VectorPack,
+                contacts: ContactPack, stats: A):
     """Set up a projection from the model's state (x_in, v_in): x = x_hat = x_start = x_in,
     v = v_in; fric = (x_prev, mu_f) per vertex, x_prev = x_hat - h v (the substep's start,
-    before dynamics), mu_f = 0 (no friction) unless ``friction``; ``start`` (choose_start's
-    candidate) = x_prev, with ``extrapolate`` moved on by h v_last (the last projection's
+    before dynamics), mu_f = 0 (no friction) unless ``friction``; vec.Wdx = choose_start's
+    candidate, x_prev with ``extrapolate`` moved on by h v_last (the last projection's
     velocity, ``finish_solve``; ``start_of``); with ``clear`` no contact half-spaces. One
     launch instead of five (each costs ~0.1 ms: a tenth of a resting 1.2k-face projection's
     host time)."""
     ti.loop_config(serialize=True)
     for n in range(nv):
-        x[n] = x_in[n]
-        v[n] = v_in[n]
-        x_hat[n] = x_in[n]
-        x_start[n] = x_in[n]
-        xp = x_in[n] - h * v_in[n]
-        fric[n] = ti.Vector([xp[0], xp[1], xp[2], contact_mu[n] if friction else 0.0])
-        start[n] = start_of(xp, v_last[n], h, extrapolate, settle)
+        vec.x[n] = io.x_in[n]
+        io.v[n] = io.v_in[n]
+        vec.x_hat[n] = io.x_in[n]
+        io.x_start[n] = io.x_in[n]
+        xp = io.x_in[n] - h * io.v_in[n]
+        mu_f = contacts.contact_mu[n] if friction else 0.0
+        contacts.fric[n] = ti.Vector([xp[0], xp[1], xp[2], mu_f])
+        # (The start candidates live in Wdx until choose_start: solve_al's arguments are
+        # near Taichi's limit of 64, buffers.py.)
+        vec.Wdx[n] = start_of(xp, io.v_last[n], h, extrapolate, settle)
         if clear:
             for j in ti.static(range(CONTACT_SLOTS)):
-                contact[n, j] = ti.Vector([0.0, 0.0, 0.0, NO_CONTACT])
+                contacts.contact[n, j] = ti.Vector([0.0, 0.0, 0.0, NO_CONTACT])
     for i in range(N_STATS):
         stats[i] = 0.0
 
@@ -1134,18 +1078,17 @@ def copy_vectors(n: int, src: A, dst: A):
 
 
 @ti.kernel
-def finish_solve(nv: int, h: float, cap: float, x: A, x_start: A, v: A, x_out: A, v_out: A,
-                 v_last: A):
+def finish_solve(nv: int, h: float, cap: float, x: A, io: StepPack):
     """v += dx / h (METHOD 4): the projection's correction becomes a velocity change, of at
-    most ``cap`` (m/s) per vertex when cap > 0; x and v are copied to x_out and v_out (the
+    most ``cap`` (m/s) per vertex when cap > 0; x and v are copied to x_in and v_in (the
     model's state) and v to v_last (the next projection's start, ``begin_solve``)."""
     ti.loop_config(serialize=True)
     for n in range(nv):
         if h > 0.0:
-            dv = (x[n] - x_start[n]) / h
+            dv = (x[n] - io.x_start[n]) / h
             if cap > 0.0 and dv.norm() > cap:
                 dv *= cap / dv.norm()
-            v[n] += dv
-        x_out[n] = x[n]
-        v_out[n] = v[n]
-        v_last[n] = v[n]
+            io.v[n] += dv
+        io.x_in[n] = x[n]
+        io.v_in[n] = io.v[n]
+        io.v_last[n] = io.v[n]

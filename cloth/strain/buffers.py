@@ -1,5 +1,6 @@
-"""The Taichi side of strain limiting, part 1: the work arrays (``Workspace``), the indices
-into its ``params`` and ``stats`` arrays, and copies between the model's fields and the arrays.
+"""The Taichi side of strain limiting, part 1: the work arrays (``Workspace``), the named
+groups the kernels take them in (``MeshPack`` ... ``StepPack``), the indices into its
+``params``, ``budget`` and ``stats`` arrays, and copies between the model's fields and the arrays.
 The solves are in ``al.py`` (augmented Lagrangian, one kernel) and ``pbd.py`` (the per-triangle
 baselines); ``direct.py`` is the Cholesky path.
 
@@ -19,6 +20,7 @@ Design notes (measured on this 2-core CPU, Taichi 1.7.4, f64):
 - The constraint loop inside the Newton kernels runs over c < K at run time (not unrolled with
   ti.static): unrolling 8 constraints x 9 gradient entries made one kernel take 30 s to compile.
 """
+import numpy as np
 import taichi as ti
 
 from ..ndarrays import A, T  # noqa: F401 (the strain kernels import them from here)
@@ -60,12 +62,48 @@ P_KKT_TOL = 14
 # strain.newton_model = "active-set" with strain.linear_solver = "pcg"); 0: the margin model's.
 P_PDAS = 15
 N_PARAMS = 16
+# Indices into the ``budget`` array: one AL solve's controls (``al.solve_al``), written by the
+# host before each launch. Why an array and not kernel arguments: solve_al had 65 parameters
+# (issue #37), and Taichi counts every scalar, ndarray and argpack member against one limit
+# of 64 per launch; the integers are exact in a float.
+(B_MU0, B_MU_GROW, B_MU_MAX, B_MAX_ROUNDS, B_MAX_NEWTON, B_MAX_CG, B_RTOL, B_TOL, B_STEP_TOL,
+ B_ADAPTIVE, B_FROM_PREV, B_PC_MODE) = range(12)
+N_BUDGET = 12
 # A vertex without a contact half-space: n = 0 and d far below any position, so d - n.x never
 # comes near activating.
 NO_CONTACT = -1e30
 # Contact half-spaces per vertex: the two nearest obstacle parts' planes (in a concave corner of
 # a body, keeping out of one primitive's plane alone walks into the next primitive).
 CONTACT_SLOTS = 2
+
+
+# Named argument groups (issue #37): the kernels take their arrays in these packs, by name,
+# instead of ~50 positional ndarrays whose order every call site had to repeat (a misordered
+# argument still compiled). A member's name is unique across the packs: in Taichi 1.7.4 two
+# packs passed to one kernel cannot share a member name. They hold ndarrays only: a scalar
+# member costs ~15 us per launch, so scalars are kernel arguments or in ``budget``. Packs do
+# not lift Taichi's limit of 64 per launch: each pack counts one, and each member one more
+# (solve_al: 60). A pack is made once per set of arrays (``Workspace.pack``), so a launch
+# costs what the loose arrays cost, and a kernel still compiles once per process (Taichi
+# keys a pack by its members' element types and dimensions, as it keys loose ndarrays).
+#   mesh      the rest state the constraints are defined on, and their parameters;
+#   metric    the projection's metric W in its block pattern, and the Newton matrix H there;
+#   cons      the strain constraints at the iterate and their multipliers;
+#   contacts  contact half-spaces, friction and seams, and their multipliers;
+#   vec       the solve's per-vertex vectors (iterate, x_hat, Newton and PCG vectors);
+#   pc        the PCG preconditioners' arrays (block Jacobi, factor, multigrid);
+#   io        the model's state a projection starts from and returns to.
+MeshPack = ti.types.argpack(face_verts=A, Dm_inv=A, grain=A, rest_area=A, mass=A, pinned=A,
+                            params=A)
+MetricPack = ti.types.argpack(w_ptr=A, w_col=A, w_val=A, w_diag=A, face_slot=A,
+                              stitch_slot=A, H=A)
+ConstraintPack = ti.types.argpack(lam=A, g=A, grad=A, cm=A, what=A, kappa=A, twist=A, curv=A)
+ContactPack = ti.types.argpack(contact=A, contact_mu=A, lam_c=A, fric=A, lam_t=A, stitch=A,
+                               lam_s=A)
+VectorPack = ti.types.argpack(x=A, x_hat=A, x_trial=A, Wdx=A, b=A, d=A, r=A, z=A, p=A, Ap=A)
+PrecondPack = ti.types.argpack(P_inv=A, f_ptr=A, f_idx=A, f_val=A, f_perm=A, f_work=A,
+                               mg_int=A, mg_real=A, mg_block=A)
+StepPack = ti.types.argpack(x_in=A, v_in=A, v=A, x_start=A, v_last=A)
 
 
 class Workspace:
@@ -113,8 +151,65 @@ class Workspace:
         self.params = ti.ndarray(float, N_PARAMS)  # bands (warp, weft, shear), margin, deltas
         self.stats = ti.ndarray(float, N_STATS)
         self.info = ti.ndarray(float, 8)          # the direct solver's per-kernel results
+        # solve_al's controls (B_* indices): a numpy array, which a CPU kernel reads in place
+        # (as a Taichi ndarray, its upload cost ~60 us a solve: a third of what the argpacks
+        # and the budget had added to a launch, measured on hanging at resolution 25).
+        self.budget = np.zeros(N_BUDGET)
         self.H = None                             # the Newton matrix's values (per pattern)
+        self._packs = {}
         self.set_stitch_capacity(1)
+
+    def pack(self, kind, pack_type, **members):
+        """The argpack of ``members``, made on first use and again only when one of its arrays
+        was replaced (a new stitch capacity, a larger H, a new pattern). The last two packs of
+        each kind are kept: the two metrics (and the preconditioner and its stubs) alternate.
+        While a pack is kept it holds its arrays, so their ids cannot be reused."""
+        key = tuple(id(a) for a in members.values())
+        made = self._packs.setdefault(kind, {})
+        pack = made.get(key)
+        if pack is None:
+            if len(made) >= 2:
+                made.pop(next(iter(made)))
+            pack = made[key] = pack_type(**members)
+        return pack
+
+    def mesh_pack(self):
+        return self.pack("mesh", MeshPack, face_verts=self.face_verts, Dm_inv=self.Dm_inv,
+                         grain=self.grain, rest_area=self.rest_area, mass=self.mass,
+                         pinned=self.pinned, params=self.params)
+
+    def metric_pack(self, metric):
+        """W = ``metric`` (a system_matrix.BlockMatrix) and the Newton matrix in its pattern."""
+        return self.pack("metric", MetricPack, w_ptr=metric.ptr, w_col=metric.col,
+                         w_val=metric.val, w_diag=metric.diag, face_slot=metric.face_slot,
+                         stitch_slot=metric.stitch_slot, H=self.newton_matrix(metric.nnz))
+
+    def constraint_pack(self):
+        return self.pack("cons", ConstraintPack, lam=self.lam, g=self.g, grad=self.grad,
+                         cm=self.cm, what=self.what, kappa=self.kappa, twist=self.twist,
+                         curv=self.curv)
+
+    def contact_pack(self):
+        return self.pack("contacts", ContactPack, contact=self.contact,
+                         contact_mu=self.contact_mu, lam_c=self.lam_c, fric=self.fric,
+                         lam_t=self.lam_t, stitch=self.stitch, lam_s=self.lam_s)
+
+    def vector_pack(self):
+        return self.pack("vec", VectorPack, x=self.x, x_hat=self.x_hat, x_trial=self.x_trial,
+                         Wdx=self.Wdx, b=self.b, d=self.d, r=self.r, z=self.z, p=self.p,
+                         Ap=self.Ap)
+
+    def precond_pack(self, fp, mg):
+        """Block Jacobi's P_inv, the factor ``fp``'s and the multigrid ``mg``'s arrays (the
+        preconditioner in use or its one-element stub: factor_precond.FactorStub)."""
+        return self.pack("pc", PrecondPack, P_inv=self.P_inv, f_ptr=fp.ptr, f_idx=fp.idx,
+                         f_val=fp.val, f_perm=fp.perm, f_work=fp.work, mg_int=mg.ints,
+                         mg_real=mg.reals, mg_block=mg.blocks)
+
+    def step_pack(self, state):
+        """The model's ``state`` (x and v) and this projection's own start and velocities."""
+        return self.pack("io", StepPack, x_in=state.x, v_in=state.v,
+                         v=self.v, x_start=self.x_start, v_last=self.v_last)
 
     def newton_matrix(self, nnz):
         """The Newton matrix's values (both Newton paths), sized for nnz blocks."""

@@ -20,7 +20,7 @@ w_u = F e_u and w_v = F e_v at the iterate.
 """
 import taichi as ti
 
-from .constraints import MAPPING_PAIRS_BY_ALIGNMENT, sym_eig2, shape_rows
+from .constraints import MAPPING_PAIRS_BY_ALIGNMENT, SVD, WARP_WEFT, sym_eig2, shape_rows
 
 # Central-difference step in C (C ~ 1). f64: the mapping closure's curvature ~1/iso^2 = 1e4
 # then has ~1e-5 relative error. f32 cannot resolve it; the step there keeps the round-off
@@ -61,14 +61,14 @@ def weighted_strain(method: ti.template(), p, q, r, grain, params_w, weights, si
     params_w = (warp lo, hi, weft lo, hi, shear lo, hi); a band's lower and upper constraints
     are lo - strain and strain - hi."""
     total = 0.0
-    if ti.static(method == 0):
+    if ti.static(method == SVD):
         gap = ti.sqrt(0.25 * (p - r) * (p - r) + q * q)
         for j in ti.static(range(2)):
             sign = 1.0 if j == 0 else -1.0
             strain = ti.sqrt(ti.max(0.5 * (p + r) + sign * gap, 0.0)) - 1.0
             total += weights[2 * j] * (params_w[2 * j] - strain) \
                 + weights[2 * j + 1] * (strain - params_w[2 * j + 1])
-    elif ti.static(method == 1):
+    elif ti.static(method == WARP_WEFT):
         e_warp = ti.Vector([grain[0, 0], grain[1, 0]])
         e_weft = ti.Vector([grain[0, 1], grain[1, 1]])
         for t in ti.static(range(3)):
@@ -127,29 +127,28 @@ def clamp_psd3(H):
 
 
 @ti.func
-def face_c_curvature(method: ti.template(), K, f, x: ti.template(), face_verts: ti.template(),
-                     Dm_inv: ti.template(), grain: ti.template(), rest_area: ti.template(),
-                     params_w, iso, step, lam: ti.template(), g: ti.template(), mu,
-                     curv: ti.template()):
-    """Fill curv[f, 0..2] for face f at positions x (see the module doc). Leaves a zero
-    flag (curv[f, 1][6] = 0) when no constraint of the face is active."""
-    sqa = ti.sqrt(rest_area[f])
+def face_c_curvature(method: ti.template(), K, f, x: ti.template(), mesh: ti.template(),
+                     params_w, iso, step, cons: ti.template(), mu):
+    """Fill cons.curv[f, 0..2] for face f at positions x (see the module doc; ``mesh`` and
+    ``cons`` are buffers.MeshPack and ConstraintPack). Leaves a zero flag
+    (curv[f, 1][6] = 0) when no constraint of the face is active."""
+    sqa = ti.sqrt(mesh.rest_area[f])
     weights = ti.Vector([0.0] * 8)
     any_active = 0
     for c in ti.static(range(8)):
         if c < K:
-            s = lam[f, c] + mu * g[f, c]
+            s = cons.lam[f, c] + mu * cons.g[f, c]
             if s > 0.0:
                 weights[c] = s * sqa
                 any_active = 1
-    curv[f, 1][6] = 0.0
+    cons.curv[f, 1][6] = 0.0
     if any_active == 1:
-        ids = face_verts[f]
-        Mr = shape_rows(Dm_inv[f])
+        ids = mesh.face_verts[f]
+        Mr = shape_rows(mesh.Dm_inv[f])
         w0 = Mr[0, 0] * x[ids[0]] + Mr[1, 0] * x[ids[1]] + Mr[2, 0] * x[ids[2]]
         w1 = Mr[0, 1] * x[ids[0]] + Mr[1, 1] * x[ids[1]] + Mr[2, 1] * x[ids[2]]
         p, q, r = w0.dot(w0), w0.dot(w1), w1.dot(w1)
-        G = grain[f]
+        G = mesh.grain[f]
         # Pair A of the mapping family (eta1, or the principal direction closer to the warp
         # under MAPPING_PAIRS_BY_ALIGNMENT), frozen.
         sigma_a = 1.0
@@ -189,12 +188,13 @@ def face_c_curvature(method: ti.template(), K, f, x: ti.template(), face_verts: 
         # Newton matrix built from the unclamped Hc was indefinite (smallest eigenvalue -2.0
         # on hanging at resolution 9, docs/speed/motion.md).
         Hc_psd = clamp_psd3(Hc)
-        curv[f, 0] = ti.Vector([Mr[0, 0], Mr[0, 1], Mr[1, 0], Mr[1, 1], Mr[2, 0], Mr[2, 1],
-                                T[0, 0], T[0, 1], T[1, 1]])
-        curv[f, 1] = ti.Vector([Hc_psd[0, 0], Hc_psd[0, 1], Hc_psd[0, 2], Hc_psd[1, 1],
-                                Hc_psd[1, 2], Hc_psd[2, 2],
-                                1.0, 0.0, 0.0])
-        curv[f, 2] = ti.Vector([w0[0], w0[1], w0[2], w1[0], w1[1], w1[2], 0.0, 0.0, 0.0])
+        cons.curv[f, 0] = ti.Vector([Mr[0, 0], Mr[0, 1], Mr[1, 0], Mr[1, 1], Mr[2, 0],
+                                     Mr[2, 1], T[0, 0], T[0, 1], T[1, 1]])
+        cons.curv[f, 1] = ti.Vector([Hc_psd[0, 0], Hc_psd[0, 1], Hc_psd[0, 2], Hc_psd[1, 1],
+                                     Hc_psd[1, 2], Hc_psd[2, 2],
+                                     1.0, 0.0, 0.0])
+        cons.curv[f, 2] = ti.Vector([w0[0], w0[1], w0[2], w1[0], w1[1], w1[2], 0.0, 0.0,
+                                     0.0])
 
 
 @ti.func

@@ -35,7 +35,7 @@ import numpy as np
 import taichi as ti
 
 from .families import (K_MAX, MAPPING_PAIRS_BY_ALIGNMENT, METHOD_IDS, METHODS,  # noqa: F401
-                       N_CONSTRAINTS)
+                       N_CONSTRAINTS, SVD, WARP_WEFT)
 
 # Regularisation of 1/(eta1 - eta2) in the svd family's principal-frame curvature (a Newton
 # model term only: values and gradients do not depend on it). See svd_constraints.
@@ -343,9 +343,9 @@ def mapping_constraints(x0, x1, x2, Dm_inv, grain, sqa, warp, weft, delta, iso,
 def face_constraints(method: ti.template(), x0, x1, x2, Dm_inv, grain, sqa, warp, weft, shear,
                      delta, iso, by_alignment: ti.template()):
     """Dispatch on the (compile-time) method id of METHOD_IDS."""
-    if ti.static(method == 0):
+    if ti.static(method == SVD):
         return svd_constraints(x0, x1, x2, Dm_inv, sqa, warp, weft, delta)
-    elif ti.static(method == 1):
+    elif ti.static(method == WARP_WEFT):
         return warp_weft_constraints(x0, x1, x2, Dm_inv, grain, sqa, warp, weft, shear)
     else:
         return mapping_constraints(x0, x1, x2, Dm_inv, grain, sqa, warp, weft, delta, iso,

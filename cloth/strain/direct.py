@@ -34,7 +34,8 @@ from .al import (SVD, assemble_all, choose_start, fill_c_curvature, merit, metri
                  newton_matrix, residual, update_multipliers, vertex_violation, violation_of)
 from .buffers import (LAST_TRY, P_CONTACT_SCALE, P_CURVATURE, P_MARGIN, P_SVD_DELTA,
                       PC_JACOBI, ST_CG, ST_COMP, ST_CONVERGED, ST_ITERS, ST_KKT, ST_NEWTON,
-                      ST_START_VIOL, ST_VIOL, A)
+                      ST_START_VIOL, ST_VIOL, A, ConstraintPack, ContactPack, MeshPack,
+                      MetricPack, VectorPack)
 
 # LOOM_DEBUG_DIRECT=1 prints every Newton step (residual, step, line-search alpha).
 _DEBUG = bool(os.environ.get("LOOM_DEBUG_DIRECT"))
@@ -51,83 +52,68 @@ I_SLOPE, I_STEP, I_VIOL, I_COMP, I_ALPHA = range(5)
 
 @ti.kernel
 def start(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: float,
-          from_prev: int, tol: float, x: A, x_hat: A, x_trial: A, w_ptr: A, w_col: A,
-          w_val: A, w_diag: A, pinned: A, face_verts: A, Dm_inv: A, grain: A, rest_area: A,
-          params: A, lam: A, g: A, grad: A, cm: A, what: A, kappa: A, twist: A, contact: A,
-          lam_c: A, stitch: A, lam_s: A, fric: A, lam_t: A, start_x: A, stats: A):
+          from_prev: int, tol: float, mesh: MeshPack, metric: MetricPack, cons: ConstraintPack,
+          contacts: ContactPack, vec: VectorPack, stats: A):
     """Constraints at x_hat and the start violation; then, as in ``solve_al``, the start
-    point (``choose_start``) unless x_hat is feasible already."""
+    point (``choose_start``, its candidate in vec.Wdx) unless x_hat is feasible already."""
     ti.loop_config(serialize=True)
     for _ in range(1):
-        assemble_all(method, nf, x, face_verts, Dm_inv, grain, rest_area, params, g, grad,
-                     cm, what, kappa, twist)
-        stats[ST_START_VIOL] = ti.max(violation_of(K, nf, rest_area, g),
-                                      vertex_violation(nv, ns, x, contact, stitch,
-                                                       params[P_CONTACT_SCALE]))
+        assemble_all(method, nf, vec.x, mesh, cons)
+        stats[ST_START_VIOL] = ti.max(violation_of(K, nf, mesh.rest_area, cons.g),
+                                      vertex_violation(nv, ns, vec.x, contacts.contact,
+                                                       contacts.stitch,
+                                                       mesh.params[P_CONTACT_SCALE]))
         if from_prev and stats[ST_START_VIOL] >= tol:
-            choose_start(method, 1, K, nv, nf, ns, mu, x, x_hat, x_trial, w_ptr, w_col, w_val,
-                         w_diag, face_verts, Dm_inv, grain, rest_area, params, lam, g, grad,
-                         cm, what, kappa, twist, contact, lam_c, stitch, lam_s, fric, lam_t,
-                         pinned, start_x)
+            choose_start(method, 1, K, nv, nf, ns, mu, mesh, metric, cons, contacts, vec,
+                         vec.Wdx)
 
 
 @ti.kernel
-def newton_system(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: float, x: A,
-                  x_hat: A, w_ptr: A, w_col: A, w_val: A, w_diag: A, pinned: A, face_verts: A,
-                  Dm_inv: A, grain: A, rest_area: A, params: A, lam: A, g: A, grad: A, cm: A,
-                  what: A, kappa: A, twist: A, contact: A, lam_c: A, stitch: A, lam_s: A,
-                  fric: A, lam_t: A, curv: A, face_slot: A, stitch_slot: A, H: A, r: A,
-                  Wdx: A):
-    """r = -grad L_A (via Wdx = W (x - x_hat), a work vector) and the projected-Newton matrix
-    H (``al.newton_matrix``: the matrix the PCG path's Newton steps solve with, in W's block
-    pattern)."""
+def newton_system(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: float,
+                  mesh: MeshPack, metric: MetricPack, cons: ConstraintPack,
+                  contacts: ContactPack, vec: VectorPack):
+    """vec.r = -grad L_A (via vec.Wdx = W (x - x_hat), a work vector) and the projected-Newton
+    matrix H (``al.newton_matrix``: the matrix the PCG path's Newton steps solve with, in W's
+    block pattern)."""
     ti.loop_config(serialize=True)
     for _ in range(1):
-        exact = params[P_CURVATURE] > 0.0
-        metric_gradient(nv, w_ptr, w_col, w_val, x, x_hat, Wdx)
-        residual(K, nv, nf, ns, mu, x, Wdx, pinned, face_verts, lam, g, grad, contact, lam_c,
-                 stitch, lam_s, fric, lam_t, r)
-        fill_c_curvature(method, K, nf, mu, x, face_verts, Dm_inv, grain, rest_area, params,
-                         lam, g, curv)
-        newton_matrix(K, nv, nf, ns, mu, params[P_MARGIN], params[P_CONTACT_SCALE],
-                      params[P_SVD_DELTA] > 0.0 and ti.static(method == SVD) and not exact, exact, x, w_ptr,
-                      w_col, w_val, w_diag, pinned, face_verts, rest_area, lam, g, grad, cm,
-                      what, kappa, twist, contact, lam_c, fric, lam_t, curv, face_slot,
-                      stitch_slot, H)
+        exact = mesh.params[P_CURVATURE] > 0.0
+        metric_gradient(nv, vec.x, metric, vec)
+        residual(K, nv, nf, ns, mu, vec.x, mesh, cons, contacts, vec)
+        fill_c_curvature(method, K, nf, mu, vec.x, mesh, cons)
+        use_twist = mesh.params[P_SVD_DELTA] > 0.0 and ti.static(method == SVD) and not exact
+        newton_matrix(K, nv, nf, ns, mu, mesh.params[P_MARGIN], mesh.params[P_CONTACT_SCALE],
+                      use_twist, exact, vec.x, mesh, metric, cons, contacts)
 
 
 @ti.kernel
-def line_search(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: float, x: A,
-                x_hat: A, x_trial: A, d: A, r: A, w_ptr: A, w_col: A, w_val: A, w_diag: A,
-                face_verts: A, Dm_inv: A, grain: A, rest_area: A, params: A, lam: A,
-                g: A, grad: A, cm: A, what: A, kappa: A, twist: A, contact: A, lam_c: A,
-                stitch: A, lam_s: A, fric: A, lam_t: A, info: A):
-    """Backtracking (Armijo) along d from x, as in ``solve_al``; leaves the constraints
-    assembled at the new x. info: slope, largest vertex move, alpha (0: no step taken)."""
+def line_search(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: float,
+                mesh: MeshPack, metric: MetricPack, cons: ConstraintPack,
+                contacts: ContactPack, vec: VectorPack, info: A):
+    """Backtracking (Armijo) along vec.d from vec.x (vec.r = -grad L_A there), as in
+    ``solve_al``; leaves the constraints assembled at the new x. info: slope, largest vertex
+    move, alpha (0: no step taken)."""
     ti.loop_config(serialize=True)
     for _ in range(1):
         slope = 0.0
         for n in range(nv):
-            slope -= r[n].dot(d[n])
-        L0 = merit(K, nv, nf, ns, mu, x, x_hat, w_ptr, w_col, w_val, w_diag, lam, g,
-                   contact, lam_c, stitch, lam_s, fric, lam_t)
+            slope -= vec.r[n].dot(vec.d[n])
+        L0 = merit(K, nv, nf, ns, mu, vec.x, vec.x_hat, metric, cons, contacts)
         alpha, step, tries, taken = 1.0, 0.0, 0, 0.0
         while tries <= LAST_TRY:
             a = alpha
             if tries == LAST_TRY or not slope < 0.0:
                 a = 0.0
             for n in range(nv):
-                x_trial[n] = x[n] + a * d[n]
-            assemble_all(method, nf, x_trial, face_verts, Dm_inv, grain, rest_area, params, g,
-                         grad, cm, what, kappa, twist)
+                vec.x_trial[n] = vec.x[n] + a * vec.d[n]
+            assemble_all(method, nf, vec.x_trial, mesh, cons)
             if a == 0.0:
                 break
-            L = merit(K, nv, nf, ns, mu, x_trial, x_hat, w_ptr, w_col, w_val, w_diag, lam,
-                      g, contact, lam_c, stitch, lam_s, fric, lam_t)
+            L = merit(K, nv, nf, ns, mu, vec.x_trial, vec.x_hat, metric, cons, contacts)
             if L <= L0 + 1e-4 * a * slope:
                 for n in range(nv):
-                    step = ti.max(step, (x_trial[n] - x[n]).norm())
-                    x[n] = x_trial[n]
+                    step = ti.max(step, (vec.x_trial[n] - vec.x[n]).norm())
+                    vec.x[n] = vec.x_trial[n]
                 taken = a
                 break
             alpha *= 0.5
@@ -139,27 +125,28 @@ def line_search(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: fl
 
 @ti.kernel
 def multipliers(K: int, nv: int, nf: int, ns: int, mu: float, mu_max: float, x: A,
-                rest_area: A, params: A, lam: A, g: A, contact: A, lam_c: A, stitch: A,
-                lam_s: A, fric: A, lam_t: A, info: A):
+                mesh: MeshPack, cons: ConstraintPack, contacts: ContactPack, info: A):
     ti.loop_config(serialize=True)
     for _ in range(1):
-        viol, comp = update_multipliers(K, nv, nf, ns, mu, mu_max, x, rest_area, lam, g,
-                                        contact, lam_c, stitch, lam_s, fric, lam_t,
-                                        params[P_CONTACT_SCALE])
+        viol, comp = update_multipliers(K, nv, nf, ns, mu, mu_max, mesh.params[P_CONTACT_SCALE],
+                                        x, mesh, cons, contacts)
         info[I_VIOL] = viol
         info[I_COMP] = comp
+
+
+def packs(lim, metric):
+    """The argument packs of the limiter ``lim``'s work arrays with the metric ``metric``:
+    (mesh, metric, constraints, contacts, vectors), the direct kernels' arguments."""
+    ws = lim._ws
+    return (ws.mesh_pack(), ws.metric_pack(metric), ws.constraint_pack(), ws.contact_pack(),
+            ws.vector_pack())
 
 
 def fill_newton_system(lim, mid, K, mu, metric):
     """``newton_system`` on the limiter's work arrays at ws.x (constraints assembled there):
     the residual into ws.r, the Newton matrix values into ws.H."""
-    ws, m = lim._ws, lim.model
-    newton_system(mid, K, m.n_verts, m.n_faces, len(lim._stitches), mu, ws.x, ws.x_hat,
-                  metric.ptr, metric.col, metric.val, metric.diag, ws.pinned, ws.face_verts,
-                  ws.Dm_inv, ws.grain, ws.rest_area, ws.params, ws.lam, ws.g, ws.grad, ws.cm,
-                  ws.what, ws.kappa, ws.twist, ws.contact, ws.lam_c, ws.stitch, ws.lam_s,
-                  ws.fric, ws.lam_t, ws.curv, metric.face_slot, metric.stitch_slot,
-                  ws.newton_matrix(metric.nnz), ws.r, ws.Wdx)
+    m = lim.model
+    newton_system(mid, K, m.n_verts, m.n_faces, len(lim._stitches), mu, *packs(lim, metric))
 
 
 def solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, margin_mu=None):
@@ -203,11 +190,7 @@ def _solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, active_set_model, ma
     nv, nf, ns = m.n_verts, m.n_faces, len(lim._stitches)
     info = ws.info
     from_prev = int(lim.coupling == "implicit" and metric is lim._system)
-    start(mid, K, nv, nf, ns, mu, from_prev, lim.tol, ws.x, ws.x_hat, ws.x_trial,
-          metric.ptr, metric.col, metric.val, metric.diag, ws.pinned, ws.face_verts,
-          ws.Dm_inv, ws.grain, ws.rest_area, ws.params, ws.lam, ws.g, ws.grad, ws.cm,
-          ws.what, ws.kappa, ws.twist, ws.contact, ws.lam_c, ws.stitch, ws.lam_s, ws.fric,
-          ws.lam_t, ws.Wdx, ws.stats)
+    start(mid, K, nv, nf, ns, mu, from_prev, lim.tol, *packs(lim, metric), ws.stats)
     stats = ws.stats.to_numpy()
     if stats[ST_START_VIOL] < lim.tol:
         stats[ST_CONVERGED], stats[ST_VIOL] = 1, stats[ST_START_VIOL]
@@ -269,11 +252,7 @@ def _solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, active_set_model, ma
                     break
                 proposed = False
             ws.d.from_numpy(step)
-            line_search(mid, K, nv, nf, ns, mu, ws.x, ws.x_hat, ws.x_trial, ws.d, ws.r,
-                        metric.ptr, metric.col, metric.val, metric.diag, ws.face_verts,
-                        ws.Dm_inv, ws.grain, ws.rest_area, ws.params, ws.lam, ws.g,
-                        ws.grad, ws.cm, ws.what, ws.kappa, ws.twist, ws.contact, ws.lam_c,
-                        ws.stitch, ws.lam_s, ws.fric, ws.lam_t, info)
+            line_search(mid, K, nv, nf, ns, mu, *packs(lim, metric), info)
             out = info.to_numpy()
             if _DEBUG:
                 print(f"  round {rounds} newton {newton}: |r| {np.linalg.norm(r0):.3e} alpha "
@@ -283,8 +262,8 @@ def _solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, active_set_model, ma
                 break
         if converged:
             break
-        multipliers(K, nv, nf, ns, mu, mu_max, ws.x, ws.rest_area, ws.params, ws.lam, ws.g,
-                    ws.contact, ws.lam_c, ws.stitch, ws.lam_s, ws.fric, ws.lam_t, info)
+        multipliers(K, nv, nf, ns, mu, mu_max, ws.x, ws.mesh_pack(), ws.constraint_pack(),
+                    ws.contact_pack(), info)
         out = info.to_numpy()
         viol, comp = float(out[I_VIOL]), float(out[I_COMP])
         rounds += 1

@@ -5,6 +5,8 @@ type Taichi has then)."""
 METHODS = ("svd", "warp-weft", "mapping")
 N_CONSTRAINTS = {"svd": 4, "warp-weft": 6, "mapping": 8}
 METHOD_IDS = {"svd": 0, "warp-weft": 1, "mapping": 2}
+# The ids by name, for the kernels' compile-time dispatch (``ti.static(method == SVD)``).
+SVD, WARP_WEFT, MAPPING = (METHOD_IDS[name] for name in METHODS)
 K_MAX = 8
 
 # The solver orders the mapping family's principal pairs by magnitude (pair A = eta1), not by

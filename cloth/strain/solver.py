@@ -749,14 +749,11 @@ class StrainLimiter:
         nv, nf = m.n_verts, m.n_faces
         mid, K = METHOD_IDS[self.method], N_CONSTRAINTS[self.method]
         # Friction holds contact vertices against sliding over the substep (from x - h v).
-        # (The start candidates live in Wdx until choose_start: solve_al has no argument
-        # left for an array of their own.)
         self._start_args = (float(h), int(self.start_extrapolate and self._v_last_valid),
                             float(self.settle_speed))
         al.begin_solve(nv, float(h), int(contacts and h > 0 and self.friction),
-                       int(not contacts), *self._start_args[1:],
-                       m.state.x, m.state.v, ws.x, ws.v, ws.x_hat, ws.x_start, ws.contact,
-                       ws.contact_mu, ws.fric, ws.v_last, ws.Wdx, ws.stats)
+                       int(not contacts), *self._start_args[1:], ws.step_pack(m.state),
+                       ws.vector_pack(), ws.contact_pack(), ws.stats)
         self.last_reverted = False
         if self.solver == "al":
             saved = None
@@ -782,10 +779,9 @@ class StrainLimiter:
                 self.last_reverted = True
                 self.reverted_count += 1
         else:
-            pbd.pbd_solve(mid, int(self.solver == "jacobi"), nv, nf, self.tol, self.max_iters,
-                        self.jacobi_omega, ws.x, ws.face_verts, ws.Dm_inv, ws.grain,
-                        ws.rest_area, ws.params, ws.mass, ws.pinned, ws.contact,
-                        len(self._stitches), ws.stitch, ws.acc, ws.cnt, ws.stats)
+            pbd.pbd_solve(mid, int(self.solver == "jacobi"), nv, nf, len(self._stitches),
+                          self.tol, self.max_iters, self.jacobi_omega, ws.x, ws.mesh_pack(),
+                          ws.contact_pack(), ws.acc, ws.cnt, ws.stats)
             # Measure the final positions (a sweep sees each face before moving it).
             self._assemble(mid, ws.x)
             stats = ws.stats.to_numpy()
@@ -796,8 +792,7 @@ class StrainLimiter:
         # every unconverged one raised the band error of 8-round svd from 3.6e-4 to 6.9e-2).
         kick = 0.5 * self.model.typical_edge() / h if (self.solver == "al" and not converged
                                                 and h > 0) else -1.0
-        al.finish_solve(nv, float(h), kick, ws.x, ws.x_start, ws.v, m.state.x, m.state.v,
-                        ws.v_last)
+        al.finish_solve(nv, float(h), kick, ws.x, ws.step_pack(m.state))
         self._v_last_valid = h > 0
         self.last_iterations = int(rounds)
         self.last_violation_max = float(max(stats[ST_VIOL], 0.0))
@@ -823,9 +818,7 @@ class StrainLimiter:
 
     def _assemble(self, mid, pos):
         ws = self._ws
-        al.assemble(mid, self.model.n_faces, pos, ws.face_verts, ws.Dm_inv, ws.grain,
-                   ws.rest_area, ws.params, ws.g, ws.grad, ws.cm, ws.what, ws.kappa,
-                   ws.twist)
+        al.assemble(mid, self.model.n_faces, pos, ws.mesh_pack(), ws.constraint_pack())
 
     def _solve_direct(self, mid, K, use_system):
         from . import direct
@@ -952,21 +945,21 @@ class StrainLimiter:
             self._stubs = {PC_FACTOR: FactorStub(), PC_MULTIGRID: MultigridStub()}
         fp = pc if pc_mode == PC_FACTOR else self._stubs[PC_FACTOR]
         mg = pc if pc_mode == PC_MULTIGRID else self._stubs[PC_MULTIGRID]
-        al.solve_al(mid, self._kernel_curvature(), K, m.n_verts, m.n_faces, len(self._stitches), mu, self.mu_grow,
-                   mu_max, self.max_iters,
-                   self.newton_budget(pc_mode), self.pcg_budget(pc_mode),
-                   min(self.cg_rtol, PDAS_CG_RTOL) if self._kernel_pdas() else self.cg_rtol,
-                   self.tol, step_tol,
-                   int(self.adaptive_margin),
-                   int(self.coupling == "implicit" and metric is self._system), ws.params, ws.x, ws.x_hat,
-                   ws.x_trial, metric.ptr, metric.col, metric.val, metric.diag,
-                   ws.pinned, ws.face_verts, ws.Dm_inv, ws.grain, ws.rest_area, ws.lam,
-                   ws.g,
-                   ws.grad, ws.cm, ws.what, ws.kappa, ws.twist, ws.contact, ws.lam_c,
-                   ws.stitch, ws.lam_s, ws.fric, ws.lam_t, ws.curv, metric.face_slot,
-                   metric.stitch_slot, ws.newton_matrix(metric.nnz), ws.b, ws.d, ws.r, ws.z, ws.p, ws.Ap, ws.P_inv,
-                   pc_mode, fp.ptr, fp.idx, fp.val, fp.perm, fp.work, mg.ints, mg.reals,
-                   mg.blocks, ws.Wdx, ws.stats)
+        budget = ws.budget
+        budget[buffers.B_MU0], budget[buffers.B_MU_GROW] = mu, self.mu_grow
+        budget[buffers.B_MU_MAX], budget[buffers.B_MAX_ROUNDS] = mu_max, self.max_iters
+        budget[buffers.B_MAX_NEWTON] = self.newton_budget(pc_mode)
+        budget[buffers.B_MAX_CG] = self.pcg_budget(pc_mode)
+        budget[buffers.B_RTOL] = min(self.cg_rtol, PDAS_CG_RTOL) if self._kernel_pdas() \
+            else self.cg_rtol
+        budget[buffers.B_TOL], budget[buffers.B_STEP_TOL] = self.tol, step_tol
+        budget[buffers.B_ADAPTIVE] = float(self.adaptive_margin)
+        budget[buffers.B_FROM_PREV] = float(self.coupling == "implicit" and
+                                            metric is self._system)
+        budget[buffers.B_PC_MODE] = pc_mode
+        al.solve_al(mid, self._kernel_curvature(), K, m.n_verts, m.n_faces, len(self._stitches),
+                    ws.budget, ws.mesh_pack(), ws.metric_pack(metric), ws.constraint_pack(),
+                    ws.contact_pack(), ws.vector_pack(), ws.precond_pack(fp, mg), ws.stats)
         stats = ws.stats.to_numpy()
         rounds, newton = int(stats[ST_ITERS]), int(stats[ST_NEWTON])
         self.last_factorizations = int(made_before)
