@@ -75,7 +75,7 @@ class Substep:
         ws, m = lim._ws, lim.model
         self.nv, self.nf, self.h, self.contacts = m.n_verts, m.n_faces, sim.h, contacts
         al.begin_solve(self.nv, float(sim.h), int(contacts and lim.friction),
-                       int(not contacts), 0, 0.0, ws.step_pack(m.state), ws.vector_pack(),
+                       int(not contacts), 0, 0.0, 0, ws.step_pack(m.state), ws.vector_pack(),
                        ws.contact_pack(), ws.stats)
         self.metric = lim._newton_metric(lim.coupling == "implicit" and lim._system_ready)
         mean = lim._mean_mass(self.metric)

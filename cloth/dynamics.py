@@ -164,6 +164,7 @@ class ImplicitEuler:
     # -- public API ---------------------------------------------------------------------------
     def step(self, h):
         """Advance model.state by one backward-Euler step of ``h`` seconds."""
+        self.model.mark_step_start()
         if self.host_loop:
             return self._step_host_loop(h)
         m, mat, s = self.model, self.model.material, self.settings

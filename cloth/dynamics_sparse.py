@@ -68,6 +68,7 @@ class SparseImplicitEuler(ImplicitEuler):
     def step(self, h):
         if self.linear_solver == "matrix-free":
             return super().step(h)
+        self.model.mark_step_start()
         m, mat, s = self.model, self.model.material, self.settings
         k = (mat.k_warp, mat.k_weft, mat.k_shear, mat.k_bend)
         alpha, beta, kst = mat.damp_mass, mat.damp_stiff, s.stitch_stiffness

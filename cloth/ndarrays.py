@@ -97,6 +97,17 @@ def _get_elements(n: ti.i32, src: A, out: A):
                     out[i, r, c] = v[r, c]
 
 
+@ti.kernel
+def _copy_rows(n: ti.i32, src: A, dst: A):
+    for i in range(n):
+        dst[i] = src[i]
+
+
+def copy_rows(src, dst, n):
+    """dst[:n] = src[:n] (ndarrays of one element type), on the device."""
+    _copy_rows(int(n), src, dst)
+
+
 def _is_elements(arr):
     from taichi.lang.matrix import MatrixNdarray, VectorNdarray
     return isinstance(arr, (VectorNdarray, MatrixNdarray))

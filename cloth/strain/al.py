@@ -1017,41 +1017,60 @@ def max_violation(K: int, nf: int, rest_area: A, g: A) -> float:
 
 
 @ti.func
-def start_of(xp, v_last, h, extrapolate, settle):
-    """choose_start's candidate for one vertex: its substep start xp, with ``extrapolate``
-    moved on by h v_last in a share rising smoothly from 0 at ``settle`` m/s to 1 at
-    4 x settle."""
-    out = xp
+def moving_share(v_last, extrapolate, settle):
+    """How much of a vertex counts as moving, from its last projection's velocity: 0 below
+    ``settle`` m/s, rising smoothly to 1 at 4 x settle (1 at every speed when settle is 0;
+    0 without ``extrapolate``, when there is no last velocity)."""
+    share = 0.0
     if extrapolate:
         share = 1.0
         if settle > 0.0:
             t = ti.min(ti.max((v_last.norm() - settle) / (3.0 * settle), 0.0), 1.0)
             share = t * t * (3.0 - 2.0 * t)
-        out = xp + share * h * v_last
+    return share
+
+
+@ti.func
+def near_obstacle(contacts: ti.template(), n):
+    """Whether vertex n has a contact plane this projection (an obstacle within reach)."""
+    return contacts.contact[n, 0][3] > 0.5 * NO_CONTACT
+
+
+@ti.func
+def start_candidate(n, xp, h, extrapolate, settle, step_start, io: ti.template(),
+                    contacts: ti.template()):
+    """choose_start's candidate for vertex n: x_prev = x_hat - h v (``xp``), moved on by
+    h v_last in the vertex's ``moving_share``. With ``step_start``, a vertex near an
+    obstacle starts instead, in the share that is not moving, where the substep truly began
+    (io.x_step): the obstacle pass between the dynamics and the projection stopped it
+    without the matching change of x, so its x_hat - h v lies where it never was (on the
+    resting drape 0.10-0.17 strain past the limits, where x_step met them to 4e-6)."""
+    share = moving_share(io.v_last[n], extrapolate, settle)
+    out = xp + share * h * io.v_last[n]
+    if step_start and near_obstacle(contacts, n):
+        out = share * out + (1.0 - share) * io.x_step[n]
     return out
 
 
 @ti.kernel
-def reset_start(nv: int, h: float, extrapolate: int, settle: float, fric: A, v_last: A,
-                start: A):
+def reset_start(nv: int, h: float, extrapolate: int, settle: float, step_start: int,
+                io: StepPack, vec: VectorPack, contacts: ContactPack):
     """``begin_solve``'s start candidates again (a projection solved again from its start:
     the first solve used their array, ``Wdx``, for W (x - x_hat))."""
     for n in range(nv):
-        xp = ti.Vector([fric[n][0], fric[n][1], fric[n][2]])
-        start[n] = start_of(xp, v_last[n], h, extrapolate, settle)
+        xp = ti.Vector([contacts.fric[n][0], contacts.fric[n][1], contacts.fric[n][2]])
+        vec.Wdx[n] = start_candidate(n, xp, h, extrapolate, settle, step_start, io, contacts)
 
 
 @ti.kernel
 def begin_solve(nv: int, h: float, friction: int, clear: int, extrapolate: int,
-                settle: float, io: StepPack, vec: VectorPack,
+                settle: float, step_start: int, io: StepPack, vec: VectorPack,
                 contacts: ContactPack, stats: A):
     """Set up a projection from the model's state (x_in, v_in): x = x_hat = x_start = x_in,
-    v = v_in; fric = (x_prev, mu_f) per vertex, x_prev = x_hat - h v (the substep's start,
-    before dynamics), mu_f = 0 (no friction) unless ``friction``; vec.Wdx = choose_start's
-    candidate, x_prev with ``extrapolate`` moved on by h v_last (the last projection's
-    velocity, ``finish_solve``; ``start_of``); with ``clear`` no contact half-spaces. One
-    launch instead of five (each costs ~0.1 ms: a tenth of a resting 1.2k-face projection's
-    host time)."""
+    v = v_in; fric = (x_prev, mu_f) per vertex, x_prev = x_hat - h v (friction's anchor),
+    mu_f = 0 (no friction) unless ``friction``; vec.Wdx = choose_start's candidates
+    (``start_candidate``); with ``clear`` no contact half-spaces. One launch instead of five
+    (each costs ~0.1 ms: a tenth of a resting 1.2k-face projection's host time)."""
     ti.loop_config(serialize=True)
     for n in range(nv):
         vec.x[n] = io.x_in[n]
@@ -1061,12 +1080,11 @@ def begin_solve(nv: int, h: float, friction: int, clear: int, extrapolate: int,
         xp = io.x_in[n] - h * io.v_in[n]
         mu_f = contacts.contact_mu[n] if friction else 0.0
         contacts.fric[n] = ti.Vector([xp[0], xp[1], xp[2], mu_f])
-        # (The start candidates live in Wdx until choose_start: solve_al's arguments are
-        # near Taichi's limit of 64, buffers.py.)
-        vec.Wdx[n] = start_of(xp, io.v_last[n], h, extrapolate, settle)
         if clear:
             for j in ti.static(range(CONTACT_SLOTS)):
                 contacts.contact[n, j] = ti.Vector([0.0, 0.0, 0.0, NO_CONTACT])
+        # (The start candidates live in Wdx until choose_start, which reads them there.)
+        vec.Wdx[n] = start_candidate(n, xp, h, extrapolate, settle, step_start, io, contacts)
     for i in range(N_STATS):
         stats[i] = 0.0
 
@@ -1078,14 +1096,27 @@ def copy_vectors(n: int, src: A, dst: A):
 
 
 @ti.kernel
-def finish_solve(nv: int, h: float, cap: float, x: A, io: StepPack):
+def finish_solve(nv: int, h: float, cap: float, extrapolate: int, settle: float,
+                 step_start: int, x: A, io: StepPack, contacts: ContactPack):
     """v += dx / h (METHOD 4): the projection's correction becomes a velocity change, of at
     most ``cap`` (m/s) per vertex when cap > 0; x and v are copied to x_in and v_in (the
-    model's state) and v to v_last (the next projection's start, ``begin_solve``)."""
+    model's state) and v to v_last (the next projection's start, ``begin_solve``).
+
+    With ``step_start``, a vertex near an obstacle takes, in the share of it that is not
+    moving (``moving_share``), the velocity of its whole substep, (x - x_step) / h, instead:
+    v + dx / h counts the obstacle pass's stop as motion (it changed v, not x), and on a
+    resting drape that left the sheet jittering (4e-5 J at resolution 25, where this rests
+    at ~1e-6 J). Moving vertices keep v + dx / h: their velocity after the obstacle pass is
+    the impact (the normal velocity removed), which (x - x_step) / h would undo, damping
+    the landing (measured: 0.019 against 0.038 J a frame after it, docs/speed/motion.md
+    section 10)."""
     ti.loop_config(serialize=True)
     for n in range(nv):
         if h > 0.0:
             dv = (x[n] - io.x_start[n]) / h
+            if step_start and near_obstacle(contacts, n):
+                still = 1.0 - moving_share(io.v_last[n], extrapolate, settle)
+                dv += still * ((x[n] - io.x_step[n]) / h - io.v[n] - dv)
             if cap > 0.0 and dv.norm() > cap:
                 dv *= cap / dv.norm()
             io.v[n] += dv

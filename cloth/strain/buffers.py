@@ -103,7 +103,7 @@ ContactPack = ti.types.argpack(contact=A, contact_mu=A, lam_c=A, fric=A, lam_t=A
 VectorPack = ti.types.argpack(x=A, x_hat=A, x_trial=A, Wdx=A, b=A, d=A, r=A, z=A, p=A, Ap=A)
 PrecondPack = ti.types.argpack(P_inv=A, f_ptr=A, f_idx=A, f_val=A, f_perm=A, f_work=A,
                                mg_int=A, mg_real=A, mg_block=A)
-StepPack = ti.types.argpack(x_in=A, v_in=A, v=A, x_start=A, v_last=A)
+StepPack = ti.types.argpack(x_in=A, v_in=A, x_step=A, v=A, x_start=A, v_last=A)
 
 
 class Workspace:
@@ -207,8 +207,9 @@ class Workspace:
                          mg_real=mg.reals, mg_block=mg.blocks)
 
     def step_pack(self, state):
-        """The model's ``state`` (x and v) and this projection's own start and velocities."""
-        return self.pack("io", StepPack, x_in=state.x, v_in=state.v,
+        """The model's ``state`` (x, v and the substep's start x_step) and this projection's
+        own start and velocities."""
+        return self.pack("io", StepPack, x_in=state.x, v_in=state.v, x_step=state.x_step,
                          v=self.v, x_start=self.x_start, v_last=self.v_last)
 
     def newton_matrix(self, nnz):

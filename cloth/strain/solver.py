@@ -360,8 +360,15 @@ class StrainLimiter:
         # (False, the rule before issue #32's landing fix; kept for old-against-new runs).
         self.start_extrapolate = True
         self.settle_speed = SETTLE_SPEED
+        # Vertices near an obstacle that are not moving (below ``settle_speed``) start at, and
+        # take their velocity from, where the substep truly began (True; al.start_candidate,
+        # al.finish_solve): the obstacle pass stopped them without moving them back. False:
+        # x_hat - h v and v + dx / h for every vertex, the rule before (kept for old-against-
+        # new runs). Measured on drape at resolution 25: docs/speed/motion.md section 12.
+        self.true_start_at_contacts = True
         self._v_last_valid = False    # v_last belongs to this mesh's vertices
-        self._start_args = (0.0, 0, 0.0)   # (h, extrapolate, settle) of the last begin_solve
+        # (h, extrapolate, settle, step_start) of the last begin_solve
+        self._start_args = (0.0, 0, 0.0, 0)
         self.multigrid_cg = None       # None: the method's MULTIGRID_CG
         self.factor_cg = None          # None: from the mesh size (FACTOR_CG_WORK)
         self.factor_max_faces = None   # None: FACTOR_MAX_FACES (a probe's override)
@@ -750,7 +757,8 @@ class StrainLimiter:
         mid, K = METHOD_IDS[self.method], N_CONSTRAINTS[self.method]
         # Friction holds contact vertices against sliding over the substep (from x - h v).
         self._start_args = (float(h), int(self.start_extrapolate and self._v_last_valid),
-                            float(self.settle_speed))
+                            float(self.settle_speed),
+                            int(self.true_start_at_contacts and m.state.step_start_valid))
         al.begin_solve(nv, float(h), int(contacts and h > 0 and self.friction),
                        int(not contacts), *self._start_args[1:], ws.step_pack(m.state),
                        ws.vector_pack(), ws.contact_pack(), ws.stats)
@@ -792,7 +800,8 @@ class StrainLimiter:
         # every unconverged one raised the band error of 8-round svd from 3.6e-4 to 6.9e-2).
         kick = 0.5 * self.model.typical_edge() / h if (self.solver == "al" and not converged
                                                 and h > 0) else -1.0
-        al.finish_solve(nv, float(h), kick, ws.x, ws.step_pack(m.state))
+        al.finish_solve(nv, float(h), kick, *self._start_args[1:], ws.x, ws.step_pack(m.state),
+                        ws.contact_pack())
         self._v_last_valid = h > 0
         self.last_iterations = int(rounds)
         self.last_violation_max = float(max(stats[ST_VIOL], 0.0))
@@ -892,7 +901,8 @@ class StrainLimiter:
         ws = self._ws
         self.last_fallback = True
         al.copy_vectors(self.model.n_verts, ws.x_start, ws.x)
-        al.reset_start(self.model.n_verts, *self._start_args, ws.fric, ws.v_last, ws.Wdx)
+        al.reset_start(self.model.n_verts, *self._start_args, ws.step_pack(self.model.state),
+                       ws.vector_pack(), ws.contact_pack())
         for a, val in zip((ws.lam, ws.lam_c, ws.lam_s, ws.lam_t), multipliers):
             a.from_numpy(val)
 
