@@ -66,12 +66,16 @@ SOLVES = {
                          "stop": "kkt"},
     # The default as it was before the start moved on (StrainLimiter.start_extrapolate).
     "substep start": {"linear_solver": "pcg", "attr.start_extrapolate": False},
+    # The default as it was before slow contact vertices took the substep's true start
+    # (StrainLimiter.true_start_at_contacts; docs/speed/motion.md section 12).
+    "contacts from x - h v": {"attr.true_start_at_contacts": False},
     "kkt stop": {"stop": "kkt"},
     "exact steps": {"linear_solver": "cholesky"},
     "kkt stop 1 mm per s": {"stop": "kkt", "kkt_velocity": 1e-3},
     "exact steps, kkt stop": {"linear_solver": "cholesky", "stop": "kkt"},
 }
-DRAPE_SOLVES = ("reference", "default", "substep start", "exact steps", "active-set")
+DRAPE_SOLVES = ("reference", "default", "substep start", "contacts from x - h v", "exact steps",
+                "active-set")
 
 
 def child(case, solve, drop=None):
