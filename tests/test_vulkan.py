@@ -2,19 +2,20 @@
 not just its compile: the hanging cloth at its default resolution (25) falls and its limits
 hold.
 
-Both bugs found so far were one limit of lavapipe's compiler (Mesa's llvmpipe): a shader
-invocation runs at most 65535 loop iterations, all its loops together, and then every loop
-ends at once without an error (cloth/strain/direct.py, ``LOOP_CAP``). The kernels that are one
-serial thread ran into it:
+Lavapipe's compiler (Mesa's llvmpipe) runs at most 65535 loop iterations in a shader
+invocation, all its loops together, and then ends every loop at once without an error
+(cloth/strain/direct.py, ``LOOP_CAP``); Loom's serial kernels are one invocation each.
 - 2026-12-02: the one-launch dynamics step computed its CG solution but never wrote x and v
   once it ran 14 or more CG iterations, so above ~100 vertices the cloth never moved (kinetic
   energy exactly 0) while the scene's final check said "hangs at rest". Vulkan and Metal now
-  run the CG loop on the host (``ImplicitEuler.host_loop``).
-- 2026-12-05: at resolution 25 (625 vertices) the strain solve's Newton-system kernel and its
-  line search from the fourth trial on: the AL ran its 100 rounds every frame and the
-  violation grew (0.071, 0.19, 0.33 over frames 1-3), while resolution 20, which this test ran
-  until then, held its limits. The direct path now runs in launches below the cap there and
-  stops with an error when one is cut short.
+  run the CG loop on the host (``ImplicitEuler.host_loop``). (Most likely the same cap; not
+  re-measured.)
+- 2026-12-05: at resolution 25 (625 vertices) the strain solve's line search lost its loops
+  from the fourth trial on (measured: benchmarks/loop_cap.py): a step it reported taken was
+  never written, the AL ran its 100 rounds every frame and the violation grew (0.071, 0.19,
+  0.33 over frames 1-3), while resolution 20, which this test ran until then, held its
+  limits. The direct path now runs in launches below the cap and stops with an error when one
+  is cut short.
 
 Runtime on this 2-core VM with lavapipe: 11-17 s with the kernels in the offline cache (3
 frames, 1.7-8 s each), ~40 s when the strain kernels compile first (fast compile). Before the
