@@ -27,7 +27,7 @@ import os
 import numpy as np
 import taichi as ti
 
-from .. import ndarrays
+from .. import backend, ndarrays
 from . import active_set, exact_curvature
 from . import al
 from .al import (SVD, assemble_all, choose_start, fill_c_curvature, merit, metric_gradient,
@@ -35,7 +35,7 @@ from .al import (SVD, assemble_all, choose_start, fill_c_curvature, merit, metri
 from .buffers import (LAST_TRY, P_CONTACT_SCALE, P_CURVATURE, P_MARGIN, P_SVD_DELTA,
                       PC_JACOBI, ST_CG, ST_COMP, ST_CONVERGED, ST_ITERS, ST_KKT, ST_NEWTON,
                       ST_START_VIOL, ST_VIOL, A, ConstraintPack, ContactPack, MeshPack,
-                      MetricPack, VectorPack)
+                      MetricPack, T, VectorPack)
 
 # LOOM_DEBUG_DIRECT=1 prints every Newton step (residual, step, line-search alpha).
 _DEBUG = bool(os.environ.get("LOOM_DEBUG_DIRECT"))
@@ -46,8 +46,8 @@ STALL, INNER_FRACTION = al.PDAS_STALL, al.PDAS_INNER_FRACTION
 # Rounds the active-set model gets before ``solve`` falls back on the margin model (converged
 # projections took 2-8 rounds on hanging at resolutions 9 and 25, svd and warp-weft).
 ACTIVE_SET_ROUNDS = 30
-# Indices into the direct solver's ``info`` array.
-I_SLOPE, I_STEP, I_VIOL, I_COMP, I_ALPHA = range(5)
+# Indices into the direct solver's ``info`` array (I_MERIT and I_LOOPS: the split kernels').
+I_SLOPE, I_STEP, I_VIOL, I_COMP, I_ALPHA, I_MERIT, I_LOOPS = range(7)
 
 
 @ti.kernel
@@ -146,6 +146,14 @@ def fill_newton_system(lim, mid, K, mu, metric):
     """``newton_system`` on the limiter's work arrays at ws.x (constraints assembled there):
     the residual into ws.r, the Newton matrix values into ws.H."""
     m = lim.model
+    if split_kernels():
+        nv, nf, ns = m.n_verts, m.n_faces, len(lim._stitches)
+        pk, info = packs(lim, metric), lim._ws.info
+        newton_rhs(mid, K, nv, nf, ns, mu, 2, *pk, info)
+        check_loops(info.to_numpy(), "newton_rhs", nv, nf)
+        newton_lhs(mid, K, nv, nf, ns, mu, 2, *pk, info)
+        check_loops(info.to_numpy(), "newton_lhs", nv, nf)
+        return
     newton_system(mid, K, m.n_verts, m.n_faces, len(lim._stitches), mu, *packs(lim, metric))
 
 
@@ -190,7 +198,11 @@ def _solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, active_set_model, ma
     nv, nf, ns = m.n_verts, m.n_faces, len(lim._stitches)
     info = ws.info
     from_prev = int(lim.coupling == "implicit" and metric is lim._system)
-    start(mid, K, nv, nf, ns, mu, from_prev, lim.tol, *packs(lim, metric), ws.stats)
+    split = split_kernels()
+    if split:
+        start_split(lim, mid, K, mu, from_prev, metric)
+    else:
+        start(mid, K, nv, nf, ns, mu, from_prev, lim.tol, *packs(lim, metric), ws.stats)
     stats = ws.stats.to_numpy()
     if stats[ST_START_VIOL] < lim.tol:
         stats[ST_CONVERGED], stats[ST_VIOL] = 1, stats[ST_START_VIOL]
@@ -252,8 +264,11 @@ def _solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, active_set_model, ma
                     break
                 proposed = False
             ws.d.from_numpy(step)
-            line_search(mid, K, nv, nf, ns, mu, *packs(lim, metric), info)
-            out = info.to_numpy()
+            if split:
+                out = line_search_split(lim, mid, K, mu, metric)
+            else:
+                line_search(mid, K, nv, nf, ns, mu, *packs(lim, metric), info)
+                out = info.to_numpy()
             if _DEBUG:
                 print(f"  round {rounds} newton {newton}: |r| {np.linalg.norm(r0):.3e} alpha "
                       f"{out[I_ALPHA]:.3g} step {out[I_STEP]:.3e} slope {out[I_SLOPE]:.3e} mu {mu:.3g}")
@@ -262,9 +277,15 @@ def _solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, active_set_model, ma
                 break
         if converged:
             break
-        multipliers(K, nv, nf, ns, mu, mu_max, ws.x, ws.mesh_pack(), ws.constraint_pack(),
-                    ws.contact_pack(), info)
-        out = info.to_numpy()
+        if split:
+            multipliers_checked(K, nv, nf, ns, mu, mu_max, 2, ws.x, ws.mesh_pack(),
+                                ws.constraint_pack(), ws.contact_pack(), info)
+            out = info.to_numpy()
+            check_loops(out, "multipliers", nv, nf)
+        else:
+            multipliers(K, nv, nf, ns, mu, mu_max, ws.x, ws.mesh_pack(), ws.constraint_pack(),
+                        ws.contact_pack(), info)
+            out = info.to_numpy()
         viol, comp = float(out[I_VIOL]), float(out[I_COMP])
         rounds += 1
         if _DEBUG:
@@ -293,3 +314,244 @@ def _solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, active_set_model, ma
     lim.last_solves = solves
     ws.stats.from_numpy(stats)
     return rounds, newton, converged
+
+
+# ---- loop-capped back ends (Vulkan, Metal: backend.HOST_LOOP_AL) ----------------------------
+# Mesa's llvmpipe, which runs Debian's software Vulkan (lavapipe), ends every loop of a shader
+# invocation once that invocation has run 65535 loop iterations in all, its loops together
+# (gallivm's LP_MAX_TGSI_LOOP_ITERATIONS, "shared between every loop"), and carries on after
+# the loops: no error, just work left undone. The kernels above are one serial thread each. On
+# the hanging scene at resolution 25 (625 vertices, 1152 faces, mapping) line_search ran into
+# it from its fourth trial on (15.3k iterations before the first trial, 16.5k a trial): a step
+# accepted at alpha 0.125 reported alpha 0.125 but never moved x (step 0), and the AL diverged:
+# 100 rounds every frame, violation 0.07, 0.19, 0.33 over frames 1-3. newton_system reached the
+# cap as well (25.7k iterations for the residual, 40.3k for the matrix), but only in the last
+# ~500 iterations of its pass over pinned rows, on rows without pins: its r and H matched the
+# split launches' below bit for bit there; at a few more vertices it would not. Resolution 20
+# (400 vertices: newton_system 40.8k) held its limits. (Measured on lavapipe, Mesa 22.3.6,
+# with benchmarks/loop_cap.py: each phase once more, followed by a counting loop of 2^20
+# iterations, which stops at 65535 minus what the phase used.)
+#
+# Here the same work runs in launches that each stay below the cap at that size: the Newton
+# system in two (the residual, the matrix), the line search's and the start choice's trials one
+# launch each with their loops on the host; the arithmetic is the kernels' above, in the same
+# order (forced onto the CPU, the split path follows the unsplit one to 1e-11 m over a frame in
+# f64; fast-math rounding then lets the AL's branches drift apart). Every launch ends with
+# ``loops_ran``, which notices the cap (a loop of ``two`` iterations then runs once), and the
+# host stops with LoopCapError instead of returning a wrong projection: the matrix launch, ~65
+# loop iterations a vertex, reaches the cap at ~1000 vertices (resolution 31 runs, 32 stops).
+# Measured on hanging at resolution 25: 4, 4, 3 rounds and violation 1.3e-5, 3.7e-5, 9.1e-5
+# over frames 1-3 (before: 100 rounds, 0.071, 0.19, 0.33), 2.5 and 1.7 s for frames 2 and 3
+# (before: 17.9 and 16.6 s). GPU drivers have no such cap; the CPU never takes this path.
+LOOP_CAP = 65535
+TRIAL_STEP, TRIAL_X, TRIAL_START = 0, 1, 2
+
+
+class LoopCapError(RuntimeError):
+    """A split kernel's loops were cut short by the driver (``loops_ran``)."""
+
+
+def split_kernels():
+    """Whether the direct path runs in the split launches (``LOOP_CAP``)."""
+    return backend.arch() in backend.HOST_LOOP_AL
+
+
+def check_loops(out, kernel, nv, nf):
+    """Raise LoopCapError unless ``out`` (an info array read back) says that every loop of
+    ``kernel`` ran (``loops_ran``)."""
+    if out[I_LOOPS] != 2:
+        raise LoopCapError(
+            f"strain kernel {kernel} stopped early on --arch {backend.arch()}: the driver ended "
+            f"its loops (Mesa's llvmpipe / lavapipe runs at most {LOOP_CAP} loop iterations a "
+            f"shader invocation), so the projection would be wrong; this mesh ({nv} vertices, "
+            f"{nf} faces) is too large for the serial strain kernels on this driver. Use a "
+            "lower --resolution (31 or less for a sheet) or --arch cpu")
+
+
+@ti.func
+def loops_ran(two, info: T):
+    """info[I_LOOPS] = 2 when a loop of ``two`` (= 2, a run-time value: a constant count is
+    unrolled and escapes the cap) iterations runs in full, 1 once the driver's loop cap was hit
+    (llvmpipe runs a capped loop's body once)."""
+    n = 0
+    for _ in range(two):
+        n += 1
+    info[I_LOOPS] = n
+
+
+@ti.kernel
+def start_values(method: ti.template(), K: int, nv: int, nf: int, ns: int, two: int,
+                 mesh: MeshPack, cons: ConstraintPack, contacts: ContactPack, vec: VectorPack,
+                 stats: A, info: A):
+    """``start``'s first part: the constraints at x (= x_hat) and the start violation."""
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        assemble_all(method, nf, vec.x, mesh, cons)
+        stats[ST_START_VIOL] = ti.max(violation_of(K, nf, mesh.rest_area, cons.g),
+                                      vertex_violation(nv, ns, vec.x, contacts.contact,
+                                                       contacts.stitch,
+                                                       mesh.params[P_CONTACT_SCALE]))
+        loops_ran(two, info)
+
+
+@ti.kernel
+def line_start(K: int, nv: int, nf: int, ns: int, mu: float, two: int, metric: MetricPack,
+               cons: ConstraintPack, contacts: ContactPack, vec: VectorPack, info: A):
+    """``line_search``'s start: the slope along vec.d and the merit at x."""
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        slope = 0.0
+        for n in range(nv):
+            slope -= vec.r[n].dot(vec.d[n])
+        info[I_SLOPE] = slope
+        info[I_MERIT] = merit(K, nv, nf, ns, mu, vec.x, vec.x_hat, metric, cons, contacts)
+        loops_ran(two, info)
+
+
+@ti.kernel
+def trial(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: float, a: float,
+          mode: int, assemble: int, evaluate: int, two: int, mesh: MeshPack,
+          metric: MetricPack, cons: ConstraintPack, contacts: ContactPack, vec: VectorPack,
+          info: A):
+    """One trial point of ``line_search`` or ``choose_start``: vec.x_trial = x + a d
+    (TRIAL_STEP), x (TRIAL_X) or the start candidate vec.Wdx at unpinned vertices
+    (TRIAL_START); with ``assemble`` the constraints there, with ``evaluate`` the merit there
+    into info[I_MERIT]."""
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        for n in range(nv):
+            if mode == TRIAL_STEP:
+                vec.x_trial[n] = vec.x[n] + a * vec.d[n]
+            else:
+                vec.x_trial[n] = vec.x[n]
+                if mode == TRIAL_START and mesh.pinned[n] == 0:
+                    vec.x_trial[n] = vec.Wdx[n]
+        if assemble:
+            assemble_all(method, nf, vec.x_trial, mesh, cons)
+        if evaluate:
+            info[I_MERIT] = merit(K, nv, nf, ns, mu, vec.x_trial, vec.x_hat, metric, cons,
+                                  contacts)
+        loops_ran(two, info)
+
+
+@ti.kernel
+def accept(nv: int, two: int, vec: VectorPack, info: A):
+    """x = x_trial; info[I_STEP] = the largest vertex move."""
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        step = 0.0
+        for n in range(nv):
+            step = ti.max(step, (vec.x_trial[n] - vec.x[n]).norm())
+            vec.x[n] = vec.x_trial[n]
+        info[I_STEP] = step
+        loops_ran(two, info)
+
+
+@ti.kernel
+def newton_rhs(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: float, two: int,
+               mesh: MeshPack, metric: MetricPack, cons: ConstraintPack,
+               contacts: ContactPack, vec: VectorPack, info: A):
+    """``newton_system``'s first part: vec.Wdx and the residual vec.r."""
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        metric_gradient(nv, vec.x, metric, vec)
+        residual(K, nv, nf, ns, mu, vec.x, mesh, cons, contacts, vec)
+        loops_ran(two, info)
+
+
+@ti.kernel
+def newton_lhs(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: float, two: int,
+               mesh: MeshPack, metric: MetricPack, cons: ConstraintPack,
+               contacts: ContactPack, vec: VectorPack, info: A):
+    """``newton_system``'s second part: the Newton matrix."""
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        exact = mesh.params[P_CURVATURE] > 0.0
+        fill_c_curvature(method, K, nf, mu, vec.x, mesh, cons)
+        use_twist = mesh.params[P_SVD_DELTA] > 0.0 and ti.static(method == SVD) and not exact
+        newton_matrix(K, nv, nf, ns, mu, mesh.params[P_MARGIN], mesh.params[P_CONTACT_SCALE],
+                      use_twist, exact, vec.x, mesh, metric, cons, contacts)
+        loops_ran(two, info)
+
+
+@ti.kernel
+def multipliers_checked(K: int, nv: int, nf: int, ns: int, mu: float, mu_max: float, two: int,
+                        x: A, mesh: MeshPack, cons: ConstraintPack, contacts: ContactPack,
+                        info: A):
+    """``multipliers`` with ``loops_ran``."""
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        viol, comp = update_multipliers(K, nv, nf, ns, mu, mu_max, mesh.params[P_CONTACT_SCALE],
+                                        x, mesh, cons, contacts)
+        info[I_VIOL] = viol
+        info[I_COMP] = comp
+        loops_ran(two, info)
+
+
+def _trial(lim, mid, K, mu, metric, a, mode, assemble, evaluate):
+    """Launch ``trial`` and return the info array read back."""
+    m, info = lim.model, lim._ws.info
+    nv, nf = m.n_verts, m.n_faces
+    mesh, met, cons, contacts, vec = packs(lim, metric)
+    trial(mid, K, nv, nf, len(lim._stitches), mu, a, mode, assemble, evaluate, 2, mesh, met,
+          cons, contacts, vec, info)
+    out = info.to_numpy()
+    check_loops(out, "trial", nv, nf)
+    return out
+
+
+def _accept(lim):
+    m, info = lim.model, lim._ws.info
+    accept(m.n_verts, 2, lim._ws.vector_pack(), info)
+    out = info.to_numpy()
+    check_loops(out, "accept", m.n_verts, m.n_faces)
+    return out
+
+
+def start_split(lim, mid, K, mu, from_prev, metric):
+    """``start`` in launches (``LOOP_CAP``): ``start_values``, then ``al.choose_start``'s
+    three passes on the host."""
+    ws, m = lim._ws, lim.model
+    nv, nf = m.n_verts, m.n_faces
+    mesh, _met, cons, contacts, vec = packs(lim, metric)
+    start_values(mid, K, nv, nf, len(lim._stitches), 2, mesh, cons, contacts, vec, ws.stats,
+                 ws.info)
+    check_loops(ws.info.to_numpy(), "start_values", nv, nf)
+    if not (from_prev and ws.stats.to_numpy()[ST_START_VIOL] >= lim.tol):
+        return
+    L_hat = _trial(lim, mid, K, mu, metric, 0.0, TRIAL_X, 0, 1)[I_MERIT]
+    L = _trial(lim, mid, K, mu, metric, 0.0, TRIAL_START, 1, 1)[I_MERIT]
+    if L < L_hat:
+        _accept(lim)
+    else:
+        _trial(lim, mid, K, mu, metric, 0.0, TRIAL_X, 1, 0)
+
+
+def line_search_split(lim, mid, K, mu, metric):
+    """``line_search`` with its loop on the host (``LOOP_CAP``); returns its info values."""
+    ws, m = lim._ws, lim.model
+    mesh, met, cons, contacts, vec = packs(lim, metric)
+    line_start(K, m.n_verts, m.n_faces, len(lim._stitches), mu, 2, met, cons, contacts, vec,
+               ws.info)
+    out = ws.info.to_numpy()
+    check_loops(out, "line_start", m.n_verts, m.n_faces)
+    f32 = np.float32 if out.dtype == np.float32 else np.float64
+    slope, L0 = f32(out[I_SLOPE]), f32(out[I_MERIT])
+    alpha, step, tries, taken = f32(1.0), 0.0, 0, 0.0
+    while tries <= LAST_TRY:
+        a = alpha
+        if tries == LAST_TRY or not slope < 0.0:
+            a = f32(0.0)
+        out = _trial(lim, mid, K, mu, metric, float(a), TRIAL_STEP, 1, int(a != 0.0))
+        if a == 0.0:
+            break
+        # The kernel's test, in its precision: L <= L0 + 1e-4 a slope.
+        if f32(out[I_MERIT]) <= L0 + f32(1e-4) * a * slope:
+            step = float(_accept(lim)[I_STEP])
+            taken = float(a)
+            break
+        alpha = alpha * f32(0.5)
+        tries += 1
+    result = np.zeros(8)
+    result[I_SLOPE], result[I_STEP], result[I_ALPHA] = slope, step, taken
+    return result
