@@ -265,10 +265,13 @@ def run_headless(sim, cfg, args, name, overlays=()):
     run = HeadlessRun(sim, cfg, out, images=o["images"], video=o["video"], color=o["color"],
                       meshes=o["meshes"], every=o["every"], size=(o["width"], o["height"]),
                       quiet=args.quiet, overlays=overlays)
+    from cloth.strain.direct import LoopCapError
     try:
         ok = run.run(int(cfg["sim"]["frames"]))
     except RenderUnavailable as err:
         return fail(f"{err}", EXIT_NO_RENDER)
+    except LoopCapError as err:     # a driver too limited for this mesh (Vulkan on lavapipe)
+        return fail(f"{err}. Output up to frame {sim.frame} is in {out}/")
     if not ok:
         print(f"loom: {run.diverged}. Output up to frame {sim.frame} is in {out}/ "
               "(last good frame kept).", file=sys.stderr)
