@@ -42,12 +42,13 @@ Every kernel is a module-level ``@ti.kernel`` taking all its arrays (the model's
 solver's work arrays, Taichi ndarrays) as arguments, and the ``@ti.func``s take the arrays they
 read as ``ti.template()`` parameters: a kernel that captured fields (or a data_oriented
 ``self``) was compiled again for every new model and solver, 2.5-10 s per Simulator (issue
-#15); these compile once per process (cloth/strain/buffers.py has the measurements). Kernels
-that read the mesh take the model's arrays in the order of ``MESH_ARRAYS`` followed by x, v and
-the element work arrays in the order of ``ImplicitEuler._elements`` (``*solver._mesh()``,
-``*solver._elements()``). The price, measured against the field version (2-core CPU, f64):
-~0.27 ms more argument handling per step and CG iterations ~1.35x slower (ndarray addressing;
-0.28 -> 0.38 ms per iteration at 4.8k triangles).
+#15); these compile once per process (cloth/strain/buffers.py has the measurements). The
+price, measured against the field version (2-core CPU, f64): ~0.27 ms more argument handling
+per step and CG iterations ~1.35x slower (ndarray addressing; 0.28 -> 0.38 ms per iteration at
+4.8k triangles). The arrays come in named argpacks (``MeshPack``, ``StatePack``,
+``ElementPack``, ``SolvePack``, ``BlockPack``) and the step's scalars in one float array
+(``coef``, read into a ``Constants`` struct by ``constants``), issue #37: a kernel takes 4-8
+parameters where it took up to 49 positional ones.
 """
 from dataclasses import dataclass
 
@@ -62,10 +63,60 @@ from .settings import COMMON_DEFAULTS
 _SIM = COMMON_DEFAULTS["sim"]
 
 
-# The model's arrays the kernels read, in the order the kernels take them (then x and v).
+# The model's arrays the kernels read (``MeshPack``'s members, by the model's names).
 MESH_ARRAYS = ("vert_mass", "vert_pinned", "vert_pin_target", "face_verts", "face_Dm_inv",
                "face_rest_area", "face_grain", "edge_verts", "edge_faces", "edge_opp",
                "edge_rest_angle", "edge_bend_weight", "bend_ptr", "bend_col", "bend_val")
+
+# Named argument groups (issue #37, as the strain solver's in cloth/strain/buffers.py): the
+# kernels take their arrays in these argpacks, by name, instead of up to 49 positional
+# arguments whose order every call site repeated (a misordered one still compiled). Each pack
+# is made once per set of arrays (``ImplicitEuler._packs``, ndarrays.PackCache) and again only
+# when one of them was replaced (a remesh's new ``bend_ptr``). Members are ndarrays only, and
+# a member's name is unique across the packs (Taichi 1.7.4 cannot take two packs sharing one
+# in a kernel).
+#   mesh    the model's rest arrays (``MESH_ARRAYS``) and the stitch pairs;
+#   state   the model's positions and velocities;
+#   elems   per-element kinematics where the step starts (``update_kinematics``);
+#   cg      the Newton step's per-vertex vectors, its block-diagonal preconditioner and the
+#           step's results (``scalars``);
+#   blocks  a system_matrix.BlockMatrix's values and slots (``system_matrix``).
+MeshPack = ti.types.argpack(**{name: A for name in MESH_ARRAYS}, stitch=A)
+StatePack = ti.types.argpack(x=A, v=A)
+ElementPack = ti.types.argpack(face_fu=A, face_fv=A, face_E=A, face_wa=A, face_wb=A,
+                               edge_grad=A, edge_theta=A)
+SolvePack = ti.types.argpack(force=A, dv=A, rhs=A, res=A, z=A, p=A, Ap=A, precond=A,
+                             scalars=A)
+BlockPack = ti.types.argpack(val=A, diag=A, face_slot=A, edge_slot=A, stitch_slot=A,
+                             bend_slot=A)
+
+# The step's scalars: indices into ``coef``, the float array (numpy) every kernel takes
+# (``ImplicitEuler._coef``) and reads once into a ``Constants`` struct (``constants``). They
+# were 9-15 scalar arguments per kernel. Why a numpy array: a CPU kernel reads it in place,
+# and measured with 33 ndarrays in 4 packs (2-core CPU, Taichi 1.7.4) a launch with it costs
+# what one with the 15 loose scalars did (227 vs 231 us), while the same scalars as a Taichi
+# struct argument cost ~95 us more per launch (and ~190 us to make the struct on the host).
+# The counts are exact in a float.
+(C_H, C_G, C_KW, C_KF, C_KS, C_KB, C_ALPHA, C_BETA, C_KST, C_TOL, C_MAX_ITERS, C_NV, C_NF,
+ C_NE, C_NST) = (0, 1, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16)   # C_G: 3 components
+N_COEF = 17
+Constants = ti.types.struct(h=float, g=ti.types.vector(3, float), kw=float, kf=float, ks=float,
+                            kb=float, alpha=float, beta=float, kst=float, tol=float,
+                            max_iters=ti.i32, nv=ti.i32, nf=ti.i32, ne=ti.i32, nst=ti.i32)
+
+
+@ti.func
+def constants(coef: T):
+    """``coef`` as a ``Constants`` struct: h (s), gravity, the warp, weft, shear, bending and
+    stitch stiffnesses, mass and stiffness damping alpha and beta, CG's tolerance and
+    iteration cap, and the counts of vertices, faces, hinges (``n_hinges``) and stitches.
+    Read once per launch into locals: the funcs' inner loops then read no array for them."""
+    return Constants(h=coef[C_H], g=ti.Vector([coef[C_G], coef[C_G + 1], coef[C_G + 2]]),
+                     kw=coef[C_KW], kf=coef[C_KF], ks=coef[C_KS], kb=coef[C_KB],
+                     alpha=coef[C_ALPHA], beta=coef[C_BETA], kst=coef[C_KST], tol=coef[C_TOL],
+                     max_iters=ti.cast(coef[C_MAX_ITERS], ti.i32),
+                     nv=ti.cast(coef[C_NV], ti.i32), nf=ti.cast(coef[C_NF], ti.i32),
+                     ne=ti.cast(coef[C_NE], ti.i32), nst=ti.cast(coef[C_NST], ti.i32))
 
 
 @dataclass
@@ -116,6 +167,18 @@ class ImplicitEuler:
         self.scalars = ti.ndarray(float, 4)
         self.stitch_cap = max(len(self.stitches_np), 1)
         self.stitch = ti.ndarray(ti.types.vector(2, ti.i32), self.stitch_cap)
+        # The kernels' scalars (``C_*``; written before each launch) and argpacks; the
+        # solver's own arrays are never replaced, so their packs are made here.
+        rt = ti.lang.impl.get_runtime()
+        self._coef = np.zeros(N_COEF, np.float64 if rt.default_fp == ti.f64 else np.float32)
+        self._packs = ndarrays.PackCache()
+        self._elems = ElementPack(face_fu=self.face_fu, face_fv=self.face_fv,
+                                  face_E=self.face_E, face_wa=self.face_wa,
+                                  face_wb=self.face_wb, edge_grad=self.edge_grad,
+                                  edge_theta=self.edge_theta)
+        self._cg = SolvePack(force=self.force, dv=self.dv, rhs=self.rhs, res=self.res,
+                             z=self.z, p=self.p, Ap=self.Ap, precond=self.precond,
+                             scalars=self.scalars)
         self.on_mesh_changed()
 
     # -- allocation ---------------------------------------------------------------------------
@@ -152,14 +215,25 @@ class ImplicitEuler:
 
     # -- kernel arguments ---------------------------------------------------------------------
     def _mesh(self):
-        """The model's arrays (``MESH_ARRAYS``), then x and v."""
+        """The model's arrays (``MESH_ARRAYS``) and the stitch pairs (``MeshPack``)."""
         m = self.model
-        return tuple(getattr(m, name) for name in MESH_ARRAYS) + (m.state.x, m.state.v)
+        return self._packs.get("mesh", MeshPack, **{name: getattr(m, name)
+                                                    for name in MESH_ARRAYS},
+                               stitch=self.stitch)
 
-    def _elements(self):
-        """The per-element work arrays and the stitch pairs."""
-        return (self.face_fu, self.face_fv, self.face_E, self.face_wa, self.face_wb,
-                self.edge_grad, self.edge_theta, self.stitch)
+    def _state(self):
+        x, v = self.model.state.x, self.model.state.v
+        return self._packs.get("state", StatePack, x=x, v=v)
+
+    def _constants(self, h=0.0):
+        """``coef`` (``C_*``) for a launch: the step ``h`` (0 where the kernel has none), the
+        material's and settings' values now, and the model's counts."""
+        m, mat, s = self.model, self.model.material, self.settings
+        self._coef[:] = (h, *s.gravity, mat.k_warp, mat.k_weft, mat.k_shear, mat.k_bend,
+                         mat.damp_mass, mat.damp_stiff, s.stitch_stiffness, s.cg_tol,
+                         s.cg_max_iters, m.n_verts, m.n_faces, self.n_hinges,
+                         self.n_stitches)
+        return self._coef
 
     # -- public API ---------------------------------------------------------------------------
     def step(self, h):
@@ -167,13 +241,8 @@ class ImplicitEuler:
         self.model.mark_step_start()
         if self.host_loop:
             return self._step_host_loop(h)
-        m, mat, s = self.model, self.model.material, self.settings
-        rel, iters = _step(h, ti.Vector(list(s.gravity)), mat.k_warp, mat.k_weft, mat.k_shear,
-                           mat.k_bend, mat.damp_mass, mat.damp_stiff, s.stitch_stiffness,
-                           m.n_verts, m.n_faces, self.n_hinges, self.n_stitches, s.cg_tol,
-                           s.cg_max_iters, *self._mesh(), *self._elements(), self.force,
-                           self.dv, self.rhs, self.res, self.z, self.p, self.Ap, self.precond,
-                           self.scalars)
+        rel, iters = _step(self._constants(h), self._mesh(), self._state(), self._elems,
+                           self._cg)
         self.last_cg_iters = int(iters)
         self.last_cg_residual = float(rel)
         return self.last_cg_iters
@@ -181,67 +250,42 @@ class ImplicitEuler:
     def _step_host_loop(self, h):
         """``step`` with the CG loop on the host, one launch per iteration (Vulkan, Metal:
         see ``_linearise``). The same arithmetic as the one-launch kernel."""
-        m, mat, s = self.model, self.model.material, self.settings
-        k = (mat.k_warp, mat.k_weft, mat.k_shear, mat.k_bend)
-        alpha, beta, kst = mat.damp_mass, mat.damp_stiff, s.stitch_stiffness
-        counts = (m.n_verts, m.n_faces, self.n_hinges, self.n_stitches)
-        _linearise(h, ti.Vector(list(s.gravity)), *k, alpha, beta, kst, *counts, *self._mesh(),
-                   *self._elements(), self.force, self.rhs, self.precond)
-        rz, bnorm = _start(h, alpha, beta, *k, kst, *counts, m.vert_mass, m.vert_pinned,
-                           m.vert_pin_target, m.face_verts, m.face_rest_area, m.edge_verts,
-                           m.edge_faces, m.edge_opp, m.edge_bend_weight, m.bend_ptr, m.bend_col,
-                           m.bend_val, m.state.x, m.state.v, self.face_fu, self.face_fv,
-                           self.face_E, self.face_wa, self.face_wb, self.edge_grad,
-                           self.stitch, self.dv, self.rhs, self.res, self.z, self.p, self.Ap,
-                           self.precond)
+        s = self.settings
+        coef, mesh, state = self._constants(h), self._mesh(), self._state()
+        _linearise(coef, mesh, state, self._elems, self._cg)
+        rz, bnorm = _start(coef, mesh, state, self._elems, self._cg)
         rel = float(np.sqrt(abs(rz) / max(bnorm, 1e-300)))
         iters = 0
         while iters < s.cg_max_iters and rel > s.cg_tol:
-            rz_new, stalled = _iteration(
-                rz, h, alpha, beta, *k, kst, *counts, m.vert_mass, m.vert_pinned, m.face_verts,
-                m.face_rest_area, m.edge_verts, m.edge_faces, m.edge_opp, m.edge_bend_weight,
-                m.bend_ptr, m.bend_col, m.bend_val,
-                self.face_fu, self.face_fv, self.face_E, self.face_wa, self.face_wb,
-                self.edge_grad, self.stitch, self.dv, self.res, self.z, self.p, self.Ap,
-                self.precond)
+            rz_new, stalled = _iteration(rz, coef, mesh, self._elems, self._cg)
             if stalled:
                 break
             rz = rz_new
             rel = float(np.sqrt(abs(rz) / max(bnorm, 1e-300)))
             iters += 1
-        _advance(h, m.n_verts, m.vert_pinned, m.vert_pin_target, m.state.x, m.state.v, self.dv)
+        _advance(coef, mesh, state, self._cg)
         self.last_cg_iters, self.last_cg_residual = iters, rel
         return iters
 
     def energy(self):
         """Elastic energy (membrane + bending + stitches) of the current positions, J."""
-        mat = self.model.material
-        return float(_energy(mat.k_warp, mat.k_weft, mat.k_shear, mat.k_bend,
-                             self.settings.stitch_stiffness, self.model.n_faces,
-                             self.n_hinges, self.n_stitches, *self._mesh(),
-                             *self._elements()))
+        return float(_energy(self._constants(), self._mesh(), self._state(), self._elems))
 
     def forces(self):
         """Elastic forces (no gravity, no damping) at the current positions, (V, 3) numpy."""
-        mat = self.model.material
-        _elastic_forces(mat.k_warp, mat.k_weft, mat.k_shear, mat.k_bend,
-                        self.settings.stitch_stiffness, self.model.n_verts, self.model.n_faces,
-                        self.n_hinges, self.n_stitches, *self._mesh(), *self._elements(),
-                        self.force)
+        _elastic_forces(self._constants(), self._mesh(), self._state(), self._elems, self._cg)
         return self.force.to_numpy()[: self.model.n_verts].astype(np.float64)
 
     def force_jacobian_product(self, p, exact=True):
         """(df/dx) p at the current positions for a (V, 3) direction ``p``: exact membrane
         Jacobian when ``exact`` (bending: Gauss-Newton part, exact where theta = theta_0),
         otherwise minus the positive semi-definite K the solver uses."""
-        mat, m = self.model.material, self.model
+        m = self.model
         full = np.zeros((m.v_cap, 3))
         full[: m.n_verts] = p
         self.p.from_numpy(full.astype(self.p.to_numpy().dtype))
-        _jacobian_product(mat.k_warp, mat.k_weft, mat.k_shear, mat.k_bend,
-                          self.settings.stitch_stiffness, m.n_verts, m.n_faces, self.n_hinges,
-                          self.n_stitches, 1 if exact else 0, *self._mesh(), *self._elements(),
-                          self.p, self.Ap)
+        _jacobian_product(1 if exact else 0, self._constants(), self._mesh(), self._state(),
+                          self._elems, self._cg)
         return -self.Ap.to_numpy()[: m.n_verts].astype(np.float64)
 
     def system_matrix(self, h, B):
@@ -249,117 +293,107 @@ class ImplicitEuler:
         stitches) with the matrix of the last ``step(h)``: A = (1 + h alpha) M + h (beta + h)
         K_psd, linearised where that step started (the element data its ``linearise`` left).
         Pinned rows are not filtered (the strain solver keeps pins fixed itself)."""
-        mat, s, m = self.model.material, self.settings, self.model
+        m = self.model
         if B.n_bend != m.n_bend:
             raise ValueError(f"the block pattern holds {B.n_bend} bending entries, the model "
                              f"{m.n_bend}: build it with system_matrix.pattern_of")
-        _fill_blocks(h, mat.damp_mass, mat.damp_stiff, mat.k_warp, mat.k_weft, mat.k_shear,
-                     mat.k_bend, s.stitch_stiffness, m.n_verts, m.n_faces, self.n_hinges,
-                     self.n_stitches, B.nnz, B.val, B.diag, B.face_slot, B.edge_slot,
-                     B.stitch_slot, B.bend_slot, *self._mesh(), *self._elements())
+        blocks = self._packs.get("blocks", BlockPack, val=B.val, diag=B.diag,
+                                 face_slot=B.face_slot, edge_slot=B.edge_slot,
+                                 stitch_slot=B.stitch_slot, bend_slot=B.bend_slot)
+        _fill_blocks(self._constants(h), B.nnz, blocks, self._mesh(), self._elems)
 
 
 @ti.kernel
-def _fill_blocks(h: float, alpha: float, beta: float, kw: float, kf: float, ks: float,
-                 kb: float, kst: float, nv: ti.i32, nf: ti.i32, ne: ti.i32, nst: ti.i32,
-                 nnz: ti.i32, val: A, diag: A, face_slot: A, edge_slot: A, stitch_slot: A,
-                 bend_slot: A,
-                 vert_mass: A, vert_pinned: A, vert_pin_target: A, face_verts: A,
-                 face_Dm_inv: A, face_rest_area: A, face_grain: A, edge_verts: A,
-                 edge_faces: A, edge_opp: A, edge_rest_angle: A, edge_bend_weight: A, bend_ptr: A,
-                 bend_col: A, bend_val: A, x: A,
-                 v: A, face_fu: A, face_fv: A, face_E: A, face_wa: A, face_wb: A,
-                 edge_grad: A, edge_theta: A, stitch: A):
+def _fill_blocks(coef: A, nnz: ti.i32, blocks: BlockPack, mesh: MeshPack, elems: ElementPack):
     # The blocks of add_K_product (exact = 0) written out: serial, as elements share blocks.
     ti.loop_config(serialize=True)
     for _ in range(1):
-        scale = h * (beta + h)
+        c = constants(coef)
+        scale = c.h * (c.beta + c.h)
         I = ti.Matrix.identity(float, 3)
         for k in range(nnz):
-            val[k] = ti.Matrix.zero(float, 3, 3)
-        for i in range(nv):
-            val[diag[i]] += (1.0 + h * alpha) * vert_mass[i] * I
-        for f in range(nf):
-            A = face_rest_area[f]
+            blocks.val[k] = ti.Matrix.zero(float, 3, 3)
+        for i in range(c.nv):
+            blocks.val[blocks.diag[i]] += (1.0 + c.h * c.alpha) * mesh.vert_mass[i] * I
+        for f in range(c.nf):
+            A = mesh.face_rest_area[f]
             for n in ti.static(range(3)):
                 for q in ti.static(range(3)):
-                    val[face_slot[f, 3 * n + q]] += scale * A * \
-                        face_block(f, n, q, kw, kf, ks, face_fu, face_fv, face_E, face_wa,
-                                   face_wb)
-        for e in range(ne):
-            if edge_faces[e][1] >= 0:
-                k = scale * kb * edge_bend_weight[e]
-                G = edge_grad[e]
+                    blocks.val[blocks.face_slot[f, 3 * n + q]] += scale * A * \
+                        face_block(f, n, q, c, elems)
+        for e in range(c.ne):
+            if mesh.edge_faces[e][1] >= 0:
+                k = scale * c.kb * mesh.edge_bend_weight[e]
+                G = elems.edge_grad[e]
                 for n in ti.static(range(4)):
                     gn = ti.Vector([G[n, 0], G[n, 1], G[n, 2]])
                     for q in ti.static(range(4)):
                         gq = ti.Vector([G[q, 0], G[q, 1], G[q, 2]])
-                        val[edge_slot[e, 4 * n + q]] += k * gn.outer_product(gq)
-        for i in range(bend_ptr.shape[0] - 1):
-            for kq in range(bend_ptr[i], bend_ptr[i + 1]):
-                val[bend_slot[kq]] += scale * kb * bend_val[kq] * I
-        for s in range(nst):
-            k = scale * kst
-            val[stitch_slot[s, 0]] += k * I
-            val[stitch_slot[s, 1]] -= k * I
-            val[stitch_slot[s, 2]] -= k * I
-            val[stitch_slot[s, 3]] += k * I
+                        blocks.val[blocks.edge_slot[e, 4 * n + q]] += k * gn.outer_product(gq)
+        for i in range(mesh.bend_ptr.shape[0] - 1):
+            for kq in range(mesh.bend_ptr[i], mesh.bend_ptr[i + 1]):
+                blocks.val[blocks.bend_slot[kq]] += scale * c.kb * mesh.bend_val[kq] * I
+        for s in range(c.nst):
+            k = scale * c.kst
+            blocks.val[blocks.stitch_slot[s, 0]] += k * I
+            blocks.val[blocks.stitch_slot[s, 1]] -= k * I
+            blocks.val[blocks.stitch_slot[s, 2]] -= k * I
+            blocks.val[blocks.stitch_slot[s, 3]] += k * I
 
 
 @ti.func
-def face_block(f, n, q, kw, kf, ks, face_fu: T, face_fv: T, face_E: T, face_wa: T,
-               face_wb: T):
+def face_block(f, n, q, c, elems: T):
     """Block (n, q) of face f's membrane stiffness K = -d2E / dx_n dx_q per unit rest area,
     made positive semi-definite: the curvature terms kept where the warp or weft is in
     tension, the shear's dropped (``add_K_product`` with exact = 0 applies the same K).
     The one definition of the block: the CG preconditioner, the assembled matrix and the
-    sparse direct solver all take it from here."""
-    fu, fv, E = face_fu[f], face_fv[f], face_E[f]
-    wa, wb = face_wa[f], face_wb[f]
+    sparse direct solver all take it from here. ``c``: the ``constants`` (kw, kf, ks)."""
+    fu, fv, E = elems.face_fu[f], elems.face_fv[f], elems.face_E[f]
+    wa, wb = elems.face_wa[f], elems.face_wb[f]
     gn = wa[n] * fv + wb[n] * fu
     gq = wa[q] * fv + wb[q] * fu
     aa, bb = wa[n] * wa[q], wb[n] * wb[q]
-    return kw * aa * fu.outer_product(fu) + kf * bb * fv.outer_product(fv) \
-        + ks * gn.outer_product(gq) \
-        + (kw * ti.max(E[0], 0.0) * aa + kf * ti.max(E[1], 0.0) * bb) * ti.Matrix.identity(float, 3)
+    return c.kw * aa * fu.outer_product(fu) + c.kf * bb * fv.outer_product(fv) \
+        + c.ks * gn.outer_product(gq) \
+        + (c.kw * ti.max(E[0], 0.0) * aa + c.kf * ti.max(E[1], 0.0) * bb) * \
+        ti.Matrix.identity(float, 3)
 
 
 # -- element kinematics -----------------------------------------------------------------------
 @ti.func
-def face_weights(f, face_Dm_inv: T, face_grain: T):
+def face_weights(f, mesh: T):
     """Warp and weft weights a_n, b_n of the face's vertices: F e_warp = sum a_n x_n."""
-    D = face_Dm_inv[f] @ face_grain[f]   # rows: M_j, M_k in grain
+    D = mesh.face_Dm_inv[f] @ mesh.face_grain[f]   # rows: M_j, M_k in grain
     wa = ti.Vector([-D[0, 0] - D[1, 0], D[0, 0], D[1, 0]])
     wb = ti.Vector([-D[0, 1] - D[1, 1], D[0, 1], D[1, 1]])
     return wa, wb
 
 
 @ti.func
-def update_face(f, x: T, face_verts: T, face_Dm_inv: T, face_grain: T, face_fu: T,
-                face_fv: T, face_E: T, face_wa: T, face_wb: T):
-    tri = face_verts[f]
-    wa, wb = face_weights(f, face_Dm_inv, face_grain)
+def update_face(f, mesh: T, state: T, elems: T):
+    tri = mesh.face_verts[f]
+    wa, wb = face_weights(f, mesh)
     fu = ti.Vector([0.0, 0.0, 0.0], dt=float)
     fv = ti.Vector([0.0, 0.0, 0.0], dt=float)
     for n in ti.static(range(3)):
-        fu += wa[n] * x[tri[n]]
-        fv += wb[n] * x[tri[n]]
-    face_fu[f], face_fv[f] = fu, fv
-    face_wa[f], face_wb[f] = wa, wb
-    face_E[f] = ti.Vector([0.5 * (fu.dot(fu) - 1.0), 0.5 * (fv.dot(fv) - 1.0), 0.5 * fu.dot(fv)])
+        fu += wa[n] * state.x[tri[n]]
+        fv += wb[n] * state.x[tri[n]]
+    elems.face_fu[f], elems.face_fv[f] = fu, fv
+    elems.face_wa[f], elems.face_wb[f] = wa, wb
+    elems.face_E[f] = ti.Vector([0.5 * (fu.dot(fu) - 1.0), 0.5 * (fv.dot(fv) - 1.0),
+                                 0.5 * fu.dot(fv)])
 
 
 @ti.func
-def update_edge(e, x: T, edge_verts: T, edge_faces: T, edge_opp: T, edge_grad: T,
-                edge_theta: T):
+def update_edge(e, mesh: T, state: T, elems: T):
     """Dihedral angle and its gradient (Bridson et al. 2003) for edge x0-x1 with opposite
     vertices x2 (face 0, order x0 x1 x2) and x3 (face 1, order x1 x0 x3)."""
     theta = 0.0
     G = ti.Matrix.zero(float, 4, 3)
-    if edge_faces[e][1] >= 0:
-        ev, eo = edge_verts[e], edge_opp[e]
-        x0, x1 = x[ev[0]], x[ev[1]]
-        x2, x3 = x[eo[0]], x[eo[1]]
+    if mesh.edge_faces[e][1] >= 0:
+        ev, eo = mesh.edge_verts[e], mesh.edge_opp[e]
+        x0, x1 = state.x[ev[0]], state.x[ev[1]]
+        x2, x3 = state.x[eo[0]], state.x[eo[1]]
         ed = x1 - x0
         n1 = ed.cross(x2 - x0)
         n2 = (x3 - x0).cross(ed)
@@ -375,14 +409,14 @@ def update_edge(e, x: T, edge_verts: T, edge_faces: T, edge_opp: T, edge_grad: T
             g1 = (x2 - x0).dot(eh) * u1 + (x3 - x0).dot(eh) * u2
             for c in ti.static(range(3)):
                 G[0, c], G[1, c], G[2, c], G[3, c] = g0[c], g1[c], g2[c], g3[c]
-    edge_theta[e] = theta
-    edge_grad[e] = G
+    elems.edge_theta[e] = theta
+    elems.edge_grad[e] = G
 
 
 @ti.func
-def edge_vertex(e, n, edge_verts: T, edge_opp: T):
+def edge_vertex(e, n, mesh: T):
     """Vertex n (0..3) of edge e's bending stencil: x0, x1, x2, x3."""
-    ev, eo = edge_verts[e], edge_opp[e]
+    ev, eo = mesh.edge_verts[e], mesh.edge_opp[e]
     vid = eo[1]
     if n == 0:
         vid = ev[0]
@@ -394,74 +428,62 @@ def edge_vertex(e, n, edge_verts: T, edge_opp: T):
 
 
 @ti.func
-def update_kinematics(nf: ti.i32, ne: ti.i32, x: T, face_verts: T, face_Dm_inv: T,
-                      face_grain: T, edge_verts: T, edge_faces: T, edge_opp: T, face_fu: T,
-                      face_fv: T, face_E: T, face_wa: T, face_wb: T, edge_grad: T,
-                      edge_theta: T):
-    for f in range(nf):
-        update_face(f, x, face_verts, face_Dm_inv, face_grain, face_fu, face_fv, face_E,
-                    face_wa, face_wb)
-    for e in range(ne):
-        update_edge(e, x, edge_verts, edge_faces, edge_opp, edge_grad, edge_theta)
+def update_kinematics(c, mesh: T, state: T, elems: T):
+    for f in range(c.nf):
+        update_face(f, mesh, state, elems)
+    for e in range(c.ne):
+        update_edge(e, mesh, state, elems)
 
 
 @ti.func
-def bend_apply(src: T, dst: T, scale, bend_ptr: T, bend_col: T, bend_val: T):
+def bend_apply(src: T, dst: T, scale, mesh: T):
     """dst += scale * Q src, Q the isotropic bending matrix (cloth/bending.py; its rows are
     empty when the model uses the hinge energy). Row by row: no atomics. Q's rows sum to
     zero, so row i applies to src_k - src_i: exact for a translated cloth, and without the
     round-off of large positions (1e-16 |x| |Q| per entry)."""
-    for i in range(bend_ptr.shape[0] - 1):
+    for i in range(mesh.bend_ptr.shape[0] - 1):
         acc = ti.Vector([0.0, 0.0, 0.0])
-        for k in range(bend_ptr[i], bend_ptr[i + 1]):
-            acc += bend_val[k] * (src[bend_col[k]] - src[i])
+        for k in range(mesh.bend_ptr[i], mesh.bend_ptr[i + 1]):
+            acc += mesh.bend_val[k] * (src[mesh.bend_col[k]] - src[i])
         dst[i] += scale * acc
 
 
 # -- forces -----------------------------------------------------------------------------------
 @ti.func
-def add_elastic_forces(force: T, kw, kf, ks, kb, kst, nf: ti.i32, ne: ti.i32, nst: ti.i32,
-                       x: T, face_verts: T, face_rest_area: T, edge_verts: T, edge_faces: T,
-                       edge_opp: T, edge_rest_angle: T, edge_bend_weight: T, bend_ptr: T,
-                       bend_col: T, bend_val: T, face_fu: T,
-                       face_fv: T, face_E: T, face_wa: T, face_wb: T, edge_grad: T,
-                       edge_theta: T, stitch: T):
-    for f in range(nf):
-        tri = face_verts[f]
-        A = face_rest_area[f]
-        fu, fv, E = face_fu[f], face_fv[f], face_E[f]
-        wa, wb = face_wa[f], face_wb[f]
+def add_elastic_forces(force: T, c, mesh: T, state: T, elems: T):
+    for f in range(c.nf):
+        tri = mesh.face_verts[f]
+        A = mesh.face_rest_area[f]
+        fu, fv, E = elems.face_fu[f], elems.face_fv[f], elems.face_E[f]
+        wa, wb = elems.face_wa[f], elems.face_wb[f]
         for n in ti.static(range(3)):
-            grad = A * (kw * E[0] * wa[n] * fu + kf * E[1] * wb[n] * fv
-                        + 2.0 * ks * E[2] * (wa[n] * fv + wb[n] * fu))
+            grad = A * (c.kw * E[0] * wa[n] * fu + c.kf * E[1] * wb[n] * fv
+                        + 2.0 * c.ks * E[2] * (wa[n] * fv + wb[n] * fu))
             force[tri[n]] -= grad
-    for e in range(ne):
-        if edge_faces[e][1] >= 0:
-            coef = kb * edge_bend_weight[e] * (edge_theta[e] - edge_rest_angle[e])
-            G = edge_grad[e]
+    for e in range(c.ne):
+        if mesh.edge_faces[e][1] >= 0:
+            w = c.kb * mesh.edge_bend_weight[e] * (elems.edge_theta[e] -
+                                                   mesh.edge_rest_angle[e])
+            G = elems.edge_grad[e]
             for n in ti.static(range(4)):
-                vid = edge_vertex(e, n, edge_verts, edge_opp)
-                force[vid] -= coef * ti.Vector([G[n, 0], G[n, 1], G[n, 2]])
-    bend_apply(x, force, -kb, bend_ptr, bend_col, bend_val)
-    for s in range(nst):
-        a, b = stitch[s][0], stitch[s][1]
-        d = x[a] - x[b]
-        force[a] -= kst * d
-        force[b] += kst * d
+                vid = edge_vertex(e, n, mesh)
+                force[vid] -= w * ti.Vector([G[n, 0], G[n, 1], G[n, 2]])
+    bend_apply(state.x, force, -c.kb, mesh)
+    for s in range(c.nst):
+        a, b = mesh.stitch[s][0], mesh.stitch[s][1]
+        d = state.x[a] - state.x[b]
+        force[a] -= c.kst * d
+        force[b] += c.kst * d
 
 
 @ti.func
-def add_K_product(src: T, dst: T, scale, kw, kf, ks, kb, kst, nf: ti.i32, ne: ti.i32,
-                  nst: ti.i32, exact: ti.i32, face_verts: T, face_rest_area: T, edge_verts: T,
-                  edge_faces: T, edge_opp: T, edge_bend_weight: T, bend_ptr: T, bend_col: T,
-                  bend_val: T, face_fu: T, face_fv: T,
-                  face_E: T, face_wa: T, face_wb: T, edge_grad: T, stitch: T):
+def add_K_product(src: T, dst: T, scale, c, exact: ti.i32, mesh: T, elems: T):
     """dst += scale * K src, with K = -df/dx (PSD-projected unless ``exact``)."""
-    for f in range(nf):
-        tri = face_verts[f]
-        A = face_rest_area[f]
-        fu, fv, E = face_fu[f], face_fv[f], face_E[f]
-        wa, wb = face_wa[f], face_wb[f]
+    for f in range(c.nf):
+        tri = mesh.face_verts[f]
+        A = mesh.face_rest_area[f]
+        fu, fv, E = elems.face_fu[f], elems.face_fv[f], elems.face_E[f]
+        wa, wb = elems.face_wa[f], elems.face_wb[f]
         dfu = wa[0] * src[tri[0]] + wa[1] * src[tri[1]] + wa[2] * src[tri[2]]
         dfv = wb[0] * src[tri[0]] + wb[1] * src[tri[1]] + wb[2] * src[tri[2]]
         dE0, dE1 = fu.dot(dfu), fv.dot(dfv)
@@ -471,293 +493,207 @@ def add_K_product(src: T, dst: T, scale, kw, kf, ks, kb, kst, nf: ti.i32, ne: ti
         if exact == 0:
             E0, E1, E2 = ti.max(E0, 0.0), ti.max(E1, 0.0), 0.0
         for n in ti.static(range(3)):
-            out = kw * (dE0 * wa[n] * fu + E0 * wa[n] * dfu) \
-                + kf * (dE1 * wb[n] * fv + E1 * wb[n] * dfv) \
-                + 2.0 * ks * (dE2 * (wa[n] * fv + wb[n] * fu) + E2 * (wa[n] * dfv + wb[n] * dfu))
+            out = c.kw * (dE0 * wa[n] * fu + E0 * wa[n] * dfu) \
+                + c.kf * (dE1 * wb[n] * fv + E1 * wb[n] * dfv) \
+                + 2.0 * c.ks * (dE2 * (wa[n] * fv + wb[n] * fu)
+                                + E2 * (wa[n] * dfv + wb[n] * dfu))
             dst[tri[n]] += scale * A * out
-    for e in range(ne):
-        if edge_faces[e][1] >= 0:
-            k = kb * edge_bend_weight[e]
-            G = edge_grad[e]
+    for e in range(c.ne):
+        if mesh.edge_faces[e][1] >= 0:
+            k = c.kb * mesh.edge_bend_weight[e]
+            G = elems.edge_grad[e]
             dtheta = 0.0
             for n in ti.static(range(4)):
                 dtheta += ti.Vector([G[n, 0], G[n, 1], G[n, 2]]).dot(
-                    src[edge_vertex(e, n, edge_verts, edge_opp)])
+                    src[edge_vertex(e, n, mesh)])
             for n in ti.static(range(4)):
-                dst[edge_vertex(e, n, edge_verts, edge_opp)] += scale * k * dtheta * \
+                dst[edge_vertex(e, n, mesh)] += scale * k * dtheta * \
                     ti.Vector([G[n, 0], G[n, 1], G[n, 2]])
-    bend_apply(src, dst, scale * kb, bend_ptr, bend_col, bend_val)
-    for s in range(nst):
-        a, b = stitch[s][0], stitch[s][1]
+    bend_apply(src, dst, scale * c.kb, mesh)
+    for s in range(c.nst):
+        a, b = mesh.stitch[s][0], mesh.stitch[s][1]
         d = src[a] - src[b]
-        dst[a] += scale * kst * d
-        dst[b] -= scale * kst * d
+        dst[a] += scale * c.kst * d
+        dst[b] -= scale * c.kst * d
 
 
 @ti.func
-def add_K_diagonal(precond: T, scale, kw, kf, ks, kb, kst, nf: ti.i32, ne: ti.i32,
-                   nst: ti.i32, face_verts: T, face_rest_area: T, edge_verts: T,
-                   edge_faces: T, edge_opp: T, edge_bend_weight: T, bend_ptr: T, bend_col: T,
-                   bend_val: T, face_fu: T, face_fv: T,
-                   face_E: T, face_wa: T, face_wb: T, edge_grad: T, stitch: T):
+def add_K_diagonal(precond: T, scale, c, mesh: T, elems: T):
     """precond += scale * (3x3 diagonal blocks of the PSD K)."""
-    for f in range(nf):
-        tri = face_verts[f]
-        A = face_rest_area[f]
+    for f in range(c.nf):
+        tri = mesh.face_verts[f]
+        A = mesh.face_rest_area[f]
         for n in ti.static(range(3)):
-            precond[tri[n]] += scale * A * face_block(f, n, n, kw, kf, ks, face_fu, face_fv,
-                                                      face_E, face_wa, face_wb)
-    for e in range(ne):
-        if edge_faces[e][1] >= 0:
-            k = kb * edge_bend_weight[e]
-            G = edge_grad[e]
+            precond[tri[n]] += scale * A * face_block(f, n, n, c, elems)
+    for e in range(c.ne):
+        if mesh.edge_faces[e][1] >= 0:
+            k = c.kb * mesh.edge_bend_weight[e]
+            G = elems.edge_grad[e]
             for n in ti.static(range(4)):
                 g = ti.Vector([G[n, 0], G[n, 1], G[n, 2]])
-                precond[edge_vertex(e, n, edge_verts, edge_opp)] += scale * k * g.outer_product(g)
-    for i in range(bend_ptr.shape[0] - 1):
-        if bend_ptr[i + 1] > bend_ptr[i]:          # the row's diagonal entry comes first
-            precond[i] += scale * kb * bend_val[bend_ptr[i]] * ti.Matrix.identity(float, 3)
-    for s in range(nst):
+                precond[edge_vertex(e, n, mesh)] += scale * k * g.outer_product(g)
+    for i in range(mesh.bend_ptr.shape[0] - 1):
+        if mesh.bend_ptr[i + 1] > mesh.bend_ptr[i]:   # the row's diagonal entry comes first
+            precond[i] += scale * c.kb * mesh.bend_val[mesh.bend_ptr[i]] * \
+                ti.Matrix.identity(float, 3)
+    for s in range(c.nst):
         I = ti.Matrix.identity(float, 3)
-        precond[stitch[s][0]] += scale * kst * I
-        precond[stitch[s][1]] += scale * kst * I
+        precond[mesh.stitch[s][0]] += scale * c.kst * I
+        precond[mesh.stitch[s][1]] += scale * c.kst * I
 
 
 # -- kernels ----------------------------------------------------------------------------------
+# The kernels without a serial loop read the constants at their top: Taichi hands them to the
+# parallel loops that follow through its global temporaries.
 @ti.kernel
-def _elastic_forces(kw: float, kf: float, ks: float, kb: float, kst: float, nv: ti.i32,
-                    nf: ti.i32, ne: ti.i32, nst: ti.i32, vert_mass: A, vert_pinned: A,
-                    vert_pin_target: A, face_verts: A, face_Dm_inv: A, face_rest_area: A,
-                    face_grain: A, edge_verts: A, edge_faces: A, edge_opp: A,
-                    edge_rest_angle: A, edge_bend_weight: A, bend_ptr: A, bend_col: A, bend_val: A,
-                    x: A, v: A, face_fu: A,
-                    face_fv: A, face_E: A, face_wa: A, face_wb: A, edge_grad: A,
-                    edge_theta: A, stitch: A, force: A):
-    for i in range(nv):
-        force[i] = ti.Vector([0.0, 0.0, 0.0])
-    update_kinematics(nf, ne, x, face_verts, face_Dm_inv, face_grain, edge_verts, edge_faces,
-                      edge_opp, face_fu, face_fv, face_E, face_wa, face_wb, edge_grad,
-                      edge_theta)
-    add_elastic_forces(force, kw, kf, ks, kb, kst, nf, ne, nst, x, face_verts, face_rest_area,
-                       edge_verts, edge_faces, edge_opp, edge_rest_angle, edge_bend_weight,
-                       bend_ptr, bend_col, bend_val,
-                       face_fu, face_fv, face_E, face_wa, face_wb, edge_grad, edge_theta,
-                       stitch)
+def _elastic_forces(coef: A, mesh: MeshPack, state: StatePack, elems: ElementPack,
+                    cg: SolvePack):
+    c = constants(coef)
+    for i in range(c.nv):
+        cg.force[i] = ti.Vector([0.0, 0.0, 0.0])
+    update_kinematics(c, mesh, state, elems)
+    add_elastic_forces(cg.force, c, mesh, state, elems)
 
 
 @ti.kernel
-def _jacobian_product(kw: float, kf: float, ks: float, kb: float, kst: float, nv: ti.i32,
-                      nf: ti.i32, ne: ti.i32, nst: ti.i32, exact: ti.i32, vert_mass: A,
-                      vert_pinned: A, vert_pin_target: A, face_verts: A, face_Dm_inv: A,
-                      face_rest_area: A, face_grain: A, edge_verts: A, edge_faces: A,
-                      edge_opp: A, edge_rest_angle: A, edge_bend_weight: A, bend_ptr: A,
-                      bend_col: A, bend_val: A, x: A, v: A,
-                      face_fu: A, face_fv: A, face_E: A, face_wa: A, face_wb: A,
-                      edge_grad: A, edge_theta: A, stitch: A, p: A, Ap: A):
-    for i in range(nv):
-        Ap[i] = ti.Vector([0.0, 0.0, 0.0])
-    update_kinematics(nf, ne, x, face_verts, face_Dm_inv, face_grain, edge_verts, edge_faces,
-                      edge_opp, face_fu, face_fv, face_E, face_wa, face_wb, edge_grad,
-                      edge_theta)
-    add_K_product(p, Ap, 1.0, kw, kf, ks, kb, kst, nf, ne, nst, exact, face_verts,
-                  face_rest_area, edge_verts, edge_faces, edge_opp, edge_bend_weight, bend_ptr,
-                  bend_col, bend_val, face_fu,
-                  face_fv, face_E, face_wa, face_wb, edge_grad, stitch)
+def _jacobian_product(exact: ti.i32, coef: A, mesh: MeshPack, state: StatePack,
+                      elems: ElementPack, cg: SolvePack):
+    c = constants(coef)
+    for i in range(c.nv):
+        cg.Ap[i] = ti.Vector([0.0, 0.0, 0.0])
+    update_kinematics(c, mesh, state, elems)
+    add_K_product(cg.p, cg.Ap, 1.0, c, exact, mesh, elems)
 
 
 @ti.kernel
-def _energy(kw: float, kf: float, ks: float, kb: float, kst: float, nf: ti.i32, ne: ti.i32,
-            nst: ti.i32, vert_mass: A, vert_pinned: A, vert_pin_target: A, face_verts: A,
-            face_Dm_inv: A, face_rest_area: A, face_grain: A, edge_verts: A, edge_faces: A,
-            edge_opp: A, edge_rest_angle: A, edge_bend_weight: A, bend_ptr: A, bend_col: A,
-            bend_val: A, x: A, v: A, face_fu: A,
-            face_fv: A, face_E: A, face_wa: A, face_wb: A, edge_grad: A, edge_theta: A,
-            stitch: A) -> float:
-    update_kinematics(nf, ne, x, face_verts, face_Dm_inv, face_grain, edge_verts, edge_faces,
-                      edge_opp, face_fu, face_fv, face_E, face_wa, face_wb, edge_grad,
-                      edge_theta)
+def _energy(coef: A, mesh: MeshPack, state: StatePack, elems: ElementPack) -> float:
+    c = constants(coef)
+    update_kinematics(c, mesh, state, elems)
     total = 0.0
-    for f in range(nf):
-        E = face_E[f]
-        total += face_rest_area[f] * (0.5 * kw * E[0] ** 2 + 0.5 * kf * E[1] ** 2
-                                      + 2.0 * ks * E[2] ** 2)
-    for e in range(ne):
-        if edge_faces[e][1] >= 0:
-            d = edge_theta[e] - edge_rest_angle[e]
-            total += 0.5 * kb * edge_bend_weight[e] * d * d
+    for f in range(c.nf):
+        E = elems.face_E[f]
+        total += mesh.face_rest_area[f] * (0.5 * c.kw * E[0] ** 2 + 0.5 * c.kf * E[1] ** 2
+                                           + 2.0 * c.ks * E[2] ** 2)
+    for e in range(c.ne):
+        if mesh.edge_faces[e][1] >= 0:
+            d = elems.edge_theta[e] - mesh.edge_rest_angle[e]
+            total += 0.5 * c.kb * mesh.edge_bend_weight[e] * d * d
     # x.Qx = -1/2 sum_ik Q_ik |x_i - x_k|^2 (rows summing to zero): terms the size of the
     # bends themselves. The plain sum of Q_ik x_i.x_k cancels terms ~1e4 times larger, and its
     # round-off (the parallel sum's order varies) stalled the calibration's energy descent.
-    for i in range(bend_ptr.shape[0] - 1):
-        for k in range(bend_ptr[i], bend_ptr[i + 1]):
-            d = x[i] - x[bend_col[k]]
-            total -= 0.25 * kb * bend_val[k] * d.dot(d)
-    for s in range(nst):
-        d = x[stitch[s][0]] - x[stitch[s][1]]
-        total += 0.5 * kst * d.dot(d)
+    for i in range(mesh.bend_ptr.shape[0] - 1):
+        for k in range(mesh.bend_ptr[i], mesh.bend_ptr[i + 1]):
+            d = state.x[i] - state.x[mesh.bend_col[k]]
+            total -= 0.25 * c.kb * mesh.bend_val[k] * d.dot(d)
+    for s in range(c.nst):
+        d = state.x[mesh.stitch[s][0]] - state.x[mesh.stitch[s][1]]
+        total += 0.5 * c.kst * d.dot(d)
     return total
 
 
 @ti.func
-def free_residual(res: T, rhs: T, Ap: T, vert_pinned: T, nv: ti.i32):
+def free_residual(c, mesh: T, cg: T):
     """res = rhs - Ap on the free rows and 0 on the pinned ones: CG's starting residual."""
-    for i in range(nv):
-        res[i] = rhs[i] - Ap[i]
-        if vert_pinned[i] != 0:
-            res[i] = ti.Vector([0.0, 0.0, 0.0])
+    for i in range(c.nv):
+        cg.res[i] = cg.rhs[i] - cg.Ap[i]
+        if mesh.vert_pinned[i] != 0:
+            cg.res[i] = ti.Vector([0.0, 0.0, 0.0])
 
 
 @ti.func
-def apply_A(src: T, dst: T, h, alpha, beta, kw, kf, ks, kb, kst, nv: ti.i32, nf: ti.i32,
-            ne: ti.i32, nst: ti.i32, vert_mass: T, vert_pinned: T, face_verts: T,
-            face_rest_area: T, edge_verts: T, edge_faces: T, edge_opp: T,
-            edge_bend_weight: T, bend_ptr: T, bend_col: T, bend_val: T, face_fu: T, face_fv: T,
-            face_E: T, face_wa: T, face_wb: T,
-            edge_grad: T, stitch: T):
+def apply_A(src: T, dst: T, c, mesh: T, elems: T):
     """dst = A src with A = (1 + h alpha) M + h (beta + h) K, pinned rows filtered."""
-    for i in range(nv):
-        dst[i] = (1.0 + h * alpha) * vert_mass[i] * src[i]
-    add_K_product(src, dst, h * (beta + h), kw, kf, ks, kb, kst, nf, ne, nst, 0, face_verts,
-                  face_rest_area, edge_verts, edge_faces, edge_opp, edge_bend_weight, bend_ptr,
-                  bend_col, bend_val, face_fu,
-                  face_fv, face_E, face_wa, face_wb, edge_grad, stitch)
-    for i in range(nv):
-        if vert_pinned[i] != 0:
+    for i in range(c.nv):
+        dst[i] = (1.0 + c.h * c.alpha) * mesh.vert_mass[i] * src[i]
+    add_K_product(src, dst, c.h * (c.beta + c.h), c, 0, mesh, elems)
+    for i in range(c.nv):
+        if mesh.vert_pinned[i] != 0:
             dst[i] = ti.Vector([0.0, 0.0, 0.0])
 
 
 @ti.func
-def linearise(h, g, kw, kf, ks, kb, alpha, beta, kst, nv: ti.i32, nf: ti.i32, ne: ti.i32,
-              nst: ti.i32, force: T, precond: T, rhs: T, vert_mass: T, face_verts: T,
-              face_Dm_inv: T, face_rest_area: T, face_grain: T, edge_verts: T, edge_faces: T,
-              edge_opp: T, edge_rest_angle: T, edge_bend_weight: T, bend_ptr: T, bend_col: T,
-              bend_val: T, x: T, v: T, face_fu: T,
-              face_fv: T, face_E: T, face_wa: T, face_wb: T, edge_grad: T, edge_theta: T,
-              stitch: T):
+def linearise(c, mesh: T, state: T, elems: T, cg: T):
     """Forces and element quantities at the start of the step, the diagonal blocks of A
-    (in ``precond``) and the right-hand side h (f - alpha M v) - h (beta + h) K v."""
-    for i in range(nv):
-        force[i] = vert_mass[i] * g
-        precond[i] = (1.0 + h * alpha) * vert_mass[i] * ti.Matrix.identity(float, 3)
-    update_kinematics(nf, ne, x, face_verts, face_Dm_inv, face_grain, edge_verts, edge_faces,
-                      edge_opp, face_fu, face_fv, face_E, face_wa, face_wb, edge_grad,
-                      edge_theta)
-    add_elastic_forces(force, kw, kf, ks, kb, kst, nf, ne, nst, x, face_verts, face_rest_area,
-                       edge_verts, edge_faces, edge_opp, edge_rest_angle, edge_bend_weight,
-                       bend_ptr, bend_col, bend_val,
-                       face_fu, face_fv, face_E, face_wa, face_wb, edge_grad, edge_theta,
-                       stitch)
-    add_K_diagonal(precond, h * (beta + h), kw, kf, ks, kb, kst, nf, ne, nst, face_verts,
-                   face_rest_area, edge_verts, edge_faces, edge_opp, edge_bend_weight, bend_ptr,
-                   bend_col, bend_val, face_fu,
-                   face_fv, face_E, face_wa, face_wb, edge_grad, stitch)
-    for i in range(nv):
-        rhs[i] = h * (force[i] - alpha * vert_mass[i] * v[i])
-    add_K_product(v, rhs, -h * (beta + h), kw, kf, ks, kb, kst, nf, ne, nst, 0, face_verts,
-                  face_rest_area, edge_verts, edge_faces, edge_opp, edge_bend_weight, bend_ptr,
-                  bend_col, bend_val, face_fu,
-                  face_fv, face_E, face_wa, face_wb, edge_grad, stitch)
+    (in ``cg.precond``) and the right-hand side h (f - alpha M v) - h (beta + h) K v."""
+    for i in range(c.nv):
+        cg.force[i] = mesh.vert_mass[i] * c.g
+        cg.precond[i] = (1.0 + c.h * c.alpha) * mesh.vert_mass[i] * ti.Matrix.identity(float, 3)
+    update_kinematics(c, mesh, state, elems)
+    add_elastic_forces(cg.force, c, mesh, state, elems)
+    add_K_diagonal(cg.precond, c.h * (c.beta + c.h), c, mesh, elems)
+    for i in range(c.nv):
+        cg.rhs[i] = c.h * (cg.force[i] - c.alpha * mesh.vert_mass[i] * state.v[i])
+    add_K_product(state.v, cg.rhs, -c.h * (c.beta + c.h), c, 0, mesh, elems)
 
 
 # The step's phases, shared by the one-launch kernel and the host-loop kernels.
 @ti.func
-def cg_begin(h, g, kw, kf, ks, kb, alpha, beta, kst, nv: ti.i32, nf: ti.i32, ne: ti.i32,
-             nst: ti.i32, vert_mass: T, vert_pinned: T, vert_pin_target: T, face_verts: T,
-             face_Dm_inv: T, face_rest_area: T, face_grain: T, edge_verts: T, edge_faces: T,
-             edge_opp: T, edge_rest_angle: T, edge_bend_weight: T, bend_ptr: T, bend_col: T,
-             bend_val: T, x: T, v: T, face_fu: T, face_fv: T, face_E: T, face_wa: T,
-             face_wb: T, edge_grad: T, edge_theta: T, stitch: T, force: T, dv: T, rhs: T,
-             res: T, z: T, p: T, Ap: T, precond: T):
+def cg_begin(c, mesh: T, state: T, elems: T, cg: T):
     """Linearise, prescribe the pinned dv, and start PCG: returns (r.z, b.P b) (CG's scale:
     the free rows only)."""
-    linearise(h, g, kw, kf, ks, kb, alpha, beta, kst, nv, nf, ne, nst, force, precond, rhs,
-              vert_mass, face_verts, face_Dm_inv, face_rest_area, face_grain, edge_verts,
-              edge_faces, edge_opp, edge_rest_angle, edge_bend_weight, bend_ptr, bend_col,
-              bend_val, x, v, face_fu, face_fv, face_E, face_wa, face_wb, edge_grad,
-              edge_theta, stitch)
-    return cg_start(h, alpha, beta, kw, kf, ks, kb, kst, nv, nf, ne, nst, vert_mass,
-                    vert_pinned, vert_pin_target, face_verts, face_rest_area, edge_verts,
-                    edge_faces, edge_opp, edge_bend_weight, bend_ptr, bend_col, bend_val, x,
-                    v, face_fu, face_fv, face_E, face_wa, face_wb, edge_grad, stitch, dv, rhs,
-                    res, z, p, Ap, precond)
+    linearise(c, mesh, state, elems, cg)
+    return cg_start(c, mesh, state, elems, cg)
 
 
 @ti.func
-def cg_start(h, alpha, beta, kw, kf, ks, kb, kst, nv: ti.i32, nf: ti.i32, ne: ti.i32,
-             nst: ti.i32, vert_mass: T, vert_pinned: T, vert_pin_target: T, face_verts: T,
-             face_rest_area: T, edge_verts: T, edge_faces: T, edge_opp: T,
-             edge_bend_weight: T, bend_ptr: T, bend_col: T, bend_val: T, x: T, v: T,
-             face_fu: T, face_fv: T, face_E: T, face_wa: T, face_wb: T, edge_grad: T,
-             stitch: T, dv: T, rhs: T, res: T, z: T, p: T, Ap: T, precond: T):
+def cg_start(c, mesh: T, state: T, elems: T, cg: T):
     """After ``linearise``: prescribe the pinned dv and start PCG."""
     # Pinned vertices: the dv that lands them on their target at the end of the step.
     # Free vertices start CG from the last step's dv (warm start: near rest, successive
     # velocity changes are alike); on_mesh_changed zeroes it after a remesh.
-    for i in range(nv):
-        if vert_pinned[i] != 0:
-            dv[i] = (vert_pin_target[i] - x[i]) / h - v[i]
-        precond[i] = precond[i].inverse()
+    for i in range(c.nv):
+        if mesh.vert_pinned[i] != 0:
+            cg.dv[i] = (mesh.vert_pin_target[i] - state.x[i]) / c.h - state.v[i]
+        cg.precond[i] = cg.precond[i].inverse()
     # r = b - A dv over the free vertices (pinned dv enters through the coupling).
-    apply_A(dv, Ap, h, alpha, beta, kw, kf, ks, kb, kst, nv, nf, ne, nst, vert_mass,
-            vert_pinned, face_verts, face_rest_area, edge_verts, edge_faces, edge_opp,
-            edge_bend_weight, bend_ptr, bend_col, bend_val, face_fu, face_fv, face_E, face_wa,
-            face_wb, edge_grad, stitch)
-    free_residual(res, rhs, Ap, vert_pinned, nv)
+    apply_A(cg.dv, cg.Ap, c, mesh, elems)
+    free_residual(c, mesh, cg)
     rz = 0.0
     bnorm = 0.0
-    for i in range(nv):
-        z[i] = precond[i] @ res[i]
-        p[i] = z[i]
-        rz += res[i].dot(z[i])
-        if vert_pinned[i] == 0:
-            bnorm += rhs[i].dot(precond[i] @ rhs[i])
+    for i in range(c.nv):
+        cg.z[i] = cg.precond[i] @ cg.res[i]
+        cg.p[i] = cg.z[i]
+        rz += cg.res[i].dot(cg.z[i])
+        if mesh.vert_pinned[i] == 0:
+            bnorm += cg.rhs[i].dot(cg.precond[i] @ cg.rhs[i])
     return ti.Vector([rz, bnorm])
 
 
 @ti.func
-def cg_iteration(rz, h, alpha, beta, kw, kf, ks, kb, kst, nv: ti.i32, nf: ti.i32,
-                 ne: ti.i32, nst: ti.i32, vert_mass: T, vert_pinned: T, face_verts: T,
-                 face_rest_area: T, edge_verts: T, edge_faces: T, edge_opp: T,
-                 edge_bend_weight: T, bend_ptr: T, bend_col: T, bend_val: T, face_fu: T,
-                 face_fv: T, face_E: T, face_wa: T,
-                 face_wb: T, edge_grad: T, stitch: T, dv: T, res: T, z: T, p: T, Ap: T,
-                 precond: T):
+def cg_iteration(rz, c, mesh: T, elems: T, cg: T):
     """One preconditioned CG iteration on the free vertices: returns (new r.z, 1 if it
     stalled on p.A p <= 0 and changed nothing)."""
-    apply_A(p, Ap, h, alpha, beta, kw, kf, ks, kb, kst, nv, nf, ne, nst, vert_mass,
-            vert_pinned, face_verts, face_rest_area, edge_verts, edge_faces, edge_opp,
-            edge_bend_weight, bend_ptr, bend_col, bend_val, face_fu, face_fv, face_E, face_wa,
-            face_wb, edge_grad, stitch)
+    apply_A(cg.p, cg.Ap, c, mesh, elems)
     pAp = 0.0
-    for i in range(nv):
-        pAp += p[i].dot(Ap[i])
+    for i in range(c.nv):
+        pAp += cg.p[i].dot(cg.Ap[i])
     rz_new = rz
     stalled = 1.0
     if pAp > 0.0:
         stalled = 0.0
         step = rz / pAp
         rz_new = 0.0
-        for i in range(nv):
-            dv[i] += step * p[i]
-            res[i] -= step * Ap[i]
-            z[i] = precond[i] @ res[i]
-            rz_new += res[i].dot(z[i])
+        for i in range(c.nv):
+            cg.dv[i] += step * cg.p[i]
+            cg.res[i] -= step * cg.Ap[i]
+            cg.z[i] = cg.precond[i] @ cg.res[i]
+            rz_new += cg.res[i].dot(cg.z[i])
         beta_cg = rz_new / rz
-        for i in range(nv):
-            p[i] = z[i] + beta_cg * p[i]
-            if vert_pinned[i] != 0:
-                p[i] = ti.Vector([0.0, 0.0, 0.0])
+        for i in range(c.nv):
+            cg.p[i] = cg.z[i] + beta_cg * cg.p[i]
+            if mesh.vert_pinned[i] != 0:
+                cg.p[i] = ti.Vector([0.0, 0.0, 0.0])
     return ti.Vector([rz_new, stalled])
 
 
 @ti.func
-def advance(h, nv: ti.i32, vert_pinned: T, vert_pin_target: T, x: T, v: T, dv: T):
+def advance(c, mesh: T, state: T, cg: T):
     """v += dv, x += h v; pins exactly on target."""
-    for i in range(nv):
-        v[i] += dv[i]
-        x[i] += h * v[i]
-        if vert_pinned[i] != 0:
-            x[i] = vert_pin_target[i]
+    for i in range(c.nv):
+        state.v[i] += cg.dv[i]
+        state.x[i] += c.h * state.v[i]
+        if mesh.vert_pinned[i] != 0:
+            state.x[i] = mesh.vert_pin_target[i]
 
 
 @ti.func
@@ -766,46 +702,31 @@ def relative(rz, bnorm):
 
 
 @ti.kernel
-def _step(h: float, g: ti.types.vector(3, float), kw: float, kf: float, ks: float, kb: float,
-          alpha: float, beta: float, kst: float, nv: ti.i32, nf: ti.i32, ne: ti.i32,
-          nst: ti.i32, tol: float, max_iters: ti.i32, vert_mass: A, vert_pinned: A,
-          vert_pin_target: A, face_verts: A, face_Dm_inv: A, face_rest_area: A,
-          face_grain: A, edge_verts: A, edge_faces: A, edge_opp: A, edge_rest_angle: A,
-          edge_bend_weight: A, bend_ptr: A, bend_col: A, bend_val: A, x: A, v: A, face_fu: A,
-          face_fv: A, face_E: A, face_wa: A,
-          face_wb: A, edge_grad: A, edge_theta: A, stitch: A, force: A, dv: A, rhs: A,
-          res: A, z: A, p: A, Ap: A, precond: A, scalars: A) -> ti.types.vector(2, float):
+def _step(coef: A, mesh: MeshPack, state: StatePack, elems: ElementPack,
+          cg: SolvePack) -> ti.types.vector(2, float):
     """(relative residual, CG iterations), also left in scalars[0] and scalars[1]."""
     # The whole step runs in one serial kernel: on a 2-core CPU, launching a kernel per CG
     # phase costs more than the work below ~50k triangles (METHOD.md section 4 hints).
     # Returning both numbers costs less than reading them back (~0.05 vs ~0.17 ms).
     ti.loop_config(serialize=True)
     for _ in range(1):
-        rb = cg_begin(h, g, kw, kf, ks, kb, alpha, beta, kst, nv, nf, ne, nst, vert_mass,
-                      vert_pinned, vert_pin_target, face_verts, face_Dm_inv, face_rest_area,
-                      face_grain, edge_verts, edge_faces, edge_opp, edge_rest_angle,
-                      edge_bend_weight, bend_ptr, bend_col, bend_val, x, v, face_fu, face_fv,
-                      face_E, face_wa, face_wb,
-                      edge_grad, edge_theta, stitch, force, dv, rhs, res, z, p, Ap, precond)
+        c = constants(coef)
+        rb = cg_begin(c, mesh, state, elems, cg)
         rz, bnorm = rb[0], rb[1]
         iters = 0
         stalled = 0.0
         rel = relative(rz, bnorm)
-        while iters < max_iters and rel > tol and stalled == 0.0:
-            out = cg_iteration(rz, h, alpha, beta, kw, kf, ks, kb, kst, nv, nf, ne, nst,
-                               vert_mass, vert_pinned, face_verts, face_rest_area, edge_verts,
-                               edge_faces, edge_opp, edge_bend_weight, bend_ptr, bend_col,
-                               bend_val, face_fu, face_fv, face_E,
-                               face_wa, face_wb, edge_grad, stitch, dv, res, z, p, Ap, precond)
+        while iters < c.max_iters and rel > c.tol and stalled == 0.0:
+            out = cg_iteration(rz, c, mesh, elems, cg)
             stalled = out[1]
             if stalled == 0.0:
                 rz = out[0]
                 rel = relative(rz, bnorm)
                 iters += 1
-        scalars[0] = rel
-        advance(h, nv, vert_pinned, vert_pin_target, x, v, dv)
-        scalars[1] = iters
-    return ti.Vector([scalars[0], scalars[1]])
+        cg.scalars[0] = rel
+        advance(c, mesh, state, cg)
+        cg.scalars[1] = iters
+    return ti.Vector([cg.scalars[0], cg.scalars[1]])
 
 
 # The same step as three kinds of launch with the CG loop on the host, for Vulkan and Metal
@@ -813,66 +734,44 @@ def _step(h: float, g: ti.types.vector(3, float), kw: float, kf: float, ks: floa
 # the one-launch step computed dv but never wrote v and x once it ran 14 CG iterations or more
 # (13 were fine; KE stayed exactly 0 and the cloth never fell), like the strain solver's
 # one-launch solve, which crashed that driver.
-# Two launches where the one-launch step has cg_begin: Vulkan and Metal take at most 31
-# ndarray arguments per kernel (measured on lavapipe: 32 silently drops one, 33 crashes).
+# Two launches where the one-launch step has cg_begin: Vulkan and Metal bind at most ~31
+# arrays per kernel (measured on lavapipe: with 32 loose ndarray arguments one was silently
+# dropped, 33 crashed). What counts is the arrays a kernel uses, not the pack members it is
+# given (measured: a 40-member pack of which 31 are used runs right, 32 used does not, with
+# one loose array besides); _linearise uses 27 (with ``coef``), _start 29, _iteration 25.
 @ti.kernel
-def _linearise(h: float, g: ti.types.vector(3, float), kw: float, kf: float, ks: float,
-               kb: float, alpha: float, beta: float, kst: float, nv: ti.i32, nf: ti.i32,
-               ne: ti.i32, nst: ti.i32, vert_mass: A, vert_pinned: A, vert_pin_target: A,
-               face_verts: A, face_Dm_inv: A, face_rest_area: A, face_grain: A, edge_verts: A,
-               edge_faces: A, edge_opp: A, edge_rest_angle: A, edge_bend_weight: A,
-               bend_ptr: A, bend_col: A, bend_val: A, x: A, v: A, face_fu: A, face_fv: A,
-               face_E: A, face_wa: A, face_wb: A, edge_grad: A, edge_theta: A, stitch: A,
-               force: A, rhs: A, precond: A):
+def _linearise(coef: A, mesh: MeshPack, state: StatePack, elems: ElementPack, cg: SolvePack):
     ti.loop_config(serialize=True)
     for _ in range(1):
-        linearise(h, g, kw, kf, ks, kb, alpha, beta, kst, nv, nf, ne, nst, force, precond, rhs,
-                  vert_mass, face_verts, face_Dm_inv, face_rest_area, face_grain, edge_verts,
-                  edge_faces, edge_opp, edge_rest_angle, edge_bend_weight, bend_ptr, bend_col,
-                  bend_val, x, v, face_fu, face_fv, face_E, face_wa, face_wb, edge_grad,
-                  edge_theta, stitch)
+        c = constants(coef)
+        linearise(c, mesh, state, elems, cg)
 
 
 @ti.kernel
-def _start(h: float, alpha: float, beta: float, kw: float, kf: float, ks: float, kb: float,
-           kst: float, nv: ti.i32, nf: ti.i32, ne: ti.i32, nst: ti.i32, vert_mass: A,
-           vert_pinned: A, vert_pin_target: A, face_verts: A, face_rest_area: A,
-           edge_verts: A, edge_faces: A, edge_opp: A, edge_bend_weight: A, bend_ptr: A,
-           bend_col: A, bend_val: A, x: A, v: A, face_fu: A, face_fv: A, face_E: A, face_wa: A,
-           face_wb: A, edge_grad: A, stitch: A, dv: A, rhs: A, res: A, z: A, p: A, Ap: A,
-           precond: A) -> ti.types.vector(2, float):
+def _start(coef: A, mesh: MeshPack, state: StatePack, elems: ElementPack,
+           cg: SolvePack) -> ti.types.vector(2, float):
     ti.loop_config(serialize=True)
     out = ti.Vector([0.0, 0.0])
     for _ in range(1):
-        out = cg_start(h, alpha, beta, kw, kf, ks, kb, kst, nv, nf, ne, nst, vert_mass,
-                       vert_pinned, vert_pin_target, face_verts, face_rest_area, edge_verts,
-                       edge_faces, edge_opp, edge_bend_weight, bend_ptr, bend_col, bend_val, x,
-                       v, face_fu, face_fv, face_E, face_wa, face_wb, edge_grad, stitch, dv,
-                       rhs, res, z, p, Ap, precond)
+        c = constants(coef)
+        out = cg_start(c, mesh, state, elems, cg)
     return out
 
 
 @ti.kernel
-def _iteration(rz: float, h: float, alpha: float, beta: float, kw: float, kf: float,
-               ks: float, kb: float, kst: float, nv: ti.i32, nf: ti.i32, ne: ti.i32,
-               nst: ti.i32, vert_mass: A, vert_pinned: A, face_verts: A, face_rest_area: A,
-               edge_verts: A, edge_faces: A, edge_opp: A, edge_bend_weight: A, bend_ptr: A,
-               bend_col: A, bend_val: A, face_fu: A,
-               face_fv: A, face_E: A, face_wa: A, face_wb: A, edge_grad: A, stitch: A, dv: A,
-               res: A, z: A, p: A, Ap: A, precond: A) -> ti.types.vector(2, float):
+def _iteration(rz: float, coef: A, mesh: MeshPack, elems: ElementPack,
+               cg: SolvePack) -> ti.types.vector(2, float):
     ti.loop_config(serialize=True)
     out = ti.Vector([0.0, 0.0])
     for _ in range(1):
-        out = cg_iteration(rz, h, alpha, beta, kw, kf, ks, kb, kst, nv, nf, ne, nst, vert_mass,
-                           vert_pinned, face_verts, face_rest_area, edge_verts, edge_faces,
-                           edge_opp, edge_bend_weight, bend_ptr, bend_col, bend_val, face_fu,
-                           face_fv, face_E, face_wa,
-                           face_wb, edge_grad, stitch, dv, res, z, p, Ap, precond)
+        c = constants(coef)
+        out = cg_iteration(rz, c, mesh, elems, cg)
     return out
 
 
 @ti.kernel
-def _advance(h: float, nv: ti.i32, vert_pinned: A, vert_pin_target: A, x: A, v: A, dv: A):
+def _advance(coef: A, mesh: MeshPack, state: StatePack, cg: SolvePack):
     ti.loop_config(serialize=True)
     for _ in range(1):
-        advance(h, nv, vert_pinned, vert_pin_target, x, v, dv)
+        c = constants(coef)
+        advance(c, mesh, state, cg)

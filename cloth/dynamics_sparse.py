@@ -18,15 +18,17 @@ Per step: ``_prepare`` (forces, kinematics, rhs, residual, free index; one seria
 ``factorize`` (``analyze_pattern`` only when the mesh or the pin set changed), ``solve``, and
 ``_finish`` (scatter dv, update v and x). ``last_timings`` holds the ms of each phase.
 The kernels are module-level and take every array as an argument, like dynamics.py's: they
-compile once per process, not once per solver.
+compile once per process, not once per solver. They take dynamics.py's argpacks and its
+``coef`` array of the step's scalars.
 """
 import time
 
 import numpy as np
 import taichi as ti
 
-from .dynamics import (A, T, DynamicsSettings, ImplicitEuler, apply_A, edge_vertex, face_block,
-                       free_residual, linearise)
+from .dynamics import (A, T, DynamicsSettings, ElementPack, ImplicitEuler, MeshPack, SolvePack,
+                       StatePack, apply_A, constants, edge_vertex, face_block, free_residual,
+                       linearise)
 from .model import ClothModel
 
 LINEAR_SOLVERS = ("llt", "ldlt", "sparse-cg", "matrix-free")
@@ -69,17 +71,14 @@ class SparseImplicitEuler(ImplicitEuler):
         if self.linear_solver == "matrix-free":
             return super().step(h)
         self.model.mark_step_start()
-        m, mat, s = self.model, self.model.material, self.settings
-        k = (mat.k_warp, mat.k_weft, mat.k_shear, mat.k_bend)
-        alpha, beta, kst = mat.damp_mass, mat.damp_stiff, s.stitch_stiffness
+        m, s = self.model, self.settings
         direct = self.linear_solver in ("llt", "ldlt")
         T = {}
         t0 = time.perf_counter()
+        coef, mesh, state = self._constants(h), self._mesh(), self._state()
         # Warm start only helps the iterative solver; a direct solve starts from dv_free = 0.
-        n_free = int(_prepare(h, ti.Vector(list(s.gravity)), *k, alpha, beta, kst, m.n_verts,
-                              m.n_faces, self.n_hinges, self.n_stitches, 0 if direct else 1,
-                              *self._mesh(), *self._elements(), self.force, self.dv, self.rhs,
-                              self.res, self.Ap, self.precond, self.scalars, self.free_index))
+        n_free = int(_prepare(0 if direct else 1, coef, mesh, state, self._elems, self._cg,
+                              self.free_index))
         t1 = time.perf_counter()
         T["prepare"] = 1e3 * (t1 - t0)
         n = 3 * n_free
@@ -91,9 +90,8 @@ class SparseImplicitEuler(ImplicitEuler):
         lower = 1 if direct else 0
         scaled = 0 if direct else 1
         self._ensure_builder(n, m)
-        _assemble(self._builder, h, *k, alpha, beta, kst, m.n_verts, m.n_faces, self.n_hinges,
-                  self.n_stitches, lower, scaled, *self._mesh(), *self._elements(),
-                  self.precond, self.free_index)
+        _assemble(self._builder, lower, scaled, coef, mesh, self._elems, self._cg,
+                  self.free_index)
         A = self._builder.build()
         t2 = time.perf_counter()
         T["assembly"] = 1e3 * (t2 - t1)
@@ -169,9 +167,7 @@ class SparseImplicitEuler(ImplicitEuler):
 
     # -- helpers ------------------------------------------------------------------------------
     def _finish_arrays(self):
-        m = self.model
-        return (m.vert_pinned, m.vert_pin_target, m.state.x, m.state.v, self.dv, self.precond,
-                self.free_index)
+        return self._mesh(), self._state(), self._cg, self.free_index
 
     def _ensure_builder(self, n, m):
         # Triplets (full blocks; the lower triangle needs about half): 9 per free vertex
@@ -187,42 +183,28 @@ class SparseImplicitEuler(ImplicitEuler):
 
 # -- kernels ----------------------------------------------------------------------------------
 @ti.kernel
-def _prepare(h: float, g: ti.types.vector(3, float), kw: float, kf: float, ks: float,
-             kb: float, alpha: float, beta: float, kst: float, nv: ti.i32, nf: ti.i32,
-             ne: ti.i32, nst: ti.i32, warm: ti.i32, vert_mass: A, vert_pinned: A,
-             vert_pin_target: A, face_verts: A, face_Dm_inv: A, face_rest_area: A,
-             face_grain: A, edge_verts: A, edge_faces: A, edge_opp: A, edge_rest_angle: A,
-             edge_bend_weight: A, bend_ptr: A, bend_col: A, bend_val: A, x: A, v: A, face_fu: A,
-             face_fv: A, face_E: A, face_wa: A,
-             face_wb: A, edge_grad: A, edge_theta: A, stitch: A, force: A, dv: A, rhs: A,
-             res: A, Ap: A, precond: A, scalars: A, free_index: A) -> ti.i32:
+def _prepare(warm: ti.i32, coef: A, mesh: MeshPack, state: StatePack, elems: ElementPack,
+             cg: SolvePack, free_index: A) -> ti.i32:
     """Forces, rhs, prescribed pinned dv, residual r = b - A dv0 in ``res`` (free rows),
     the compact free-vertex index and the diagonal blocks of A in ``precond``."""
     ti.loop_config(serialize=True)
     for _ in range(1):
-        linearise(h, g, kw, kf, ks, kb, alpha, beta, kst, nv, nf, ne, nst, force, precond, rhs,
-                  vert_mass, face_verts, face_Dm_inv, face_rest_area, face_grain, edge_verts,
-                  edge_faces, edge_opp, edge_rest_angle, edge_bend_weight, bend_ptr, bend_col,
-                  bend_val, x, v, face_fu,
-                  face_fv, face_E, face_wa, face_wb, edge_grad, edge_theta, stitch)
+        c = constants(coef)
+        linearise(c, mesh, state, elems, cg)
         n_free = 0
-        for i in range(nv):
-            if vert_pinned[i] != 0:
-                dv[i] = (vert_pin_target[i] - x[i]) / h - v[i]
+        for i in range(c.nv):
+            if mesh.vert_pinned[i] != 0:
+                cg.dv[i] = (mesh.vert_pin_target[i] - state.x[i]) / c.h - state.v[i]
                 free_index[i] = -1
             else:
                 if warm == 0:
-                    dv[i] = ti.Vector([0.0, 0.0, 0.0])
+                    cg.dv[i] = ti.Vector([0.0, 0.0, 0.0])
                 free_index[i] = n_free
                 n_free += 1
-        apply_A(dv, Ap, h, alpha, beta, kw, kf, ks, kb, kst, nv, nf, ne, nst, vert_mass,
-                vert_pinned, face_verts, face_rest_area, edge_verts, edge_faces, edge_opp,
-                edge_bend_weight, bend_ptr, bend_col, bend_val, face_fu, face_fv, face_E, face_wa,
-                face_wb, edge_grad,
-                stitch)
-        free_residual(res, rhs, Ap, vert_pinned, nv)
-        scalars[2] = n_free
-    return ti.cast(scalars[2], ti.i32)
+        apply_A(cg.dv, cg.Ap, c, mesh, elems)
+        free_residual(c, mesh, cg)
+        cg.scalars[2] = n_free
+    return ti.cast(cg.scalars[2], ti.i32)
 
 
 @ti.func
@@ -247,54 +229,50 @@ def add_block(B: T, va, vb, blk, lower: ti.i32, scaled: ti.i32, precond: T, free
 
 
 @ti.kernel
-def _assemble(B: ti.types.sparse_matrix_builder(), h: float, kw: float, kf: float, ks: float,
-              kb: float, alpha: float, beta: float, kst: float, nv: ti.i32, nf: ti.i32,
-              ne: ti.i32, nst: ti.i32, lower: ti.i32, scaled: ti.i32, vert_mass: A,
-              vert_pinned: A, vert_pin_target: A, face_verts: A, face_Dm_inv: A,
-              face_rest_area: A, face_grain: A, edge_verts: A, edge_faces: A, edge_opp: A,
-              edge_rest_angle: A, edge_bend_weight: A, bend_ptr: A, bend_col: A, bend_val: A, x: A,
-              v: A, face_fu: A, face_fv: A,
-              face_E: A, face_wa: A, face_wb: A, edge_grad: A, edge_theta: A, stitch: A,
-              precond: A, free_index: A):
+def _assemble(B: ti.types.sparse_matrix_builder(), lower: ti.i32, scaled: ti.i32, coef: A,
+              mesh: MeshPack, elems: ElementPack, cg: SolvePack, free_index: A):
     """The free-free block of A = (1 + h alpha) M + h (beta + h) K_psd, element by element:
     the blocks whose action is ``add_K_product(..., exact=0)`` and whose diagonal is
     ``add_K_diagonal``. Uses the kinematics left by ``_prepare``."""
     ti.loop_config(serialize=True)
     for _ in range(1):
-        sc = h * (beta + h)
+        c = constants(coef)
+        sc = c.h * (c.beta + c.h)
         I = ti.Matrix.identity(float, 3)
-        for i in range(nv):
-            add_block(B, i, i, (1.0 + h * alpha) * vert_mass[i] * I, lower, scaled, precond,
-                      free_index)
-        for f in range(nf):
-            tri = face_verts[f]
-            A = face_rest_area[f]
+        for i in range(c.nv):
+            add_block(B, i, i, (1.0 + c.h * c.alpha) * mesh.vert_mass[i] * I, lower, scaled,
+                      cg.precond, free_index)
+        for f in range(c.nf):
+            tri = mesh.face_verts[f]
+            A = mesh.face_rest_area[f]
             for n in ti.static(range(3)):
                 for q in ti.static(range(3)):
-                    add_block(B, tri[n], tri[q],
-                              sc * A * face_block(f, n, q, kw, kf, ks, face_fu, face_fv, face_E,
-                                                  face_wa, face_wb),
-                              lower, scaled, precond, free_index)
-        for e in range(ne):
-            if edge_faces[e][1] >= 0:
-                kk = sc * kb * edge_bend_weight[e]
-                G = edge_grad[e]
+                    add_block(B, tri[n], tri[q], sc * A * face_block(f, n, q, c, elems),
+                              lower, scaled, cg.precond, free_index)
+        for e in range(c.ne):
+            if mesh.edge_faces[e][1] >= 0:
+                kk = sc * c.kb * mesh.edge_bend_weight[e]
+                G = elems.edge_grad[e]
                 for n, q in ti.ndrange(4, 4):
                     gn = ti.Vector([G[n, 0], G[n, 1], G[n, 2]])
                     gq = ti.Vector([G[q, 0], G[q, 1], G[q, 2]])
-                    add_block(B, edge_vertex(e, n, edge_verts, edge_opp),
-                              edge_vertex(e, q, edge_verts, edge_opp), kk * gn.outer_product(gq),
-                              lower, scaled, precond, free_index)
-        for i in range(bend_ptr.shape[0] - 1):
-            for kq in range(bend_ptr[i], bend_ptr[i + 1]):
-                add_block(B, i, bend_col[kq], sc * kb * bend_val[kq] * I, lower, scaled, precond,
-                          free_index)
-        for s in range(nst):
-            a, b = stitch[s][0], stitch[s][1]
-            add_block(B, a, a, sc * kst * I, lower, scaled, precond, free_index)
-            add_block(B, b, b, sc * kst * I, lower, scaled, precond, free_index)
-            add_block(B, a, b, -sc * kst * I, lower, scaled, precond, free_index)
-            add_block(B, b, a, -sc * kst * I, lower, scaled, precond, free_index)
+                    add_block(B, edge_vertex(e, n, mesh), edge_vertex(e, q, mesh),
+                              kk * gn.outer_product(gq), lower, scaled, cg.precond,
+                              free_index)
+        for i in range(mesh.bend_ptr.shape[0] - 1):
+            for kq in range(mesh.bend_ptr[i], mesh.bend_ptr[i + 1]):
+                add_block(B, i, mesh.bend_col[kq], sc * c.kb * mesh.bend_val[kq] * I, lower,
+                          scaled, cg.precond, free_index)
+        for s in range(c.nst):
+            a, b = mesh.stitch[s][0], mesh.stitch[s][1]
+            add_block(B, a, a, sc * c.kst * I, lower, scaled, cg.precond,
+                      free_index)
+            add_block(B, b, b, sc * c.kst * I, lower, scaled, cg.precond,
+                      free_index)
+            add_block(B, a, b, -sc * c.kst * I, lower, scaled, cg.precond,
+                      free_index)
+            add_block(B, b, a, -sc * c.kst * I, lower, scaled, cg.precond,
+                      free_index)
 
 
 @ti.kernel
@@ -307,15 +285,15 @@ def _gather(b: A, nv: ti.i32, scaled: ti.i32, res: A, precond: A, free_index: A)
 
 
 @ti.kernel
-def _finish(sol: A, h: float, nv: ti.i32, scaled: ti.i32, vert_pinned: A, vert_pin_target: A,
-            x: A, v: A, dv: A, precond: A, free_index: A):
+def _finish(sol: A, h: float, nv: ti.i32, scaled: ti.i32, mesh: MeshPack, state: StatePack,
+            cg: SolvePack, free_index: A):
     """dv_free += solution (unscaled), then v += dv, x += h v, pins exactly on target."""
     for i in range(nv):
         r = free_index[i]
         if r >= 0:
             for c in ti.static(range(3)):
-                dv[i][c] += sol[3 * r + c] * scale_of(i, c, scaled, precond)
-        v[i] += dv[i]
-        x[i] += h * v[i]
-        if vert_pinned[i] != 0:
-            x[i] = vert_pin_target[i]
+                cg.dv[i][c] += sol[3 * r + c] * scale_of(i, c, scaled, cg.precond)
+        state.v[i] += cg.dv[i]
+        state.x[i] += h * state.v[i]
+        if mesh.vert_pinned[i] != 0:
+            state.x[i] = mesh.vert_pin_target[i]

@@ -8,6 +8,10 @@ once per model, solver or obstacle (issue #15; cloth/strain/buffers.py has the m
 value to its fill kernel as a template argument keyed by the value object, so every call
 compiled a new kernel (measured: three new kernels per Simulator, and one per non-warm
 projection and per Cholesky Newton step before this helper).
+
+``PackCache`` keeps the argpacks (``ti.types.argpack`` groups of ndarrays) the kernels take
+their arrays in (issue #37): the strain solver's (cloth/strain/buffers.py) and the dynamics'
+(cloth/dynamics.py).
 """
 import taichi as ti
 
@@ -22,6 +26,29 @@ def _zero_elements(arr: A):
         for J in ti.static(ti.grouped(ti.ndrange(*v.get_shape()))):
             v[J] = 0            # written, not multiplied: a NaN becomes 0 too
         arr[I] = v
+
+
+class PackCache:
+    """Argpacks made once per set of arrays: ``get(kind, pack_type, **members)`` returns the
+    pack of ``members``, made on first use and again only when one of its arrays was replaced
+    (a remesh's new bend_ptr, a new stitch capacity, a larger matrix). Why cache: making a
+    pack of 16 ndarrays costs ~260 us, more than a launch with 33 ndarrays (~230 us; 2-core
+    CPU, Taichi 1.7.4), while the look-up costs a few. The last two packs of each kind are
+    kept (the strain solver's two metrics, and its preconditioner and stubs, alternate).
+    While a pack is kept it holds its arrays, so their ids cannot be reused."""
+
+    def __init__(self):
+        self._made = {}
+
+    def get(self, kind, pack_type, **members):
+        key = tuple(id(a) for a in members.values())
+        made = self._made.setdefault(kind, {})
+        pack = made.get(key)
+        if pack is None:
+            if len(made) >= 2:
+                made.pop(next(iter(made)))
+            pack = made[key] = pack_type(**members)
+        return pack
 
 
 def zero(arr):

@@ -33,20 +33,34 @@ Pinned vertices are never touched.
 The kernels are module-level functions of ndarray arguments: the model's arrays, the
 collider's small result arrays and the obstacle's shape (kind, parameters, primitives, grid; see
 ``shape.py``). None captures a field or is specialised to an obstacle, so each compiles once
-per process however many Colliders, obstacles and models a process builds (issue #15).
+per process however many Colliders, obstacles and models a process builds (issue #15). The
+obstacle pass takes the obstacle's motion over the substep and its scalars in one float array
+(``_motion``, ``M_*`` indices; issue #37: it took 21 arguments).
 
 Units: SI. Arrays use ``float`` (Taichi's default float).
 """
 import time
 
+import numpy as np
 import taichi as ti
 
 # The contact half-spaces' layout is the strain projection's (its work arrays hold them).
-from ..ndarrays import A
+from ..ndarrays import A, T
 from ..strain.buffers import CONTACT_SLOTS, NO_CONTACT
 from . import shape
 from .obstacles import THICKNESS, CollisionError, Obstacle, mat3, vec3
 
+
+
+# Indices into the obstacle pass's ``motion`` array (``Collider._motion``): the substep h, the
+# thickness, the obstacle's friction coefficient, the continuous test's sample spacing (<= 0:
+# none), and the obstacle's pose at the start (R0, c0) and end (R1, c1) of the substep and its
+# linear and angular velocity; R row by row. Why an array: these were 10 of the kernel's 21
+# arguments, six of them matrices and vectors built as Taichi objects at every launch; a CPU
+# kernel reads a numpy array in place.
+M_H, M_TH, M_MU, M_STEP, M_R0, M_C0, M_R1, M_C1, M_VLIN, M_OMEGA = \
+    0, 1, 2, 3, 4, 13, 16, 25, 28, 31
+N_MOTION = 34
 
 
 class Collider:
@@ -84,6 +98,8 @@ class Collider:
         self._counter = ti.ndarray(ti.i32, 1)     # contacts of the last obstacle pass
         self._maxval = ti.ndarray(float, 1)       # max_penetration's reduction
         self._moved = ti.ndarray(float, 1)        # largest push of the last obstacle pass (m)
+        rt = ti.lang.impl.get_runtime()
+        self._motion = np.zeros(N_MOTION, np.float64 if rt.default_fp == ti.f64 else np.float32)
         self._mu_tmp = None
         self.self_solver = None
         if self.self_collision:
@@ -167,10 +183,13 @@ class Collider:
             c1, R1 = o.pose(t + h)
             vlin, omega = o.velocity(t, h)
             step = min(o.ccd_step(self.thickness), 1e30) if ccd else -1.0
-            _resolve_obstacle(*o.shape_args(), st.x, st.v, self.model.vert_pinned, n, h,
-                              self.thickness, o.mu, ti.Matrix(R0), ti.Vector(c0),
-                              ti.Matrix(R1), ti.Vector(c1), ti.Vector(vlin), ti.Vector(omega),
-                              step, self.ccd_samples, self._counter, self._moved)
+            mo = self._motion
+            mo[M_H], mo[M_TH], mo[M_MU], mo[M_STEP] = h, self.thickness, o.mu, step
+            mo[M_R0:M_C0], mo[M_C0:M_R1] = np.ravel(R0), c0
+            mo[M_R1:M_C1], mo[M_C1:M_VLIN] = np.ravel(R1), c1
+            mo[M_VLIN:M_OMEGA], mo[M_OMEGA:] = vlin, omega
+            _resolve_obstacle(*o.shape_args(), st.x, st.v, self.model.vert_pinned, n,
+                              self.ccd_samples, mo, self._counter, self._moved)
 
     def _mark_pass(self, h, t, flags):
         """The read-only pass before self-collision: set ``flags[i]`` where vertex i started
@@ -244,13 +263,27 @@ class Collider:
 # Each takes an obstacle as (kind, prm, prims, grid) (``Obstacle.shape_args``, see shape.py) and
 # the model's arrays as ndarrays: compiled once per process.
 
+@ti.func
+def _vec3_at(a: T, k):
+    return ti.Vector([a[k], a[k + 1], a[k + 2]])
+
+
+@ti.func
+def _mat3_at(a: T, k):
+    return ti.Matrix([[a[k], a[k + 1], a[k + 2]], [a[k + 3], a[k + 4], a[k + 5]],
+                      [a[k + 6], a[k + 7], a[k + 8]]])
+
+
 @ti.kernel
 def _resolve_obstacle(kind: ti.i32, prm: shape.params_t, prims: A, grid: A, x: A, v: A,
-                      pinned: A, n: ti.i32, h: float, th: float, mu: float, R0: mat3, c0: vec3,
-                      R1: mat3, c1: vec3, vlin: vec3, omega: vec3, step: float,
-                      ccd_samples: ti.i32, counter: A, moved: A):
+                      pinned: A, n: ti.i32, ccd_samples: ti.i32, motion: A, counter: A,
+                      moved: A):
     """One obstacle's response (the module docstring); ``counter[0]`` counts the contacts,
     ``moved[0]`` keeps the largest move of a vertex. ``step`` <= 0: no continuous test."""
+    h, th, mu, step = motion[M_H], motion[M_TH], motion[M_MU], motion[M_STEP]
+    R0, c0 = _mat3_at(motion, M_R0), _vec3_at(motion, M_C0)
+    R1, c1 = _mat3_at(motion, M_R1), _vec3_at(motion, M_C1)
+    vlin, omega = _vec3_at(motion, M_VLIN), _vec3_at(motion, M_OMEGA)
     for i in range(n):
         if pinned[i] == 0:
             x1 = x[i]

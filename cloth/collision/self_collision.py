@@ -29,7 +29,8 @@ No friction between layers.
 Every buffer is an ndarray and every kernel a module-level function of ndarray arguments (the
 model's arrays and the buffers below), so the kernels compile once per process however many
 models and colliders it builds, and a buffer reallocated for a larger mesh needs no recompile
-(issue #15).
+(issue #15). The kernels with the most arrays take them in named argpacks (``GeoPack``,
+``HashPack``, ``PairPack``; issue #37, as cloth/dynamics.py and cloth/strain/buffers.py).
 """
 import time
 
@@ -44,6 +45,18 @@ from .obstacles import THICKNESS
 # Indices into SelfCollision._sums (written by _prepare) and _cnt (entry and pair counts).
 S_MAX_SPEED, S_EDGE_SUM = 0, 1
 C_TRI, C_EDGE, C_PAIRS = 0, 1, 2
+
+# Named argument groups (issue #37): the broad and narrow phase took up to 24 positional
+# arguments. Made once per set of arrays (``SelfCollision._packs``, ndarrays.PackCache) and
+# again when one was replaced (larger entry or pair arrays, a model with larger capacities).
+#   geo    the substep's start and predicted end positions, velocities, face and edge vertices;
+#   table  the spatial hash: bucket counts and starts, and the entries (id, cell) of the
+#          triangles and of the edges;
+#   pairs  the proximity pairs (``_Pairs``).
+GeoPack = ti.types.argpack(x0=A, x=A, v=A, fv=A, ev=A)
+HashPack = ti.types.argpack(tri_count=A, tri_start=A, edge_count=A, edge_start=A, te_id=A,
+                            te_cell=A, ee_id=A, ee_cell=A)
+PairPack = ti.types.argpack(p_idx=A, p_w=A, p_n=A, p_d=A)
 
 
 def _pow2(n):
@@ -69,6 +82,7 @@ class SelfCollision:
         self._caps = None
         self._sums = ti.ndarray(float, 2)      # S_MAX_SPEED, S_EDGE_SUM
         self._cnt = ti.ndarray(ti.i32, 4)      # C_TRI, C_EDGE, C_PAIRS: entries and pairs
+        self._packs = ndarrays.PackCache()
         self._ensure_model_capacity()
 
     # -- allocation ----------------------------------------------------------------------------
@@ -105,14 +119,15 @@ class SelfCollision:
         st = m.state
         g = self.geo
         _prepare(g.x0, g.touched, st.x, st.v, m.edge_verts, nv, ne, h, self._sums)
+        geo = self._packs.get("geo", GeoPack, x0=g.x0, x=st.x, v=st.v, fv=m.face_verts,
+                              ev=m.edge_verts)
         mean_edge = float(self._sums[S_EDGE_SUM]) / max(ne, 1)
         r = 1.5 * self.thickness                  # detection radius
         cs = max(mean_edge, 2.0 * r)              # cell size
         ahead = 2.0 * h                           # look-ahead time for keeping a pair
         # Hash: count, prefix sum, fill (re-run once if an entry array was too small).
         for _ in range(2):
-            _count_entries(g.x0, g.tri_count, g.edge_count, st.x, m.face_verts, m.edge_verts,
-                           nf, ne, cs, r, self._cnt)
+            _count_entries(geo, g.tri_count, g.edge_count, nf, ne, cs, r, self._cnt)
             nt, nee = int(self._cnt[C_TRI]), int(self._cnt[C_EDGE])
             grown = False
             if nt > self.tri_entries.cap:
@@ -125,14 +140,15 @@ class SelfCollision:
                 break
             self.realloc_count += 1
         te, ee = self.tri_entries, self.edge_entries
-        _fill_entries(g.x0, g.tri_count, g.tri_start, g.edge_count, g.edge_start, te.id,
-                      te.cell, ee.id, ee.cell, st.x, m.face_verts, m.edge_verts, nf, ne, cs, r)
+        table = self._packs.get("table", HashPack, tri_count=g.tri_count,
+                                tri_start=g.tri_start, edge_count=g.edge_count,
+                                edge_start=g.edge_start, te_id=te.id, te_cell=te.cell,
+                                ee_id=ee.id, ee_cell=ee.cell)
+        _fill_entries(geo, table, nf, ne, cs, r)
         # Proximity pairs (re-run once with a larger array on overflow).
         for _ in range(2):
-            pr = self.pairs
-            _find_pairs(g.x0, g.tri_count, g.tri_start, g.edge_count, g.edge_start, te.id,
-                        te.cell, ee.id, ee.cell, pr.idx, pr.w, pr.n, pr.d, st.x, m.face_verts,
-                        m.edge_verts, st.v, nv, ne, cs, r, ahead, self.thickness, self._cnt)
+            _find_pairs(geo, table, self._pair_pack(), nv, ne, cs, r, ahead, self.thickness,
+                        self._cnt)
             npairs = int(self._cnt[C_PAIRS])
             if npairs <= self.pairs.cap:
                 break
@@ -141,13 +157,16 @@ class SelfCollision:
         npairs = min(npairs, self.pairs.cap)
         self.last_pairs = npairs
         if npairs > 0:
-            pr = self.pairs
-            _impulses(g.contact, g.touched, pr.idx, pr.w, pr.n, pr.d, st.v, m.vert_mass,
+            _impulses(g.contact, g.touched, self._pair_pack(), st.v, m.vert_mass,
                       m.vert_pinned, npairs, h, self.thickness, self.restore, self.iterations,
                       self.contact_mass_ratio)
             _reintegrate(g.x0, g.touched, st.x, st.v, m.vert_pinned, nv, h)
         ti.sync()
         self.last_ms = 1e3 * (time.perf_counter() - t0)
+
+    def _pair_pack(self):
+        pr = self.pairs
+        return self._packs.get("pairs", PairPack, p_idx=pr.idx, p_w=pr.w, p_n=pr.n, p_d=pr.d)
 
 
 class _Geo:
@@ -187,7 +206,8 @@ class _Pairs:
 
 # -- kernels and their helpers -------------------------------------------------------------------
 # Names: x0 start positions, x predicted end positions, v velocities, fv / ev face and edge
-# vertices; cs the hash cell size, r the detection radius (1.5 x thickness).
+# vertices (loose, or members of ``geo``); cs the hash cell size, r the detection radius
+# (1.5 x thickness).
 
 @ti.kernel
 def _prepare(x0: A, touched: A, x: A, v: A, ev: A, nv: ti.i32, ne: ti.i32, h: float, sums: A):
@@ -235,8 +255,8 @@ def _edge_box(x0: T, x: T, ev: T, e, r):
 
 
 @ti.kernel
-def _count_entries(x0: A, tri_count: A, edge_count: A, x: A, fv: A, ev: A, nf: ti.i32,
-                   ne: ti.i32, cs: float, r: float, cnt: A):
+def _count_entries(geo: GeoPack, tri_count: A, edge_count: A, nf: ti.i32, ne: ti.i32,
+                   cs: float, r: float, cnt: A):
     nb = tri_count.shape[0]
     cnt[C_TRI] = 0
     cnt[C_EDGE] = 0
@@ -244,13 +264,13 @@ def _count_entries(x0: A, tri_count: A, edge_count: A, x: A, fv: A, ev: A, nf: t
         tri_count[b] = 0
         edge_count[b] = 0
     for t in range(nf):
-        lo, hi = _tri_box(x0, x, fv, t, r)
+        lo, hi = _tri_box(geo.x0, geo.x, geo.fv, t, r)
         c0, c1 = _cell(lo, cs), _cell(hi, cs)
         for i, j, k in ti.ndrange((c0[0], c1[0] + 1), (c0[1], c1[1] + 1), (c0[2], c1[2] + 1)):
             ti.atomic_add(tri_count[_hash(ti.Vector([i, j, k]), nb)], 1)
             ti.atomic_add(cnt[C_TRI], 1)
     for e in range(ne):
-        lo, hi = _edge_box(x0, x, ev, e, r)
+        lo, hi = _edge_box(geo.x0, geo.x, geo.ev, e, r)
         c0, c1 = _cell(lo, cs), _cell(hi, cs)
         for i, j, k in ti.ndrange((c0[0], c1[0] + 1), (c0[1], c1[1] + 1), (c0[2], c1[2] + 1)):
             ti.atomic_add(edge_count[_hash(ti.Vector([i, j, k]), nb)], 1)
@@ -258,34 +278,34 @@ def _count_entries(x0: A, tri_count: A, edge_count: A, x: A, fv: A, ev: A, nf: t
 
 
 @ti.kernel
-def _fill_entries(x0: A, tri_count: A, tri_start: A, edge_count: A, edge_start: A, te_id: A,
-                  te_cell: A, ee_id: A, ee_cell: A, x: A, fv: A, ev: A, nf: ti.i32, ne: ti.i32,
-                  cs: float, r: float):
-    nb = tri_count.shape[0]
+def _fill_entries(geo: GeoPack, table: HashPack, nf: ti.i32, ne: ti.i32, cs: float, r: float):
+    nb = table.tri_count.shape[0]
     # Exclusive prefix sums (serial: one pass over the buckets), counts reused as cursors.
     ti.loop_config(serialize=True)
     for _ in range(1):
         st = 0
         se = 0
         for b in range(nb):
-            tri_start[b] = st
-            st += tri_count[b]
-            tri_count[b] = 0
-            edge_start[b] = se
-            se += edge_count[b]
-            edge_count[b] = 0
+            table.tri_start[b] = st
+            st += table.tri_count[b]
+            table.tri_count[b] = 0
+            table.edge_start[b] = se
+            se += table.edge_count[b]
+            table.edge_count[b] = 0
     # Serial fills: the order of entries within a bucket decides the order of the pair
     # list, and the impulses are applied in that order (Gauss-Seidel), so a parallel fill
     # made runs differ from run to run (measured: 8 mm after 10 tshirt frames; the chest
     # wrinkle measure of Table 2 moved by 15 % between two identical runs).
     ti.loop_config(serialize=True)
     for t in range(nf):
-        lo, hi = _tri_box(x0, x, fv, t, r)
-        _insert(t, lo, hi, cs, nb, tri_start, tri_count, te_id, te_cell)
+        lo, hi = _tri_box(geo.x0, geo.x, geo.fv, t, r)
+        _insert(t, lo, hi, cs, nb, table.tri_start, table.tri_count, table.te_id,
+                table.te_cell)
     ti.loop_config(serialize=True)
     for e in range(ne):
-        lo, hi = _edge_box(x0, x, ev, e, r)
-        _insert(e, lo, hi, cs, nb, edge_start, edge_count, ee_id, ee_cell)
+        lo, hi = _edge_box(geo.x0, geo.x, geo.ev, e, r)
+        _insert(e, lo, hi, cs, nb, table.edge_start, table.edge_count, table.ee_id,
+                table.ee_cell)
 
 
 @ti.func
@@ -302,7 +322,7 @@ def _insert(elem, lo, hi, cs, nb, start: T, count: T, ids: T, cells: T):
 
 
 @ti.func
-def _add_pair(p_idx: T, p_w: T, p_n: T, p_d: T, v: T, cnt: T, idx, w, n, d, ahead, th):
+def _add_pair(pairs: T, v: T, cnt: T, idx, w, n, d, ahead, th):
     # Keep a pair only if it is (nearly) in contact or closing fast enough to get there
     # within about two substeps at its present relative normal velocity: with a detection
     # radius of the order of an edge, most candidates are neighbours in the same layer
@@ -312,44 +332,42 @@ def _add_pair(p_idx: T, p_w: T, p_n: T, p_d: T, v: T, cnt: T, idx, w, n, d, ahea
         vn += w[j] * v[idx[j]].dot(n)
     if d - ahead * ti.max(-vn, 0.0) < 1.5 * th:
         k = ti.atomic_add(cnt[C_PAIRS], 1)
-        if k < p_idx.shape[0]:
-            p_idx[k] = idx
-            p_w[k] = w
-            p_n[k] = n
-            p_d[k] = d
+        if k < pairs.p_idx.shape[0]:
+            pairs.p_idx[k] = idx
+            pairs.p_w[k] = w
+            pairs.p_n[k] = n
+            pairs.p_d[k] = d
 
 
 @ti.kernel
-def _find_pairs(x0: A, tri_count: A, tri_start: A, edge_count: A, edge_start: A, te_id: A,
-                te_cell: A, ee_id: A, ee_cell: A, p_idx: A, p_w: A, p_n: A, p_d: A, x: A,
-                fv: A, ev: A, v: A, nv: ti.i32, ne: ti.i32, cs: float, r: float, ahead: float,
-                th: float, cnt: A):
+def _find_pairs(geo: GeoPack, table: HashPack, pairs: PairPack, nv: ti.i32, ne: ti.i32,
+                cs: float, r: float, ahead: float, th: float, cnt: A):
     # Candidates: swept boxes overlap (the inserted primitive's grown by 1.5 thickness).
     # Each candidate is met in every cell both boxes cover; it is taken only in the cell
     # holding the low corner of the overlap, so once. Proximity is measured at the start.
     # Serial, so that the pair list has the same order in every run (see _fill_entries).
-    nb = tri_count.shape[0]
+    nb = table.tri_count.shape[0]
     cnt[C_PAIRS] = 0
     # vertex - triangle
     ti.loop_config(serialize=True)
     for i in range(nv):
-        p = x0[i]
-        lo1 = ti.min(p, x[i])
-        hi1 = ti.max(p, x[i])
+        p = geo.x0[i]
+        lo1 = ti.min(p, geo.x[i])
+        hi1 = ti.max(p, geo.x[i])
         c0, c1 = _cell(lo1, cs), _cell(hi1, cs)
         for ci, cj, ck in ti.ndrange((c0[0], c1[0] + 1), (c0[1], c1[1] + 1),
                                      (c0[2], c1[2] + 1)):
             c = ti.Vector([ci, cj, ck])
             hb = _hash(c, nb)
-            for s in range(tri_start[hb], tri_start[hb] + tri_count[hb]):
-                if all(te_cell[s] == c):
-                    t = te_id[s]
-                    f = fv[t]
+            for s in range(table.tri_start[hb], table.tri_start[hb] + table.tri_count[hb]):
+                if all(table.te_cell[s] == c):
+                    t = table.te_id[s]
+                    f = geo.fv[t]
                     if f[0] != i and f[1] != i and f[2] != i:
-                        lo2, hi2 = _tri_box(x0, x, fv, t, r)
+                        lo2, hi2 = _tri_box(geo.x0, geo.x, geo.fv, t, r)
                         if all(_cell(ti.max(lo1, lo2), cs) == c) and all(lo1 <= hi2) \
                                 and all(lo2 <= hi1):
-                            a, b, cc = x0[f[0]], x0[f[1]], x0[f[2]]
+                            a, b, cc = geo.x0[f[0]], geo.x0[f[1]], geo.x0[f[2]]
                             q, w = closest_on_triangle(p, a, b, cc)
                             dvec = p - q
                             d = dvec.norm()
@@ -360,29 +378,29 @@ def _find_pairs(x0: A, tri_count: A, tri_start: A, edge_count: A, edge_start: A,
                             n = fn
                             if d > 1e-9 * cs:
                                 n = dvec / d
-                            _add_pair(p_idx, p_w, p_n, p_d, v, cnt,
+                            _add_pair(pairs, geo.v, cnt,
                                       ti.Vector([i, f[0], f[1], f[2]]),
                                       ti.Vector([1.0, -w[0], -w[1], -w[2]]), n, d, ahead, th)
     # edge - edge (each unordered pair once: e2 > e)
     ti.loop_config(serialize=True)
     for e in range(ne):
-        lo1, hi1 = _edge_box(x0, x, ev, e, 0.0)
+        lo1, hi1 = _edge_box(geo.x0, geo.x, geo.ev, e, 0.0)
         c0, c1 = _cell(lo1, cs), _cell(hi1, cs)
-        a1, b1 = ev[e][0], ev[e][1]
+        a1, b1 = geo.ev[e][0], geo.ev[e][1]
         for ci, cj, ck in ti.ndrange((c0[0], c1[0] + 1), (c0[1], c1[1] + 1),
                                      (c0[2], c1[2] + 1)):
             c = ti.Vector([ci, cj, ck])
             hb = _hash(c, nb)
-            for s in range(edge_start[hb], edge_start[hb] + edge_count[hb]):
-                e2 = ee_id[s]
-                if e2 > e and all(ee_cell[s] == c):
-                    a2, b2 = ev[e2][0], ev[e2][1]
+            for s in range(table.edge_start[hb], table.edge_start[hb] + table.edge_count[hb]):
+                e2 = table.ee_id[s]
+                if e2 > e and all(table.ee_cell[s] == c):
+                    a2, b2 = geo.ev[e2][0], geo.ev[e2][1]
                     if a1 != a2 and a1 != b2 and b1 != a2 and b1 != b2:
-                        lo2, hi2 = _edge_box(x0, x, ev, e2, r)
+                        lo2, hi2 = _edge_box(geo.x0, geo.x, geo.ev, e2, r)
                         if all(_cell(ti.max(lo1, lo2), cs) == c) and all(lo1 <= hi2) \
                                 and all(lo2 <= hi1):
-                            p1, q1 = x0[a1], x0[b1]
-                            p2, q2 = x0[a2], x0[b2]
+                            p1, q1 = geo.x0[a1], geo.x0[b1]
+                            p2, q2 = geo.x0[a2], geo.x0[b2]
                             sa, tb = closest_segments(p1, q1, p2, q2)
                             dvec = (p1 + sa * (q1 - p1)) - (p2 + tb * (q2 - p2))
                             d = dvec.norm()
@@ -390,23 +408,22 @@ def _find_pairs(x0: A, tri_count: A, tri_start: A, edge_count: A, edge_start: A,
                                                ti.Vector([0.0, 0.0, 1.0]))
                             if d > 1e-9 * cs:
                                 n = dvec / d
-                            _add_pair(p_idx, p_w, p_n, p_d, v, cnt, ti.Vector([a1, b1, a2, b2]),
+                            _add_pair(pairs, geo.v, cnt, ti.Vector([a1, b1, a2, b2]),
                                       ti.Vector([1.0 - sa, sa, tb - 1.0, -tb]), n, d, ahead, th)
 
 
 @ti.kernel
-def _impulses(contact: A, touched: A, p_idx: A, p_w: A, p_n: A, p_d: A, v: A, mass: A,
-              pinned: A, npairs: ti.i32, h: float, th: float, restore: float, iters: ti.i32,
-              ratio: float):
+def _impulses(contact: A, touched: A, pairs: PairPack, v: A, mass: A, pinned: A,
+              npairs: ti.i32, h: float, th: float, restore: float, iters: ti.i32, ratio: float):
     # Gauss-Seidel: pairs share vertices, so sequential updates converge where Jacobi
     # averaging would need many more sweeps.
     ti.loop_config(serialize=True)
     for _ in range(iters):
         for k in range(npairs):
-            idx = p_idx[k]
-            w = p_w[k]
-            n = p_n[k]
-            gap = th - p_d[k]
+            idx = pairs.p_idx[k]
+            w = pairs.p_w[k]
+            n = pairs.p_n[k]
+            gap = th - pairs.p_d[k]
             target = gap / h
             if gap > 0.0:
                 target *= restore

@@ -23,7 +23,7 @@ Design notes (measured on this 2-core CPU, Taichi 1.7.4, f64):
 import numpy as np
 import taichi as ti
 
-from ..ndarrays import A, T  # noqa: F401 (the strain kernels import them from here)
+from ..ndarrays import A, T, PackCache  # noqa: F401 (strain kernels import A, T from here)
 from .constraints import K_MAX
 
 
@@ -156,22 +156,13 @@ class Workspace:
         # and the budget had added to a launch, measured on hanging at resolution 25).
         self.budget = np.zeros(N_BUDGET)
         self.H = None                             # the Newton matrix's values (per pattern)
-        self._packs = {}
+        self._packs = PackCache()
         self.set_stitch_capacity(1)
 
     def pack(self, kind, pack_type, **members):
-        """The argpack of ``members``, made on first use and again only when one of its arrays
-        was replaced (a new stitch capacity, a larger H, a new pattern). The last two packs of
-        each kind are kept: the two metrics (and the preconditioner and its stubs) alternate.
-        While a pack is kept it holds its arrays, so their ids cannot be reused."""
-        key = tuple(id(a) for a in members.values())
-        made = self._packs.setdefault(kind, {})
-        pack = made.get(key)
-        if pack is None:
-            if len(made) >= 2:
-                made.pop(next(iter(made)))
-            pack = made[key] = pack_type(**members)
-        return pack
+        """The argpack of ``members`` (ndarrays.PackCache: made again only when one of its
+        arrays was replaced, e.g. a new stitch capacity, a larger H, a new pattern)."""
+        return self._packs.get(kind, pack_type, **members)
 
     def mesh_pack(self):
         return self.pack("mesh", MeshPack, face_verts=self.face_verts, Dm_inv=self.Dm_inv,
