@@ -1,0 +1,297 @@
+"""Does the draped sheet's resting shape depend on the strain solve? (issue #32: "a cloth's
+final draped shape must not depend on the solver's tolerance: the default and exact steps
+give the same drape, the same fold count, within the chaos floor").
+
+    python -m benchmarks.drape_shape --out docs/speed          # ~15 min, two runs at a time
+    python -m benchmarks.drape_shape --drops 0.95 --out /tmp/ds   # one height
+
+The drape scene (resolution 25, the default settings otherwise) runs FRAMES frames from each
+height in DROPS, once per solve: the default PCG steps and exact (Cholesky) Newton steps, and
+each again with every free vertex's start moved by 1 nm in a random direction. The sheet
+rests from about frame 40; the shape it rests in is what a user sees. Per run: the final
+positions, the lowest vertex, the hem's folds (``fold_count``) and the mean kinetic energy
+over the last 30 frames.
+
+The *chaos floor* of a solve at a height is the RMS distance between its resting sheet and
+the same solve's from the start moved by 1 nm: the landing buckles the sheet, and a buckle's
+side is decided by rounding, so no solve can be held to a closer answer than that. The
+default gives the same drape as exact steps when its distance to them is within that floor,
+and the fold counts agree as a distribution over the heights (one height's count is one
+draw of a chaotic outcome).
+
+Writes drape_shape.md, drape_shape.json and drape_shape.png (the hems seen from above, per
+height and solve) to --out; runs are cached in --out/drape_shape_runs/ (--fresh: run again).
+"""
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+FRAMES = 90
+REST_FRAMES = 30                    # the last frames, over which the resting KE is averaged
+DROPS = (0.95, 0.951, 0.953, 0.957, 0.96, 0.965, 0.97)     # as benchmarks.motion_error
+SOLVES = {"default": {}, "exact steps": {"linear_solver": "cholesky"}}
+# A fold: an outward lobe of the hem, standing at least this far (m) out from the hem on both
+# sides of it (about one edge of the resolution-25 sheet, 4.2 cm: smaller bumps are single
+# triangles, not folds).
+FOLD_PROMINENCE = 0.04
+
+
+def hem_loop(faces):
+    """The boundary vertices of a disc-like triangle mesh, in order around it."""
+    from collections import Counter, defaultdict
+    count = Counter()
+    for a, b, c in faces:
+        for e in ((a, b), (b, c), (c, a)):
+            count[tuple(sorted(e))] += 1
+    nbr = defaultdict(list)
+    for (a, b), n in count.items():
+        if n == 1:
+            nbr[a].append(b)
+            nbr[b].append(a)
+    if not nbr or any(len(v) != 2 for v in nbr.values()):
+        raise ValueError("the mesh's boundary is not one simple loop")
+    start = min(nbr)
+    loop, prev = [start], None
+    while True:
+        here = loop[-1]
+        nxt = nbr[here][0] if nbr[here][0] != prev else nbr[here][1]
+        if nxt == start:
+            break
+        loop.append(nxt)
+        prev = here
+    if len(loop) != len(nbr):
+        raise ValueError("the mesh's boundary is more than one loop")
+    return loop
+
+
+def fold_count(x, loop, axis_xz, prominence=FOLD_PROMINENCE):
+    """Folds of the hem: local maxima, along the closed hem, of its horizontal distance from
+    the sphere's vertical axis that stand ``prominence`` above the minima on both sides (a
+    fold hangs out from the sphere; between two folds the hem comes back in)."""
+    import numpy as np
+    from scipy.signal import find_peaks
+    p = np.asarray(x)[loop]
+    r = np.hypot(p[:, 0] - axis_xz[0], p[:, 2] - axis_xz[1])
+    n = len(r)
+    # Three copies so that a fold across the loop's start is seen whole; count the middle one.
+    peaks, _ = find_peaks(np.concatenate([r, r, r]), prominence=prominence)
+    return int(np.sum((peaks >= n) & (peaks < 2 * n)))
+
+
+def child(solve, drop, chaos):
+    """One run: the final positions and faces, the lowest vertex, KE and ms per frame."""
+    from cloth import backend
+    backend.init("cpu", "f64")
+    import numpy as np
+    from benchmarks.harness import configure
+    from cloth import metrics
+    from cloth.simulator import Simulator
+    _, cfg, setup = configure("drape", {"cloth": {"drop": drop}, "strain": SOLVES[solve]})
+    if chaos:
+        rng = np.random.default_rng(1)
+        step = rng.normal(size=setup.mesh.x.shape)
+        step /= np.linalg.norm(step, axis=1, keepdims=True)
+        setup.mesh.x += 1e-9 * step
+    sim = Simulator(setup, cfg)
+    ms, ke = [], []
+    for _ in range(FRAMES):
+        sim.step_frame()
+        ms.append(sim.stage("strain_limit").ms)
+        ke.append(metrics.kinetic_energy(sim.model.velocities(), sim.model.mass))
+    x = sim.model.positions()
+    return {"x": x.tolist(), "faces": np.asarray(sim.model.faces).tolist(),
+            "lowest": float(x[:, 1].min()), "ms": ms, "ke": ke,
+            "diagonal": float(np.linalg.norm(np.ptp(sim.model.uv, axis=0))),
+            "sphere": cfg["sphere"]["center"]}
+
+
+def run_one(folder, solve, drop, chaos, fresh):
+    tag = f"{solve.replace(' ', '_')}__{drop}" + ("__chaos" if chaos else "")
+    path = os.path.join(folder, tag + ".json")
+    if os.path.exists(path) and not fresh:
+        with open(path) as fh:
+            return json.load(fh)
+    t0 = time.time()
+    proc = subprocess.run([sys.executable, "-m", "benchmarks.drape_shape", "--child",
+                           json.dumps([solve, drop, chaos])],
+                          capture_output=True, text=True, cwd=ROOT)
+    if proc.returncode != 0:
+        result = {"error": proc.stderr[-600:]}
+    else:
+        result = json.loads(proc.stdout.strip().splitlines()[-1])
+        result["wall_s"] = time.time() - t0
+        with open(path, "w") as fh:
+            json.dump(result, fh)
+    print(f"  {solve} / drop {drop}" + (" / 1 nm" if chaos else "")
+          + (f": error {result['error'][-300:]}" if "error" in result else
+             f" ({result['wall_s']:.0f} s)"), file=sys.stderr, flush=True)
+    return result
+
+
+def rms(a, b, diagonal):
+    import numpy as np
+    a, b = np.asarray(a), np.asarray(b)
+    return float(np.sqrt(np.mean(np.sum((a - b) ** 2, axis=1))) / diagonal)
+
+
+def summarize(runs, drops):
+    """Per height: each solve's lowest vertex, folds, resting KE, its chaos floor, and the
+    default's distance to exact steps."""
+    import numpy as np
+    rows = []
+    for drop in drops:
+        row = {"drop": drop}
+        for solve in SOLVES:
+            run, twin = runs[(solve, drop, False)], runs[(solve, drop, True)]
+            loop = hem_loop(run["faces"])
+            axis = (run["sphere"][0], run["sphere"][2])
+            row[solve] = dict(
+                lowest=run["lowest"], folds=fold_count(run["x"], loop, axis),
+                folds_1nm=fold_count(twin["x"], loop, axis),
+                ke_rest=float(np.mean(run["ke"][-REST_FRAMES:])),
+                ms=float(np.median(run["ms"][5:])),
+                floor=rms(run["x"], twin["x"], run["diagonal"]))
+        d, e = runs[("default", drop, False)], runs[("exact steps", drop, False)]
+        row["default_vs_exact"] = rms(d["x"], e["x"], d["diagonal"])
+        rows.append(row)
+    return rows
+
+
+def permutation_p(a, b, draws=20000):
+    """Two-sided permutation test of a difference in means between two samples: the share of
+    random relabellings whose difference is at least the observed one."""
+    import numpy as np
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    pooled, observed = np.concatenate([a, b]), abs(a.mean() - b.mean())
+    rng = np.random.default_rng(0)
+    hits = 0
+    for _ in range(draws):
+        rng.shuffle(pooled)
+        hits += abs(pooled[: len(a)].mean() - pooled[len(a):].mean()) >= observed - 1e-12
+    return hits / draws
+
+
+def write_report(out, rows, seconds):
+    import numpy as np
+    from benchmarks.harness import commit, machine
+    solves = list(SOLVES)
+    lines = [
+        "# Does the resting drape depend on the strain solve? (issue #32)", "",
+        f"Command: `python -m benchmarks.drape_shape --out {out}` ({seconds / 60:.0f} min of "
+        f"runs, two at a time). Commit {commit()}; {machine()}.", "",
+        f"The drape scene (resolution 25, 1152 faces) for {FRAMES} frames from each height, "
+        "once per solve and once more with every vertex's start moved by 1 nm. *floor*: the "
+        "RMS distance between a run's resting sheet and its 1 nm twin's, over the sheet's "
+        "diagonal (the chaos floor: how far the same solve's rest moves when rounding decides "
+        "a buckle differently). *default vs exact*: the same distance between the default's "
+        "and exact steps' resting sheets from the same height. *folds*: outward lobes of the "
+        f"hem at least {100 * FOLD_PROMINENCE:.0f} cm deep (`fold_count`), the 1 nm twin's "
+        f"after the slash. KE: mean over the last {REST_FRAMES} frames. ms: strain limiting a "
+        "frame, median of frames 6 on.", "",
+        "| drop (m) | default vs exact | floor, default | floor, exact | folds, default | "
+        "folds, exact | lowest (m), default / exact | resting KE (J), default / exact |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for r in rows:
+        d, e = r["default"], r["exact steps"]
+        lines.append(
+            f"| {r['drop']:.3f} | {r['default_vs_exact']:.3f} | {d['floor']:.3f} | "
+            f"{e['floor']:.3f} | {d['folds']} / {d['folds_1nm']} | {e['folds']} / "
+            f"{e['folds_1nm']} | {d['lowest']:.3f} / {e['lowest']:.3f} | "
+            f"{d['ke_rest']:.1e} / {e['ke_rest']:.1e} |")
+    dve = np.array([r["default_vs_exact"] for r in rows])
+    floors = np.array([[r[s]["floor"] for s in solves] for r in rows])
+    folds = {s: sorted([r[s]["folds"] for r in rows] + [r[s]["folds_1nm"] for r in rows])
+             for s in solves}
+    ms = {s: float(np.median([r[s]["ms"] for r in rows])) for s in solves}
+    p_folds = permutation_p(*(folds[s] for s in solves))
+    lines += ["", "Summary over the heights:", "",
+              f"- default vs exact: median {np.median(dve):.3f}, largest {dve.max():.3f} of "
+              f"the diagonal; the chaos floors: median {np.median(floors):.3f}, largest "
+              f"{floors.max():.3f}.",
+              "- folds (every run, twins included): " + "; ".join(
+                  f"{s} {', '.join(map(str, folds[s]))} (median {np.median(folds[s]):g})"
+                  for s in solves) + f"; the means differ by "
+              f"{abs(np.mean(folds[solves[0]]) - np.mean(folds[solves[1]])):.2f} fold, and a "
+              f"random split of the same counts differs as much or more with probability "
+              f"{p_folds:.2f} (two-sided permutation test).",
+              "- strain limiting ms a frame (median over the heights): " + ", ".join(
+                  f"{s} {ms[s]:.0f}" for s in solves) + ".",
+              "", "![the hems from above](drape_shape.png)", ""]
+    with open(os.path.join(out, "drape_shape.md"), "w") as fh:
+        fh.write("\n".join(lines))
+    with open(os.path.join(out, "drape_shape.json"), "w") as fh:
+        json.dump(rows, fh, indent=1)
+
+
+def plot(out, runs, drops):
+    """The resting hems seen from above: a panel per height, default and exact steps (and
+    their 1 nm twins, thin), over the sphere's outline."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+    cols = min(len(drops), 4)
+    rows = -(-len(drops) // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(2.7 * cols, 2.8 * rows + 0.4), squeeze=False)
+    for ax in axes.flat[len(drops):]:
+        ax.axis("off")
+    colors = {"default": "tab:blue", "exact steps": "tab:orange"}
+    for ax, drop in zip(axes.flat, drops):
+        for solve, color in colors.items():
+            for chaos in (False, True):
+                run = runs[(solve, drop, chaos)]
+                loop = hem_loop(run["faces"])
+                p = np.asarray(run["x"])[loop + loop[:1]]
+                ax.plot(p[:, 0], p[:, 2], color=color, lw=0.6 if chaos else 1.6,
+                        alpha=0.6 if chaos else 1.0,
+                        label=None if chaos else solve)
+        c = runs[("default", drop, False)]["sphere"]
+        t = np.linspace(0, 2 * np.pi, 100)
+        ax.plot(c[0] + 0.3 * np.cos(t), c[2] + 0.3 * np.sin(t), color="0.6", lw=0.8, ls=":")
+        ax.set_aspect("equal")
+        ax.set_title(f"drop {drop:.3f} m", fontsize=9)
+        ax.set_xticks([])
+        ax.set_yticks([])
+    axes[0][0].legend(fontsize=7, loc="lower left")
+    fig.suptitle("Resting hems from above\n(thin: the same solve from a start moved by 1 nm; "
+                 "dotted: the sphere)", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, "drape_shape.png"), dpi=110)
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--out", default="docs/speed")
+    p.add_argument("--drops", type=float, nargs="+", default=list(DROPS))
+    p.add_argument("--jobs", type=int, default=2)
+    p.add_argument("--fresh", action="store_true")
+    p.add_argument("--child", help=argparse.SUPPRESS)
+    a = p.parse_args()
+    if a.child:
+        print(json.dumps(child(*json.loads(a.child))))
+        return
+    os.makedirs(a.out, exist_ok=True)
+    folder = os.path.join(a.out, "drape_shape_runs")
+    os.makedirs(folder, exist_ok=True)
+    plan = [(s, d, c) for d in a.drops for s in SOLVES for c in (False, True)]
+    print(f"drape_shape: {len(plan)} runs of {FRAMES} frames", file=sys.stderr)
+    t0 = time.time()
+    with ThreadPoolExecutor(a.jobs) as pool:
+        results = list(pool.map(lambda r: run_one(folder, *r, a.fresh), plan))
+    failed = [(r, res["error"]) for r, res in zip(plan, results) if "error" in res]
+    if failed:
+        raise SystemExit(f"drape_shape: {len(failed)} runs failed, e.g. {failed[0]}")
+    runs = dict(zip(plan, results))
+    rows = summarize(runs, a.drops)
+    write_report(a.out, rows, time.time() - t0)
+    plot(a.out, runs, a.drops)
+    print(open(os.path.join(a.out, "drape_shape.md")).read())
+
+
+if __name__ == "__main__":
+    main()
