@@ -59,6 +59,20 @@ def test_pause_holds_the_cloth_and_step_advances_exactly_one_frame(st):
     assert st.sim.frame == 5
 
 
+def test_a_driver_loop_cap_pauses_the_window_with_the_whole_fix(st, monkeypatch):
+    """Vulkan on lavapipe cuts long serial loops short (cloth/strain/direct.py LOOP_CAP): the
+    window pauses and shows the error's advice in full (a generic stage error is cut at 160
+    characters, which dropped the fix)."""
+    from cloth.strain import direct
+
+    def capped():
+        direct.check_loops({direct.I_LOOPS: 1}, "matrix", 1200, 2300)
+    monkeypatch.setattr(st.sim, "step_frame", capped)
+    run(st, 1)
+    assert st.paused and st.failed
+    assert "--arch cpu" in st.message and "--resolution" in st.message
+
+
 def test_reset_restarts_the_scene_and_keeps_the_settings(st):
     x_start = st.sim.model.positions()
     st.set_substeps(2)

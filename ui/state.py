@@ -22,6 +22,7 @@ import numpy as np
 
 from cloth import compile_notice, metrics
 from cloth.simulator import STRAIN_METHODS, SimulationDiverged, Simulator
+from cloth.strain.direct import LoopCapError
 
 COMPARE_METHODS = STRAIN_METHODS[:-1]      # the three families, without "none"
 BANDS = ("warp", "weft", "bias")
@@ -193,6 +194,10 @@ class AppState:
             except SimulationDiverged as err:
                 self.paused = self.failed = True
                 self.message = f"diverged ({self.labels[i]}): {err}. Press reset."
+                return False
+            except LoopCapError as err:   # the driver, not the cloth: its whole message names
+                self.paused = self.failed = True       # the fix, so it is shown whole
+                self.message = f"{err}."
                 return False
             except Exception as err:   # a stage failed: keep the window, show why, pause
                 traceback.print_exc()
