@@ -265,7 +265,7 @@ def run_headless(sim, cfg, args, name, overlays=()):
     run = HeadlessRun(sim, cfg, out, images=o["images"], video=o["video"], color=o["color"],
                       meshes=o["meshes"], every=o["every"], size=(o["width"], o["height"]),
                       quiet=args.quiet, overlays=overlays)
-    from cloth.strain.direct import LoopCapError
+    from cloth.backend import LoopCapError
     try:
         ok = run.run(int(cfg["sim"]["frames"]))
     except RenderUnavailable as err:

@@ -24,6 +24,13 @@ class BackendError(RuntimeError):
     """Raised when Taichi cannot start with the requested settings."""
 
 
+class LoopCapError(RuntimeError):
+    """A serial kernel's loops were cut short by the driver: Mesa's llvmpipe (Debian's
+    software Vulkan, lavapipe) runs at most 65535 loop iterations in one shader invocation and
+    then ends every loop without an error (cloth/strain/direct.py ``LOOP_CAP``). Raised by the
+    launches that probe for it (``loops_ran`` in strain/direct.py and dynamics.py)."""
+
+
 # LOOM_FAST_COMPILE=1 switches off Taichi's advanced IR optimisation. Measured on this 2-core
 # VM (hanging, resolution 7, mapping, empty offline cache): building the simulator compiles the
 # one-launch AL solve (strain/al.py solve_al) in 158 s with it and 12 s without (the

@@ -252,20 +252,36 @@ class ImplicitEuler:
         see ``_linearise``). The same arithmetic as the one-launch kernel."""
         s = self.settings
         coef, mesh, state = self._constants(h), self._mesh(), self._state()
-        _linearise(coef, mesh, state, self._elems, self._cg)
-        rz, bnorm = _start(coef, mesh, state, self._elems, self._cg)
+        self._check_loops(_linearise(2, coef, mesh, state, self._elems, self._cg), "linearise")
+        rz, bnorm, ran = _start(2, coef, mesh, state, self._elems, self._cg)
+        self._check_loops(ran, "start")
         rel = float(np.sqrt(abs(rz) / max(bnorm, 1e-300)))
         iters = 0
         while iters < s.cg_max_iters and rel > s.cg_tol:
-            rz_new, stalled = _iteration(rz, coef, mesh, self._elems, self._cg)
+            rz_new, stalled, ran = _iteration(2, rz, coef, mesh, self._elems, self._cg)
+            self._check_loops(ran, "CG iteration")
             if stalled:
                 break
             rz = rz_new
             rel = float(np.sqrt(abs(rz) / max(bnorm, 1e-300)))
             iters += 1
-        _advance(coef, mesh, state, self._cg)
+        self._check_loops(_advance(2, coef, mesh, state, self._cg), "advance")
         self.last_cg_iters, self.last_cg_residual = iters, rel
         return iters
+
+    def _check_loops(self, ran, phase):
+        """Raise backend.LoopCapError unless the launch's probe loop of 2 iterations ran twice
+        (``loops_ran``): a driver that caps loops (lavapipe) ends every loop of the launch
+        once the cap is hit, and the step would be silently wrong (measured with
+        benchmarks/loop_cap.py: linearise runs ~50 loop iterations a vertex, so it is cut
+        short from ~1300 vertices, a CG iteration ~26 a vertex)."""
+        if int(round(float(ran))) != 2:
+            raise backend.LoopCapError(
+                f"dynamics kernel {phase} stopped early on --arch {backend.arch()}: the driver "
+                f"ended its loops (Mesa's llvmpipe / lavapipe runs at most 65535 loop "
+                f"iterations a shader invocation), so the step would be wrong; this mesh "
+                f"({self.model.n_verts} vertices) is too large for the serial dynamics kernels "
+                "on this driver. Use a lower --resolution (35 or less for a sheet) or --arch cpu")
 
     def energy(self):
         """Elastic energy (membrane + bending + stitches) of the current positions, J."""
@@ -739,39 +755,60 @@ def _step(coef: A, mesh: MeshPack, state: StatePack, elems: ElementPack,
 # dropped, 33 crashed). What counts is the arrays a kernel uses, not the pack members it is
 # given (measured: a 40-member pack of which 31 are used runs right, 32 used does not, with
 # one loose array besides); _linearise uses 27 (with ``coef``), _start 29, _iteration 25.
+# Each launch ends with ``loops_ran`` and returns its count (``ImplicitEuler._check_loops``).
+@ti.func
+def loops_ran(two):
+    """2.0 when a loop of ``two`` (= 2, a run-time value: a constant count is unrolled and
+    escapes the cap) iterations runs in full, 1.0 once the driver's loop cap was hit (llvmpipe
+    then runs a loop's body once)."""
+    n = 0.0
+    for _ in range(two):
+        n += 1.0
+    return n
+
+
 @ti.kernel
-def _linearise(coef: A, mesh: MeshPack, state: StatePack, elems: ElementPack, cg: SolvePack):
+def _linearise(two: int, coef: A, mesh: MeshPack, state: StatePack, elems: ElementPack,
+               cg: SolvePack) -> float:
     ti.loop_config(serialize=True)
+    ran = 0.0
     for _ in range(1):
         c = constants(coef)
         linearise(c, mesh, state, elems, cg)
+        ran = loops_ran(two)
+    return ran
 
 
 @ti.kernel
-def _start(coef: A, mesh: MeshPack, state: StatePack, elems: ElementPack,
-           cg: SolvePack) -> ti.types.vector(2, float):
+def _start(two: int, coef: A, mesh: MeshPack, state: StatePack, elems: ElementPack,
+           cg: SolvePack) -> ti.types.vector(3, float):
     ti.loop_config(serialize=True)
-    out = ti.Vector([0.0, 0.0])
+    out = ti.Vector([0.0, 0.0, 0.0])
     for _ in range(1):
         c = constants(coef)
-        out = cg_start(c, mesh, state, elems, cg)
+        rb = cg_start(c, mesh, state, elems, cg)
+        out = ti.Vector([rb[0], rb[1], loops_ran(two)])
     return out
 
 
 @ti.kernel
-def _iteration(rz: float, coef: A, mesh: MeshPack, elems: ElementPack,
-               cg: SolvePack) -> ti.types.vector(2, float):
+def _iteration(two: int, rz: float, coef: A, mesh: MeshPack, elems: ElementPack,
+               cg: SolvePack) -> ti.types.vector(3, float):
     ti.loop_config(serialize=True)
-    out = ti.Vector([0.0, 0.0])
+    out = ti.Vector([0.0, 0.0, 0.0])
     for _ in range(1):
         c = constants(coef)
-        out = cg_iteration(rz, c, mesh, elems, cg)
+        it = cg_iteration(rz, c, mesh, elems, cg)
+        out = ti.Vector([it[0], it[1], loops_ran(two)])
     return out
 
 
 @ti.kernel
-def _advance(coef: A, mesh: MeshPack, state: StatePack, cg: SolvePack):
+def _advance(two: int, coef: A, mesh: MeshPack, state: StatePack, cg: SolvePack) -> float:
     ti.loop_config(serialize=True)
+    ran = 0.0
     for _ in range(1):
         c = constants(coef)
         advance(c, mesh, state, cg)
+        ran = loops_ran(two)
+    return ran

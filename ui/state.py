@@ -22,7 +22,7 @@ import numpy as np
 
 from cloth import compile_notice, metrics
 from cloth.simulator import STRAIN_METHODS, SimulationDiverged, Simulator
-from cloth.strain.direct import LoopCapError
+from cloth.backend import LoopCapError
 
 COMPARE_METHODS = STRAIN_METHODS[:-1]      # the three families, without "none"
 BANDS = ("warp", "weft", "bias")

@@ -347,8 +347,7 @@ LOOP_CAP = 65535
 TRIAL_STEP, TRIAL_X, TRIAL_START = 0, 1, 2
 
 
-class LoopCapError(RuntimeError):
-    """A split kernel's loops were cut short by the driver (``loops_ran``)."""
+LoopCapError = backend.LoopCapError     # (one class for every kernel that probes the cap)
 
 
 def split_kernels():
