@@ -68,10 +68,10 @@ def assemble_all(method: ti.template(), nf, pos: T, mesh: T, cons: T):
 
 
 @ti.kernel
-def assemble(method: ti.template(), nf: int, pos: A, mesh: MeshPack, cons: ConstraintPack):
+def assemble(method: ti.template(), pos: A, mesh: MeshPack, cons: ConstraintPack):
     ti.loop_config(serialize=True)
     for _ in range(1):
-        assemble_all(method, nf, pos, mesh, cons)
+        assemble_all(method, mesh.n_faces, pos, mesh, cons)
 
 
 # ---- augmented Lagrangian pieces (METHOD 4, paper eqs. 25-27) ----------------------------------
@@ -831,9 +831,9 @@ def choose_start(method: ti.template(), from_prev, K, nv, nf, ns, mu, mesh: T, m
 
 
 @ti.kernel
-def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: int, ns: int,
-             budget: A, mesh: MeshPack, metric: MetricPack, cons: ConstraintPack,
-             contacts: ContactPack, vec: VectorPack, pc: PrecondPack, stats: A):
+def solve_al(method: ti.template(), exact: ti.template(), budget: A, mesh: MeshPack,
+             metric: MetricPack, cons: ConstraintPack, contacts: ContactPack, vec: VectorPack,
+             pc: PrecondPack, stats: A):
     """The whole AL projection (METHOD 4) in one launch (measured: with one launch per
     phase, Python's argument handling cost as much as the solve): rounds of inexact
     minimisation of L_A by projected Newton + PCG with a backtracking (Armijo) line search,
@@ -846,6 +846,7 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
     budgets, tolerances, preconditioner) are read from ``budget`` (buffers.B_*)."""
     ti.loop_config(serialize=True)
     for _ in range(1):
+        K, nv, nf, ns = cons.n_per_face, mesh.n_verts, mesh.n_faces, contacts.n_stitches
         use_twist = mesh.params[P_SVD_DELTA] > 0.0 and ti.static(method == SVD) and \
             mesh.params[P_CURVATURE] == 0.0
         margin = mesh.params[P_MARGIN]

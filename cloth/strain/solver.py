@@ -556,6 +556,7 @@ class StrainLimiter:
         ws = self._ws
         if len(self._stitches) > ws.s_cap:
             ws.set_stitch_capacity(len(self._stitches))
+        ws.n_stitches = len(self._stitches)
         ndarrays.zero(ws.lam_s)
         self._retire_patterns()                # the stitches are part of the pattern
         self._chol = None
@@ -787,9 +788,9 @@ class StrainLimiter:
                 self.last_reverted = True
                 self.reverted_count += 1
         else:
-            pbd.pbd_solve(mid, int(self.solver == "jacobi"), nv, nf, len(self._stitches),
-                          self.tol, self.max_iters, self.jacobi_omega, ws.x, ws.mesh_pack(),
-                          ws.contact_pack(), ws.acc, ws.cnt, ws.stats)
+            pbd.pbd_solve(mid, int(self.solver == "jacobi"), self.tol, self.max_iters,
+                          self.jacobi_omega, ws.x, ws.mesh_pack(), ws.contact_pack(), ws.acc,
+                          ws.cnt, ws.stats)
             # Measure the final positions (a sweep sees each face before moving it).
             self._assemble(mid, ws.x)
             stats = ws.stats.to_numpy()
@@ -826,8 +827,10 @@ class StrainLimiter:
             self._upload_params()
 
     def _assemble(self, mid, pos):
+        """The constraints of the method ``mid`` at ``pos`` into the work arrays (ws.g,
+        ws.grad, ...)."""
         ws = self._ws
-        al.assemble(mid, self.model.n_faces, pos, ws.mesh_pack(), ws.constraint_pack())
+        al.assemble(mid, pos, ws.mesh_pack(), ws.constraint_pack(N_CONSTRAINTS[self.method]))
 
     def _solve_direct(self, mid, K, use_system):
         from . import direct
@@ -967,9 +970,9 @@ class StrainLimiter:
         budget[buffers.B_FROM_PREV] = float(self.coupling == "implicit" and
                                             metric is self._system)
         budget[buffers.B_PC_MODE] = pc_mode
-        al.solve_al(mid, self._kernel_curvature(), K, m.n_verts, m.n_faces, len(self._stitches),
-                    ws.budget, ws.mesh_pack(), ws.metric_pack(metric), ws.constraint_pack(),
-                    ws.contact_pack(), ws.vector_pack(), ws.precond_pack(fp, mg), ws.stats)
+        al.solve_al(mid, self._kernel_curvature(), ws.budget, ws.mesh_pack(),
+                    ws.metric_pack(metric), ws.constraint_pack(K), ws.contact_pack(),
+                    ws.vector_pack(), ws.precond_pack(fp, mg), ws.stats)
         stats = ws.stats.to_numpy()
         rounds, newton = int(stats[ST_ITERS]), int(stats[ST_NEWTON])
         self.last_factorizations = int(made_before)
