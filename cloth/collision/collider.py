@@ -52,15 +52,17 @@ from .obstacles import THICKNESS, CollisionError, Obstacle, mat3, vec3
 
 
 
-# Indices into the obstacle pass's ``motion`` array (``Collider._motion``): the substep h, the
+# Indices into the obstacle kernels' ``motion`` array (``Collider._motion``): the substep h, the
 # thickness, the obstacle's friction coefficient, the continuous test's sample spacing (<= 0:
-# none), and the obstacle's pose at the start (R0, c0) and end (R1, c1) of the substep and its
-# linear and angular velocity; R row by row. Why an array: these were 10 of the kernel's 21
-# arguments, six of them matrices and vectors built as Taichi objects at every launch; a CPU
-# kernel reads a numpy array in place.
-M_H, M_TH, M_MU, M_STEP, M_R0, M_C0, M_R1, M_C1, M_VLIN, M_OMEGA = \
-    0, 1, 2, 3, 4, 13, 16, 25, 28, 31
-N_MOTION = 34
+# none), the obstacle's pose at the start (R0, c0) and end (R1, c1) of the substep and its
+# linear and angular velocity, R row by row; and how far from the surface a contact plane is
+# still made (``contact_planes``' reach). The kernels that need the pose at one time only
+# (``_mark_resting``, ``_planes``) read it from R0, c0. Why an array: these were 10 of the
+# obstacle pass's 21 arguments, six of them matrices and vectors built as Taichi objects at
+# every launch; a CPU kernel reads a numpy array in place.
+M_H, M_TH, M_MU, M_STEP, M_R0, M_C0, M_R1, M_C1, M_VLIN, M_OMEGA, M_REACH = \
+    0, 1, 2, 3, 4, 13, 16, 25, 28, 31, 34
+N_MOTION = 35
 
 
 class Collider:
@@ -187,7 +189,7 @@ class Collider:
             mo[M_H], mo[M_TH], mo[M_MU], mo[M_STEP] = h, self.thickness, o.mu, step
             mo[M_R0:M_C0], mo[M_C0:M_R1] = np.ravel(R0), c0
             mo[M_R1:M_C1], mo[M_C1:M_VLIN] = np.ravel(R1), c1
-            mo[M_VLIN:M_OMEGA], mo[M_OMEGA:] = vlin, omega
+            mo[M_VLIN:M_OMEGA], mo[M_OMEGA:M_REACH] = vlin, omega
             _resolve_obstacle(*o.shape_args(), st.x, st.v, self.model.vert_pinned, n,
                               self.ccd_samples, mo, self._counter, self._moved)
 
@@ -195,11 +197,13 @@ class Collider:
         """The read-only pass before self-collision: set ``flags[i]`` where vertex i started
         the substep on an obstacle (nothing else is written)."""
         st = self.model.state
+        mo = self._motion
         for o in self.obstacles:
             c0, R0 = o.pose(t)
+            mo[M_H], mo[M_TH] = h, self.thickness
+            mo[M_R0:M_C0], mo[M_C0:M_R1] = np.ravel(R0), c0
             _mark_resting(*o.shape_args(), st.x, st.v, self.model.vert_pinned,
-                          self.model.n_verts, h, self.thickness, ti.Matrix(R0), ti.Vector(c0),
-                          flags)
+                          self.model.n_verts, mo, flags)
 
     # -- contacts as constraints of the strain projection -----------------------------------
     def contact_planes(self, t, out, reach=None, mu_out=None):
@@ -223,10 +227,13 @@ class Collider:
         if mu_out is None:
             mu_out = self._mu_scratch(n)
         _clear_planes(n, out, mu_out)
+        mo = self._motion
         for o in self.obstacles:
             c, R = o.pose(t)
-            _planes(*o.shape_args(), self.model.state.x, self.model.vert_pinned, n,
-                    self.thickness, reach, float(o.mu), ti.Matrix(R), ti.Vector(c), out, mu_out)
+            mo[M_TH], mo[M_REACH], mo[M_MU] = self.thickness, reach, float(o.mu)
+            mo[M_R0:M_C0], mo[M_C0:M_R1] = np.ravel(R), c
+            _planes(*o.shape_args(), self.model.state.x, self.model.vert_pinned, n, mo, out,
+                    mu_out)
 
     def _mu_scratch(self, n):
         if self._mu_tmp is None or self._mu_tmp.shape[0] < n:
@@ -376,7 +383,9 @@ def _resolve_obstacle(kind: ti.i32, prm: shape.params_t, prims: A, grid: A, x: A
 
 @ti.kernel
 def _mark_resting(kind: ti.i32, prm: shape.params_t, prims: A, grid: A, x: A, v: A, pinned: A,
-                  n: ti.i32, h: float, th: float, R0: mat3, c0: vec3, flags: A):
+                  n: ti.i32, motion: A, flags: A):
+    h, th = motion[M_H], motion[M_TH]
+    R0, c0 = _mat3_at(motion, M_R0), _vec3_at(motion, M_C0)
     for i in range(n):
         if pinned[i] == 0:
             # Resting on the obstacle at the start of the substep. (Not "inside at the end": a
@@ -398,7 +407,9 @@ def _clear_planes(n: ti.i32, out: A, mu_out: A):
 
 @ti.kernel
 def _planes(kind: ti.i32, prm: shape.params_t, prims: A, grid: A, x: A, pinned: A, n: ti.i32,
-            th: float, reach: float, mu: float, R: mat3, c: vec3, out: A, mu_out: A):
+            motion: A, out: A, mu_out: A):
+    th, reach, mu = motion[M_TH], motion[M_REACH], motion[M_MU]
+    R, c = _mat3_at(motion, M_R0), _vec3_at(motion, M_C0)
     for i in range(n):
         if pinned[i] == 0:
             xi = x[i]
