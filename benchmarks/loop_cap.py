@@ -103,7 +103,8 @@ def _hook():
         for _ in range(1):
             K, nv, nf, ns = cons.n_per_face, mesh.n_verts, mesh.n_faces, contacts.n_stitches
             exact = mesh.params[P_CURVATURE] > 0.0
-            fill_c_curvature(method, K, nf, mu, vec.x, mesh, cons)
+            if exact:
+                fill_c_curvature(method, K, nf, mu, vec.x, mesh, cons)
             use_twist = mesh.params[P_SVD_DELTA] > 0.0 and ti.static(method == SVD) and \
                 not exact
             newton_matrix(K, nv, nf, ns, mu, mesh.params[P_MARGIN],

@@ -50,7 +50,9 @@ PC_JACOBI, PC_FACTOR, PC_MULTIGRID = 0, 1, 2
 P_WARP, P_WEFT, P_SHEAR, P_MARGIN, P_DELTA, P_SVD_DELTA, P_CONTACT_SCALE = 0, 2, 4, 6, 7, 8, 9
 P_ISO = 10
 # The Newton matrix's constraint curvature: 0 the model of constraints.py, 1 exact through C
-# (c_curvature.py), with its difference step in C.
+# (c_curvature.py), with its difference step in C. Read by the direct path's kernels, which
+# compile once for both; ``al.solve_al`` takes the choice as its template argument ``exact``
+# instead (compiled in only where chosen) and does not read P_CURVATURE.
 P_CURVATURE, P_C_STEP = 11, 12
 # A round's inner loop stops once |grad L_A| fell below this fraction of its first value (0:
 # run max_newton steps).

@@ -81,7 +81,8 @@ def newton_system(method: ti.template(), mu: float, mesh: MeshPack, metric: Metr
         exact = mesh.params[P_CURVATURE] > 0.0
         metric_gradient(nv, vec.x, metric, vec)
         residual(K, nv, nf, ns, mu, vec.x, mesh, cons, contacts, vec)
-        fill_c_curvature(method, K, nf, mu, vec.x, mesh, cons)
+        if exact:
+            fill_c_curvature(method, K, nf, mu, vec.x, mesh, cons)
         use_twist = mesh.params[P_SVD_DELTA] > 0.0 and ti.static(method == SVD) and not exact
         newton_matrix(K, nv, nf, ns, mu, mesh.params[P_MARGIN], mesh.params[P_CONTACT_SCALE],
                       use_twist, exact, vec.x, mesh, metric, cons, contacts)
@@ -478,7 +479,8 @@ def newton_lhs(method: ti.template(), mu: float, two: int, mesh: MeshPack, metri
     for _ in range(1):
         K, nv, nf, ns = cons.n_per_face, mesh.n_verts, mesh.n_faces, contacts.n_stitches
         exact = mesh.params[P_CURVATURE] > 0.0
-        fill_c_curvature(method, K, nf, mu, vec.x, mesh, cons)
+        if exact:
+            fill_c_curvature(method, K, nf, mu, vec.x, mesh, cons)
         use_twist = mesh.params[P_SVD_DELTA] > 0.0 and ti.static(method == SVD) and not exact
         newton_matrix(K, nv, nf, ns, mu, mesh.params[P_MARGIN], mesh.params[P_CONTACT_SCALE],
                       use_twist, exact, vec.x, mesh, metric, cons, contacts)
