@@ -182,22 +182,18 @@ def solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, margin_mu=None):
     lim.last_fallback = False
     if lim.newton_model != "active-set":
         return _solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, False, lim.max_iters)
-    ws = lim._ws
     multipliers_in = lim.multipliers()
     out = _solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, True,
                  min(ACTIVE_SET_ROUNDS, lim.max_iters))
     if out[2] or margin_mu is None:
         return out
     lim.restart_from(multipliers_in)
-    params = ws.params.to_numpy()
-    params[P_MARGIN] = lim.active_margin
-    ws.params.from_numpy(params)
+    lim._upload_params(margin_fallback=True)
     try:
         rounds, newton, converged = _solve(lim, mid, K, metric, chol, margin_mu, mu_max,
                                            step_tol, False, lim.max_iters)
     finally:
-        params[P_MARGIN] = 0.0
-        ws.params.from_numpy(params)
+        lim._upload_params()
     return out[0] + rounds, out[1] + newton, converged
 
 
