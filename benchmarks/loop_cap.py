@@ -142,39 +142,19 @@ def _hook():
             out[0] = count()
 
     @ti.kernel
-    def p_linearise(h: float, g: ti.types.vector(3, float), kw: float, kf: float, ks: float,
-                    kb: float, alpha: float, beta: float, kst: float, nv: ti.i32, nf: ti.i32,
-                    ne: ti.i32, nst: ti.i32, vert_mass: A, vert_pinned: A,
-                    vert_pin_target: A, face_verts: A, face_Dm_inv: A, face_rest_area: A,
-                    face_grain: A, edge_verts: A, edge_faces: A, edge_opp: A,
-                    edge_rest_angle: A, edge_bend_weight: A, bend_ptr: A, bend_col: A,
-                    bend_val: A, x: A, v: A, face_fu: A, face_fv: A, face_E: A, face_wa: A,
-                    face_wb: A, edge_grad: A, edge_theta: A, stitch: A, force: A, rhs: A,
-                    precond: A, out: A):
+    def p_linearise(coef: A, mesh: D.MeshPack, state: D.StatePack, elems: D.ElementPack,
+                    cg: D.SolvePack, out: A):
         ti.loop_config(serialize=True)
         for _ in range(1):
-            D.linearise(h, g, kw, kf, ks, kb, alpha, beta, kst, nv, nf, ne, nst, force,
-                        precond, rhs, vert_mass, face_verts, face_Dm_inv, face_rest_area,
-                        face_grain, edge_verts, edge_faces, edge_opp, edge_rest_angle,
-                        edge_bend_weight, bend_ptr, bend_col, bend_val, x, v, face_fu,
-                        face_fv, face_E, face_wa, face_wb, edge_grad, edge_theta, stitch)
+            D.linearise(D.constants(coef), mesh, state, elems, cg)
             out[0] = count()
 
     @ti.kernel
-    def p_iteration(rz: float, h: float, alpha: float, beta: float, kw: float, kf: float,
-                    ks: float, kb: float, kst: float, nv: ti.i32, nf: ti.i32, ne: ti.i32,
-                    nst: ti.i32, vert_mass: A, vert_pinned: A, face_verts: A,
-                    face_rest_area: A, edge_verts: A, edge_faces: A, edge_opp: A,
-                    edge_bend_weight: A, bend_ptr: A, bend_col: A, bend_val: A, face_fu: A,
-                    face_fv: A, face_E: A, face_wa: A, face_wb: A, edge_grad: A, stitch: A,
-                    dv: A, res: A, z: A, p: A, Ap: A, precond: A, out: A):
+    def p_iteration(rz: float, coef: A, mesh: D.MeshPack, elems: D.ElementPack,
+                    cg: D.SolvePack, out: A):
         ti.loop_config(serialize=True)
         for _ in range(1):
-            o = D.cg_iteration(rz, h, alpha, beta, kw, kf, ks, kb, kst, nv, nf, ne, nst,
-                               vert_mass, vert_pinned, face_verts, face_rest_area, edge_verts,
-                               edge_faces, edge_opp, edge_bend_weight, bend_ptr, bend_col,
-                               bend_val, face_fu, face_fv, face_E, face_wa, face_wb,
-                               edge_grad, stitch, dv, res, z, p, Ap, precond)
+            o = D.cg_iteration(rz, D.constants(coef), mesh, elems, cg)
             out[1] = o[0]
             out[0] = count()
 
@@ -190,10 +170,12 @@ def _hook():
 
     def iteration_probe(*a):
         if "cg_iteration" not in dyn:
-            saved = [arr.to_numpy() for arr in a[-6:]]
+            cg = a[-1]            # the probe's iteration changes the CG's vectors: put back
+            vectors = [cg.dv, cg.res, cg.z, cg.p, cg.Ap, cg.precond]
+            saved = [arr.to_numpy() for arr in vectors]
             p_iteration(*a, out)
             dyn["cg_iteration"] = int(out.to_numpy()[0])
-            for arr, val in zip(a[-6:], saved):
+            for arr, val in zip(vectors, saved):
                 arr.from_numpy(val)
         return iteration(*a)
 
