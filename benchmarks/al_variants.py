@@ -155,11 +155,11 @@ def solve(step, margin=1e-2, mu=1.0, kkt=None, pdas=False, host_exact=False, new
     from cloth.strain import direct
     from cloth.strain.buffers import P_CURVATURE, P_MARGIN, ST_START_VIOL
     lim, ws, metric = step.lim, step.lim._ws, step.metric
-    nv, nf, K, mid, ns = step.nv, step.nf, step.K, step.mid, len(lim._stitches)
+    nv, K, mid = step.nv, step.K, step.mid
     m, m_max = step.mu0 * mu, step.mu_max
     _set_param(lim, P_MARGIN, margin)
-    packs = direct.packs(lim, metric)     # (mesh, metric, constraints, contacts, vectors)
-    direct.start(mid, K, nv, nf, ns, m, int(lim.coupling == "implicit"), tol, *packs, ws.stats)
+    packs = direct.packs(lim, metric, K)  # (mesh, metric, constraints, contacts, vectors)
+    direct.start(mid, m, int(lim.coupling == "implicit"), tol, *packs, ws.stats)
     log = dict(rounds=0, newton=0, solves=0, alpha=[], first_step=[], converged=False)
     if ws.stats.to_numpy()[ST_START_VIOL] < tol:
         log["converged"] = True
@@ -205,7 +205,7 @@ def solve(step, margin=1e-2, mu=1.0, kkt=None, pdas=False, host_exact=False, new
             full = np.zeros((ws.d.shape[0], 3))
             full[:nv] = d.reshape(nv, 3)
             ws.d.from_numpy(full)
-            direct.line_search(mid, K, nv, nf, ns, m, *packs, ws.info)
+            direct.line_search(mid, m, *packs, ws.info)
             out = ws.info.to_numpy()
             log["alpha"].append(float(out[direct.I_ALPHA]))
             if out[direct.I_ALPHA] == 0.0 or (kkt is not None and d_max < 0.1 * kkt) or \
@@ -213,7 +213,7 @@ def solve(step, margin=1e-2, mu=1.0, kkt=None, pdas=False, host_exact=False, new
                 break
         if log["converged"]:
             break
-        direct.multipliers(K, nv, nf, ns, m, m_max, ws.x, ws.mesh_pack(), ws.constraint_pack(),
+        direct.multipliers(m, m_max, ws.x, ws.mesh_pack(), ws.constraint_pack(K),
                            ws.contact_pack(), ws.info)
         out = ws.info.to_numpy()
         viol, comp = float(out[direct.I_VIOL]), float(out[direct.I_COMP])

@@ -87,23 +87,24 @@ def _hook():
         return n
 
     @ti.kernel
-    def p_rhs(K: int, nv: int, nf: int, ns: int, mu: float, mesh: MeshPack,
-              metric: MetricPack, cons: ConstraintPack, contacts: ContactPack,
-              vec: VectorPack, out: A):
+    def p_rhs(mu: float, mesh: MeshPack, metric: MetricPack, cons: ConstraintPack,
+              contacts: ContactPack, vec: VectorPack, out: A):
         ti.loop_config(serialize=True)
         for _ in range(1):
+            K, nv, nf, ns = cons.n_per_face, mesh.n_verts, mesh.n_faces, contacts.n_stitches
             metric_gradient(nv, vec.x, metric, vec)
             residual(K, nv, nf, ns, mu, vec.x, mesh, cons, contacts, vec)
             out[0] = count()
 
     @ti.kernel
-    def p_lhs(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: float,
-              mesh: MeshPack, metric: MetricPack, cons: ConstraintPack,
-              contacts: ContactPack, vec: VectorPack, out: A):
+    def p_lhs(method: ti.template(), mu: float, mesh: MeshPack, metric: MetricPack,
+              cons: ConstraintPack, contacts: ContactPack, vec: VectorPack, out: A):
         ti.loop_config(serialize=True)
         for _ in range(1):
+            K, nv, nf, ns = cons.n_per_face, mesh.n_verts, mesh.n_faces, contacts.n_stitches
             exact = mesh.params[P_CURVATURE] > 0.0
-            fill_c_curvature(method, K, nf, mu, vec.x, mesh, cons)
+            if exact:
+                fill_c_curvature(method, K, nf, mu, vec.x, mesh, cons)
             use_twist = mesh.params[P_SVD_DELTA] > 0.0 and ti.static(method == SVD) and \
                 not exact
             newton_matrix(K, nv, nf, ns, mu, mesh.params[P_MARGIN],
@@ -112,26 +113,28 @@ def _hook():
             out[0] = count()
 
     @ti.kernel
-    def p_assemble(method: ti.template(), nf: int, mesh: MeshPack, cons: ConstraintPack,
+    def p_assemble(method: ti.template(), mesh: MeshPack, cons: ConstraintPack,
                    vec: VectorPack, out: A):
         ti.loop_config(serialize=True)
         for _ in range(1):
-            assemble_all(method, nf, vec.x, mesh, cons)
+            assemble_all(method, mesh.n_faces, vec.x, mesh, cons)
             out[0] = count()
 
     @ti.kernel
-    def p_merit(K: int, nv: int, nf: int, ns: int, mu: float, metric: MetricPack,
-                cons: ConstraintPack, contacts: ContactPack, vec: VectorPack, out: A):
+    def p_merit(mu: float, mesh: MeshPack, metric: MetricPack, cons: ConstraintPack,
+                contacts: ContactPack, vec: VectorPack, out: A):
         ti.loop_config(serialize=True)
         for _ in range(1):
+            K, nv, nf, ns = cons.n_per_face, mesh.n_verts, mesh.n_faces, contacts.n_stitches
             out[1] = merit(K, nv, nf, ns, mu, vec.x, vec.x_hat, metric, cons, contacts)
             out[0] = count()
 
     @ti.kernel
-    def p_multipliers(K: int, nv: int, nf: int, ns: int, mu: float, mesh: MeshPack,
-                      cons: ConstraintPack, contacts: ContactPack, vec: VectorPack, out: A):
+    def p_multipliers(mu: float, mesh: MeshPack, cons: ConstraintPack, contacts: ContactPack,
+                      vec: VectorPack, out: A):
         ti.loop_config(serialize=True)
         for _ in range(1):
+            K, nv, nf, ns = cons.n_per_face, mesh.n_verts, mesh.n_faces, contacts.n_stitches
             viol, _comp = update_multipliers(K, nv, nf, ns, mu, 1e30,
                                              mesh.params[P_CONTACT_SCALE], vec.x, mesh, cons,
                                              contacts)
@@ -167,33 +170,36 @@ def _hook():
         return linearise(two, *a)
 
     def iteration_probe(two, *a):
-        # The probe runs one CG iteration more than the step asked for: it changes the step's
-        # answer, not the loop counts, which depend on the mesh's sizes.
         if "cg_iteration" not in dyn:
+            cg = a[-1]            # the probe's iteration changes the CG's vectors: put back
+            vectors = [cg.dv, cg.res, cg.z, cg.p, cg.Ap, cg.precond]
+            saved = [arr.to_numpy() for arr in vectors]
             p_iteration(*a, out)
             dyn["cg_iteration"] = int(out.to_numpy()[0])
+            for arr, val in zip(vectors, saved):
+                arr.from_numpy(val)
         return iteration(two, *a)
 
     D._linearise, D._iteration = linearise_probe, iteration_probe
 
     def fill_probe(lim, mid, K, mu, metric):
         m = lim.model
-        nv, nf, ns = m.n_verts, m.n_faces, len(lim._stitches)
-        mesh, met, cons, contacts, vec = direct.packs(lim, metric)
+        nv, nf = m.n_verts, m.n_faces
+        mesh, met, cons, contacts, vec = direct.packs(lim, metric, K)
         print(f"hanging, resolution {int(round(nv ** 0.5))}: {nv} vertices, {nf} faces, "
               f"{K} constraints a face; loop iterations a launch (cap {CAP}):")
         for name, value in dyn.items():
             print(f"  {'dynamics ' + name:<34} "
                   f"{'no cap' if value > CAP else CAP - value}")
-        p_rhs(K, nv, nf, ns, mu, mesh, met, cons, contacts, vec, out)
+        p_rhs(mu, mesh, met, cons, contacts, vec, out)
         _report("newton_rhs (residual)", out)
-        p_lhs(mid, K, nv, nf, ns, mu, mesh, met, cons, contacts, vec, out)
+        p_lhs(mid, mu, mesh, met, cons, contacts, vec, out)
         _report("newton_lhs (Newton matrix)", out)
-        p_merit(K, nv, nf, ns, mu, met, cons, contacts, vec, out)
+        p_merit(mu, mesh, met, cons, contacts, vec, out)
         _report("merit", out)
-        p_assemble(mid, nf, mesh, cons, vec, out)
+        p_assemble(mid, mesh, cons, vec, out)
         _report("assemble_all", out)
-        p_multipliers(K, nv, nf, ns, mu, mesh, cons, contacts, vec, out)
+        p_multipliers(mu, mesh, cons, contacts, vec, out)
         _report("update_multipliers", out)
         raise _Done()
 

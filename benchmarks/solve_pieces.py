@@ -61,12 +61,10 @@ def time_pieces(a):
     from cloth.strain.buffers import B_MU0, B_PC_MODE
     piece = piece_kernel()
     budget = a["budget"]
-    order = ("method", "K", "nv", "nf", "ns", "mesh", "metric", "cons", "contacts", "vec",
-             "pc")
-    args = [a[k] for k in order[:5]] + [float(budget[B_MU0]), int(budget[B_PC_MODE])] + \
-        [a[k] for k in order[5:]]
+    order = ("mesh", "metric", "cons", "contacts", "vec", "pc")
+    args = [a["method"], float(budget[B_MU0]), int(budget[B_PC_MODE])] + [a[k] for k in order]
     out = []
-    reps = max(3, int(50 * 2000 / a["nf"]))
+    reps = max(3, int(50 * 2000 / a["mesh"].n_faces))
     for which in range(len(PIECES)):
         piece(which, 1, *args)          # compile, warm the caches
         ti.sync()
@@ -96,12 +94,13 @@ def piece_kernel():
                                       PrecondPack, VectorPack)
 
     @ti.kernel
-    def piece(which: int, reps: int, method: ti.template(), K: int, nv: int, nf: int, ns: int,
-              mu: float, pc_mode: int, mesh: MeshPack, metric: MetricPack, cons: ConstraintPack,
-              contacts: ContactPack, vec: VectorPack, pc: PrecondPack) -> float:
+    def piece(which: int, reps: int, method: ti.template(), mu: float, pc_mode: int,
+              mesh: MeshPack, metric: MetricPack, cons: ConstraintPack, contacts: ContactPack,
+              vec: VectorPack, pc: PrecondPack) -> float:
         ti.loop_config(serialize=True)
         acc = 0.0
         for _ in range(1):
+            K, nv, nf, ns = cons.n_per_face, mesh.n_verts, mesh.n_faces, contacts.n_stitches
             use_twist = mesh.params[P_SVD_DELTA] > 0.0 and ti.static(method == al.SVD) and \
                 mesh.params[P_CURVATURE] == 0.0
             margin, c_scale = mesh.params[P_MARGIN], mesh.params[P_CONTACT_SCALE]

@@ -29,19 +29,21 @@ def _zero_elements(arr: A):
 
 
 class PackCache:
-    """Argpacks made once per set of arrays: ``get(kind, pack_type, **members)`` returns the
-    pack of ``members``, made on first use and again only when one of its arrays was replaced
-    (a remesh's new bend_ptr, a new stitch capacity, a larger matrix). Why cache: making a
-    pack of 16 ndarrays costs ~260 us, more than a launch with 33 ndarrays (~230 us; 2-core
-    CPU, Taichi 1.7.4), while the look-up costs a few. The last two packs of each kind are
-    kept (the strain solver's two metrics, and its preconditioner and stubs, alternate).
-    While a pack is kept it holds its arrays, so their ids cannot be reused."""
+    """Argpacks made once per set of arrays and counts: ``get(kind, pack_type, **members)``
+    returns the pack of ``members``, made on first use and again only when one of its arrays
+    was replaced (a remesh's new bend_ptr, a new stitch capacity, a larger matrix) or one of
+    its scalars (a count) changed. Why cache: making a pack of 16 ndarrays costs ~260 us, more
+    than a launch with 33 ndarrays (~230 us; 2-core CPU, Taichi 1.7.4), while the look-up
+    costs a few. The last two packs of each kind are kept (the strain solver's two metrics,
+    and its preconditioner and stubs, alternate). While a pack is kept it holds its arrays,
+    so their ids cannot be reused. A pack is never changed once made (why:
+    cloth/strain/buffers.py, above MeshPack)."""
 
     def __init__(self):
         self._made = {}
 
     def get(self, kind, pack_type, **members):
-        key = tuple(id(a) for a in members.values())
+        key = tuple(a if isinstance(a, (int, float)) else id(a) for a in members.values())
         made = self._made.setdefault(kind, {})
         pack = made.get(key)
         if pack is None:

@@ -23,13 +23,12 @@ A = ti.types.ndarray()
 
 
 @ti.kernel
-def fill(method: ti.template(), K: int, nf: int, x: A, mesh: MeshPack, cons: ConstraintPack,
-         mu: float):
+def fill(method: ti.template(), x: A, mesh: MeshPack, cons: ConstraintPack, mu: float):
     ti.loop_config(serialize=True)
     for _ in range(1):
         params_w = ti.Vector([mesh.params[k] for k in ti.static(range(6))])
-        for f in range(nf):
-            face_c_curvature(method, K, f, x, mesh, params_w, mesh.params[P_ISO],
+        for f in range(mesh.n_faces):
+            face_c_curvature(method, cons.n_per_face, f, x, mesh, params_w, mesh.params[P_ISO],
                              mesh.params[P_C_STEP], cons, mu)
 
 
@@ -60,10 +59,10 @@ def main():
     curv = ti.ndarray(ti.types.vector(9, float), (n, 3))
     unused = ti.ndarray(float, 1)    # pack members face_c_curvature does not read
     mesh = MeshPack(face_verts=fv, Dm_inv=dm, grain=gr, rest_area=ra, mass=unused,
-                    pinned=unused, params=pa)
+                    pinned=unused, params=pa, n_verts=3 * n, n_faces=n)
     cons = ConstraintPack(lam=lam, g=g, grad=unused, cm=unused, what=unused, kappa=unused,
-                          twist=unused, curv=curv)
-    fill(METHOD_IDS["mapping"], 8, n, x, mesh, cons, 1.0)
+                          twist=unused, curv=curv, n_per_face=8)
+    fill(METHOD_IDS["mapping"], x, mesh, cons, 1.0)
     c = curv.to_numpy()
     Hc = c[:, 1][:, [0, 1, 2, 1, 3, 4, 2, 4, 5]].reshape(-1, 3, 3)
     print(np.linalg.eigvalsh(Hc).min() / np.abs(Hc).max())

@@ -2,6 +2,8 @@
 cloth/strain/active_set.py): its Gauss-Newton blocks against a dense assembly, projections that
 land on the tight solve where the margin model does not, and the fallback on the margin model
 when it does not converge."""
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -11,13 +13,18 @@ from cloth.strain.solver import StrainLimitError, StrainLimiter
 from tests.test_coupling import _hanging, _redo_dynamics, _saved_state
 
 
-def _settle(sim, model, **attrs):
-    """Switch the limiter to ``model`` with the kkt stop and these attributes."""
+def _settle(sim, model, **values):
+    """Switch the limiter to ``model`` with the kkt stop and these values: the strain
+    settings among them through the simulator's settings (their one owner), the limiter's own
+    knobs (``max_newton``) on the limiter."""
     lim = sim.strain
-    lim.set_newton_model(model)
-    lim.stop = "kkt"
-    for k, v in attrs.items():
-        setattr(lim, k, v)
+    keys = {f.name for f in dataclasses.fields(sim.settings.strain)}
+    settings = {"newton_model": model, "stop": "kkt"}
+    settings.update({k: v for k, v in values.items() if k in keys})
+    sim._change("strain", **settings)
+    for k, v in values.items():
+        if k not in keys:
+            setattr(lim, k, v)
     lim._upload_params()
     return lim
 

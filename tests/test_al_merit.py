@@ -13,38 +13,38 @@ from cloth.strain.constraints import METHOD_IDS, N_CONSTRAINTS
 
 
 @ti.kernel
-def _merit_at(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: float, pos: A,
-              mesh: MeshPack, metric: MetricPack, cons: ConstraintPack, contacts: ContactPack,
-              vec: VectorPack) -> float:
+def _merit_at(method: ti.template(), mu: float, pos: A, mesh: MeshPack, metric: MetricPack,
+              cons: ConstraintPack, contacts: ContactPack, vec: VectorPack) -> float:
     total = 0.0
     ti.loop_config(serialize=True)
     for _ in range(1):
+        K, nv, nf, ns = cons.n_per_face, mesh.n_verts, mesh.n_faces, contacts.n_stitches
         al.assemble_all(method, nf, pos, mesh, cons)
         total = al.merit(K, nv, nf, ns, mu, pos, vec.x_hat, metric, cons, contacts)
     return total
 
 
 @ti.kernel
-def _residual_at(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: float, pos: A,
-                 mesh: MeshPack, metric: MetricPack, cons: ConstraintPack,
-                 contacts: ContactPack, vec: VectorPack):
+def _residual_at(method: ti.template(), mu: float, pos: A, mesh: MeshPack, metric: MetricPack,
+                 cons: ConstraintPack, contacts: ContactPack, vec: VectorPack):
     ti.loop_config(serialize=True)
     for _ in range(1):
+        K, nv, nf, ns = cons.n_per_face, mesh.n_verts, mesh.n_faces, contacts.n_stitches
         al.assemble_all(method, nf, pos, mesh, cons)
         al.metric_gradient(nv, pos, metric, vec)
         al.residual(K, nv, nf, ns, mu, pos, mesh, cons, contacts, vec)
 
 
 @ti.kernel
-def _line_merits(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: float,
-                 a: float, pos: A, moved: A, mesh: MeshPack, metric: MetricPack,
-                 cons: ConstraintPack, contacts: ContactPack,
+def _line_merits(method: ti.template(), mu: float, a: float, pos: A, moved: A, mesh: MeshPack,
+                 metric: MetricPack, cons: ConstraintPack, contacts: ContactPack,
                  vec: VectorPack) -> ti.types.vector(2, float):
     """The merit at pos + a d (d = vec.d) two ways: directly, and as solve_al's line search
     forms it (the quadratic from ``metric_along`` at pos, plus the constraint terms)."""
     out = ti.Vector([0.0, 0.0])
     ti.loop_config(serialize=True)
     for _ in range(1):
+        K, nv, nf, ns = cons.n_per_face, mesh.n_verts, mesh.n_faces, contacts.n_stitches
         al.metric_gradient(nv, pos, metric, vec)
         quad = al.metric_along(nv, pos, metric, vec)
         for n in range(nv):
@@ -74,15 +74,15 @@ def test_residual_is_minus_the_merit_gradient(method):
     lam = ws.lam.to_numpy()
     assert np.count_nonzero(lam[:nf, :K]) > 0, "no active multipliers: the test sees nothing"
 
-    packs = direct.packs(lim, W)     # (mesh, metric, constraints, contacts, vectors)
+    packs = direct.packs(lim, W, K)  # (mesh, metric, constraints, contacts, vectors)
     pos = ws.x_trial
 
     def merit_at(xs):
         pos.from_numpy(xs)
-        return _merit_at(mid, K, nv, nf, 0, mu, pos, *packs)
+        return _merit_at(mid, mu, pos, *packs)
 
     pos.from_numpy(x0)
-    _residual_at(mid, K, nv, nf, 0, mu, pos, *packs)
+    _residual_at(mid, mu, pos, *packs)
     r = ws.r.to_numpy()[:nv]
     for trial in range(3):
         d = np.zeros_like(x0)
@@ -99,7 +99,7 @@ def test_residual_is_minus_the_merit_gradient(method):
     ws.d.from_numpy(d)
     for a in (1.0, 0.37):
         pos.from_numpy(x0)
-        merit, along = _line_merits(mid, K, nv, nf, 0, mu, a, pos, ws.z, *packs)
+        merit, along = _line_merits(mid, mu, a, pos, ws.z, *packs)
         assert abs(merit - along) <= 1e-12 * abs(merit), (a, merit, along)
 
 

@@ -179,7 +179,7 @@ def _tight_projection(sim, state, precondition):
     Newton and PCG budgets whatever it is, so that solves can be compared). Returns (the
     preconditioner object the solve had, whether it was usable, the positions)."""
     lim = sim.strain
-    lim.precondition = precondition
+    sim._change("strain", precondition=precondition)
     lim.inner_rtol, lim.cg_rtol, lim.max_cg = 0.0, 1e-10, 400
     lim.factor_cg = lim.multigrid_cg = 400
     lim.max_newton = 5
@@ -257,7 +257,7 @@ def test_inner_loop_stops_on_the_residual_under_implicit_coupling():
     # Block Jacobi: its Newton steps lower the residual fast on the stiff constraint
     # directions, so the stop is seen within a round here (with the factor preconditioner a
     # step lowers it by less and every round of this substep ran all its steps either way).
-    lim.precondition = "jacobi"
+    sim._change("strain", precondition="jacobi")
     assert lim.inner_rtol == INNER_RTOL["implicit"] > 0
     lim.set_coupling("projection")
     assert lim.inner_rtol == INNER_RTOL["projection"] == 0
@@ -310,11 +310,11 @@ def test_kkt_stop_reaches_its_stationarity_with_exact_steps(method):
         sim.step_frame()
     state = _saved_state(sim)
     lim = sim.strain
-    lim.stop = "violation"
+    sim._change("strain", stop="violation")
     _redo_dynamics(sim, state)
     lim.project(sim.h)
     assert lim.last_converged and np.isnan(lim.last_stationarity)
-    lim.stop = "kkt"
+    sim._change("strain", stop="kkt")
     _redo_dynamics(sim, state)
     lim.project(sim.h)
     assert lim.last_converged and lim.last_violation_max < lim.tol

@@ -95,8 +95,7 @@ def _newton_matrices(method, host_split_for_model):
     assert (active > 0).sum() > 10          # curvature to compare: constraints are active
     matrices = []
     for curvature in ("exact", "model"):
-        lim.curvature = curvature
-        lim._upload_params()
+        sim._change("strain", curvature=curvature)
         lim._assemble(mid, ws.x)
         host = curvature == "model" and host_split_for_model
         if host:

@@ -94,7 +94,7 @@ def test_multigrid_and_block_jacobi_give_the_same_projection():
     solve with the multigrid really uses it."""
     sim = _hanging("mapping", "implicit", res=9)
     lim = sim.strain
-    lim.precondition = "multigrid"
+    sim._change("strain", precondition="multigrid")
     for _ in range(12):
         sim.step_frame()
     state = _saved_state(sim)

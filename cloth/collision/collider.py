@@ -45,7 +45,7 @@ import numpy as np
 import taichi as ti
 
 # The contact half-spaces' layout is the strain projection's (its work arrays hold them).
-from ..ndarrays import A, T
+from ..ndarrays import A, PackCache, T
 from ..strain.buffers import CONTACT_SLOTS, NO_CONTACT
 from . import shape
 from .obstacles import THICKNESS, CollisionError, Obstacle, mat3, vec3
@@ -61,6 +61,12 @@ from .obstacles import THICKNESS, CollisionError, Obstacle, mat3, vec3
 M_H, M_TH, M_MU, M_STEP, M_R0, M_C0, M_R1, M_C1, M_VLIN, M_OMEGA = \
     0, 1, 2, 3, 4, 13, 16, 25, 28, 31
 N_MOTION = 34
+# The cloth's vertex arrays the contact-plane and resting passes read, with the active vertex
+# count (issue #37: those kernels took 14 and 13 arguments). The pose stays a mat3 / vec3
+# argument: read from the motion array instead (before the loop, or in it with full
+# optimisation), tshirt's capsule planes came out different in the last bit, which the
+# strain projection's active-set model then amplified into visible differences (measured).
+ClothPack = ti.types.argpack(x=A, v=A, pinned=A, n_verts=ti.i32)
 
 
 class Collider:
@@ -98,6 +104,7 @@ class Collider:
         self._counter = ti.ndarray(ti.i32, 1)     # contacts of the last obstacle pass
         self._maxval = ti.ndarray(float, 1)       # max_penetration's reduction
         self._moved = ti.ndarray(float, 1)        # largest push of the last obstacle pass (m)
+        self._packs = PackCache()
         rt = ti.lang.impl.get_runtime()
         self._motion = np.zeros(N_MOTION, np.float64 if rt.default_fp == ti.f64 else np.float32)
         self._mu_tmp = None
@@ -191,15 +198,21 @@ class Collider:
             _resolve_obstacle(*o.shape_args(), st.x, st.v, self.model.vert_pinned, n,
                               self.ccd_samples, mo, self._counter, self._moved)
 
+    def _cloth_pack(self):
+        """The model's positions, velocities and pins with its vertex count now (a remesh
+        changes it: PackCache then makes a new pack)."""
+        m = self.model
+        return self._packs.get("cloth", ClothPack, x=m.state.x, v=m.state.v,
+                               pinned=m.vert_pinned, n_verts=int(m.n_verts))
+
     def _mark_pass(self, h, t, flags):
         """The read-only pass before self-collision: set ``flags[i]`` where vertex i started
         the substep on an obstacle (nothing else is written)."""
-        st = self.model.state
+        cloth = self._cloth_pack()
         for o in self.obstacles:
             c0, R0 = o.pose(t)
-            _mark_resting(*o.shape_args(), st.x, st.v, self.model.vert_pinned,
-                          self.model.n_verts, h, self.thickness, ti.Matrix(R0), ti.Vector(c0),
-                          flags)
+            _mark_resting(*o.shape_args(), cloth, h, self.thickness, ti.Matrix(R0),
+                          ti.Vector(c0), flags)
 
     # -- contacts as constraints of the strain projection -----------------------------------
     def contact_planes(self, t, out, reach=None, mu_out=None):
@@ -223,10 +236,11 @@ class Collider:
         if mu_out is None:
             mu_out = self._mu_scratch(n)
         _clear_planes(n, out, mu_out)
+        cloth = self._cloth_pack()
         for o in self.obstacles:
             c, R = o.pose(t)
-            _planes(*o.shape_args(), self.model.state.x, self.model.vert_pinned, n,
-                    self.thickness, reach, float(o.mu), ti.Matrix(R), ti.Vector(c), out, mu_out)
+            _planes(*o.shape_args(), cloth, self.thickness, reach, float(o.mu), ti.Matrix(R),
+                    ti.Vector(c), out, mu_out)
 
     def _mu_scratch(self, n):
         if self._mu_tmp is None or self._mu_tmp.shape[0] < n:
@@ -375,14 +389,14 @@ def _resolve_obstacle(kind: ti.i32, prm: shape.params_t, prims: A, grid: A, x: A
 
 
 @ti.kernel
-def _mark_resting(kind: ti.i32, prm: shape.params_t, prims: A, grid: A, x: A, v: A, pinned: A,
-                  n: ti.i32, h: float, th: float, R0: mat3, c0: vec3, flags: A):
-    for i in range(n):
-        if pinned[i] == 0:
+def _mark_resting(kind: ti.i32, prm: shape.params_t, prims: A, grid: A, cloth: ClothPack,
+                  h: float, th: float, R0: mat3, c0: vec3, flags: A):
+    for i in range(cloth.n_verts):
+        if cloth.pinned[i] == 0:
             # Resting on the obstacle at the start of the substep. (Not "inside at the end": a
             # layer falling onto a resting layer is predicted inside the ground too, and must
             # not count as supported.)
-            p0 = R0.transpose() @ ((x[i] - h * v[i]) - c0)
+            p0 = R0.transpose() @ ((cloth.x[i] - h * cloth.v[i]) - c0)
             phi0 = shape.sdf_local(kind, prm, prims, grid, p0) - th
             if phi0 < 0.1 * th:
                 flags[i] = 1
@@ -397,11 +411,11 @@ def _clear_planes(n: ti.i32, out: A, mu_out: A):
 
 
 @ti.kernel
-def _planes(kind: ti.i32, prm: shape.params_t, prims: A, grid: A, x: A, pinned: A, n: ti.i32,
-            th: float, reach: float, mu: float, R: mat3, c: vec3, out: A, mu_out: A):
-    for i in range(n):
-        if pinned[i] == 0:
-            xi = x[i]
+def _planes(kind: ti.i32, prm: shape.params_t, prims: A, grid: A, cloth: ClothPack, th: float,
+            reach: float, mu: float, R: mat3, c: vec3, out: A, mu_out: A):
+    for i in range(cloth.n_verts):
+        if cloth.pinned[i] == 0:
+            xi = cloth.x[i]
             p = R.transpose() @ (xi - c)
             d1, n1, d2, n2 = shape.nearest_two(kind, prm, prims, grid, p)
             for k in ti.static(range(2)):

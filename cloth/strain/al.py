@@ -10,8 +10,8 @@ import taichi as ti
 from .buffers import (B_ADAPTIVE, B_FROM_PREV, B_MAX_CG, B_MAX_NEWTON, B_MAX_ROUNDS, B_MU0,
                       B_MU_GROW, B_MU_MAX, B_PC_MODE, B_RTOL, B_STEP_TOL, B_TOL, CONTACT_SLOTS,
                       CONVERGED, FEASIBLE_AS_GIVEN, LAST_TRY, N_STATS, NO_CONTACT, NO_SKIP,
-                      P_C_STEP, P_CONTACT_SCALE, P_CURVATURE, P_DELTA, P_INNER_RTOL, P_ISO,
-                      P_KKT_TOL, P_MARGIN, P_PDAS, P_SHEAR, P_SVD_DELTA, P_WARP, P_WEFT,
+                      P_C_STEP, P_CONTACT_SCALE, P_DELTA, P_INNER_RTOL, P_ISO, P_KKT_TOL,
+                      P_MARGIN, P_PDAS, P_SHEAR, P_SVD_DELTA, P_WARP, P_WEFT,
                       PC_FACTOR, PC_JACOBI, PC_MULTIGRID, RUNNING, ST_CG, ST_COMP, ST_CONVERGED,
                       ST_ITERS, ST_KKT, ST_NEWTON, ST_START_VIOL, ST_TRIALS, ST_VIOL, A, T,
                       ConstraintPack, ContactPack, MeshPack, MetricPack, PrecondPack, StepPack,
@@ -68,10 +68,10 @@ def assemble_all(method: ti.template(), nf, pos: T, mesh: T, cons: T):
 
 
 @ti.kernel
-def assemble(method: ti.template(), nf: int, pos: A, mesh: MeshPack, cons: ConstraintPack):
+def assemble(method: ti.template(), pos: A, mesh: MeshPack, cons: ConstraintPack):
     ti.loop_config(serialize=True)
     for _ in range(1):
-        assemble_all(method, nf, pos, mesh, cons)
+        assemble_all(method, mesh.n_faces, pos, mesh, cons)
 
 
 # ---- augmented Lagrangian pieces (METHOD 4, paper eqs. 25-27) ----------------------------------
@@ -309,14 +309,14 @@ def near_weight(s, near):
 
 @ti.func
 def fill_c_curvature(method: ti.template(), K, nf, mu, x: T, mesh: T, cons: T):
-    """The exact constraint curvature of every face at x (c_curvature.py), when the
-    params ask for it (P_CURVATURE); the Newton matrix then uses it instead of the model.
-    (The direct path's kernels; solve_al compiles it in only with ``exact``.)"""
-    if mesh.params[P_CURVATURE] > 0.0:
-        params_w = ti.Vector([mesh.params[k] for k in ti.static(range(6))])
-        for f in range(nf):
-            face_c_curvature(method, K, f, x, mesh, params_w, mesh.params[P_ISO],
-                             mesh.params[P_C_STEP], cons, mu)
+    """The exact constraint curvature of every face at x (c_curvature.py); the Newton matrix
+    then uses it instead of the model. Called where the curvature is exact: solve_al compiles
+    it in only with its template argument ``exact``, the direct path's kernels (compiled once
+    for both) call it where params[P_CURVATURE] says so."""
+    params_w = ti.Vector([mesh.params[k] for k in ti.static(range(6))])
+    for f in range(nf):
+        face_c_curvature(method, K, f, x, mesh, params_w, mesh.params[P_ISO],
+                         mesh.params[P_C_STEP], cons, mu)
 
 
 @ti.func
@@ -831,9 +831,9 @@ def choose_start(method: ti.template(), from_prev, K, nv, nf, ns, mu, mesh: T, m
 
 
 @ti.kernel
-def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: int, ns: int,
-             budget: A, mesh: MeshPack, metric: MetricPack, cons: ConstraintPack,
-             contacts: ContactPack, vec: VectorPack, pc: PrecondPack, stats: A):
+def solve_al(method: ti.template(), exact: ti.template(), budget: A, mesh: MeshPack,
+             metric: MetricPack, cons: ConstraintPack, contacts: ContactPack, vec: VectorPack,
+             pc: PrecondPack, stats: A):
     """The whole AL projection (METHOD 4) in one launch (measured: with one launch per
     phase, Python's argument handling cost as much as the solve): rounds of inexact
     minimisation of L_A by projected Newton + PCG with a backtracking (Armijo) line search,
@@ -846,8 +846,8 @@ def solve_al(method: ti.template(), exact: ti.template(), K: int, nv: int, nf: i
     budgets, tolerances, preconditioner) are read from ``budget`` (buffers.B_*)."""
     ti.loop_config(serialize=True)
     for _ in range(1):
-        use_twist = mesh.params[P_SVD_DELTA] > 0.0 and ti.static(method == SVD) and \
-            mesh.params[P_CURVATURE] == 0.0
+        K, nv, nf, ns = cons.n_per_face, mesh.n_verts, mesh.n_faces, contacts.n_stitches
+        use_twist = mesh.params[P_SVD_DELTA] > 0.0 and ti.static(method == SVD and not exact)
         margin = mesh.params[P_MARGIN]
         c_scale = mesh.params[P_CONTACT_SCALE]
         mu_grow, mu_max = budget[B_MU_GROW], budget[B_MU_MAX]

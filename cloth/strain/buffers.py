@@ -50,7 +50,9 @@ PC_JACOBI, PC_FACTOR, PC_MULTIGRID = 0, 1, 2
 P_WARP, P_WEFT, P_SHEAR, P_MARGIN, P_DELTA, P_SVD_DELTA, P_CONTACT_SCALE = 0, 2, 4, 6, 7, 8, 9
 P_ISO = 10
 # The Newton matrix's constraint curvature: 0 the model of constraints.py, 1 exact through C
-# (c_curvature.py), with its difference step in C.
+# (c_curvature.py), with its difference step in C. Read by the direct path's kernels, which
+# compile once for both; ``al.solve_al`` takes the choice as its template argument ``exact``
+# instead (compiled in only where chosen) and does not read P_CURVATURE.
 P_CURVATURE, P_C_STEP = 11, 12
 # A round's inner loop stops once |grad L_A| fell below this fraction of its first value (0:
 # run max_newton steps).
@@ -80,26 +82,36 @@ CONTACT_SLOTS = 2
 # Named argument groups (issue #37): the kernels take their arrays in these packs, by name,
 # instead of ~50 positional ndarrays whose order every call site had to repeat (a misordered
 # argument still compiled). A member's name is unique across the packs: in Taichi 1.7.4 two
-# packs passed to one kernel cannot share a member name. They hold ndarrays only: a scalar
-# member costs ~15 us per launch, so scalars are kernel arguments or in ``budget``. Packs do
-# not lift Taichi's limit of 64 per launch: each pack counts one, and each member one more
-# (solve_al: 60). A pack is made once per set of arrays (``Workspace.pack``), so a launch
-# costs what the loose arrays cost, and a kernel still compiles once per process (Taichi
-# keys a pack by its members' element types and dimensions, as it keys loose ndarrays).
-#   mesh      the rest state the constraints are defined on, and their parameters;
+# packs passed to one kernel cannot share a member name, and a kernel cannot assign a local of
+# a member's name (``K, nv, nf, ns = cons.n_per_face, ...``). Besides arrays a pack holds the
+# counts that say how much of them is in use, so no kernel takes a size apart from its
+# arrays; other scalars (the penalty, tolerances, flags) are kernel arguments or in
+# ``budget``. Packs do not lift Taichi's limit of 64 per launch: each pack counts one, and
+# each member one more (solve_al: 60). A pack is made once per set of arrays and counts
+# (``Workspace.pack``), so a launch costs what the loose arguments cost, and a kernel still
+# compiles once per process (Taichi keys a pack by its members' types, not their values).
+# A pack is never changed after it is made: a count that changed makes a new pack. Why: on
+# Vulkan a launch reads its packs when it runs, not when it is queued; setting a member of a
+# pack that a queued launch holds changed what that launch saw (measured on lavapipe: 59
+# launches of one pack, its count set before each, saw later counts). Making a pack of 9
+# costs ~0.2-0.4 ms; counts change with a remesh, a new seam set or another method.
+#   mesh      the rest state the constraints are defined on, their parameters, and the
+#             active vertex and face counts;
 #   metric    the projection's metric W in its block pattern, and the Newton matrix H there;
-#   cons      the strain constraints at the iterate and their multipliers;
-#   contacts  contact half-spaces, friction and seams, and their multipliers;
+#   cons      the strain constraints at the iterate and their multipliers, and how many of
+#             them a face has under the method in use (constraints.N_CONSTRAINTS);
+#   contacts  contact half-spaces, friction and the seams in use, and their multipliers;
 #   vec       the solve's per-vertex vectors (iterate, x_hat, Newton and PCG vectors);
 #   pc        the PCG preconditioners' arrays (block Jacobi, factor, multigrid);
 #   io        the model's state a projection starts from and returns to.
 MeshPack = ti.types.argpack(face_verts=A, Dm_inv=A, grain=A, rest_area=A, mass=A, pinned=A,
-                            params=A)
+                            params=A, n_verts=ti.i32, n_faces=ti.i32)
 MetricPack = ti.types.argpack(w_ptr=A, w_col=A, w_val=A, w_diag=A, face_slot=A,
                               stitch_slot=A, H=A)
-ConstraintPack = ti.types.argpack(lam=A, g=A, grad=A, cm=A, what=A, kappa=A, twist=A, curv=A)
+ConstraintPack = ti.types.argpack(lam=A, g=A, grad=A, cm=A, what=A, kappa=A, twist=A, curv=A,
+                                  n_per_face=ti.i32)
 ContactPack = ti.types.argpack(contact=A, contact_mu=A, lam_c=A, fric=A, lam_t=A, stitch=A,
-                               lam_s=A)
+                               lam_s=A, n_stitches=ti.i32)
 VectorPack = ti.types.argpack(x=A, x_hat=A, x_trial=A, Wdx=A, b=A, d=A, r=A, z=A, p=A, Ap=A)
 PrecondPack = ti.types.argpack(P_inv=A, f_ptr=A, f_idx=A, f_val=A, f_perm=A, f_work=A,
                                mg_int=A, mg_real=A, mg_block=A)
@@ -110,6 +122,7 @@ class Workspace:
     """Per-limiter arrays sized from the model's capacities (f_cap faces, v_cap vertices)."""
 
     def __init__(self, model):
+        self.model = model
         self.f_cap, self.v_cap = model.f_cap, model.v_cap
         F, V, K = model.f_cap, model.v_cap, K_MAX
         vec3, vec9 = ti.types.vector(3, float), ti.types.vector(9, float)
@@ -161,13 +174,18 @@ class Workspace:
 
     def pack(self, kind, pack_type, **members):
         """The argpack of ``members`` (ndarrays.PackCache: made again only when one of its
-        arrays was replaced, e.g. a new stitch capacity, a larger H, a new pattern)."""
+        arrays was replaced, e.g. a new stitch capacity, a larger H, a new pattern, or one of
+        its counts changed)."""
         return self._packs.get(kind, pack_type, **members)
 
     def mesh_pack(self):
+        """The rest arrays with the model's active counts at this call (a remesh changes
+        them in place)."""
+        m = self.model
         return self.pack("mesh", MeshPack, face_verts=self.face_verts, Dm_inv=self.Dm_inv,
                          grain=self.grain, rest_area=self.rest_area, mass=self.mass,
-                         pinned=self.pinned, params=self.params)
+                         pinned=self.pinned, params=self.params, n_verts=int(m.n_verts),
+                         n_faces=int(m.n_faces))
 
     def metric_pack(self, metric):
         """W = ``metric`` (a system_matrix.BlockMatrix) and the Newton matrix in its pattern."""
@@ -175,15 +193,18 @@ class Workspace:
                          w_val=metric.val, w_diag=metric.diag, face_slot=metric.face_slot,
                          stitch_slot=metric.stitch_slot, H=self.newton_matrix(metric.nnz))
 
-    def constraint_pack(self):
+    def constraint_pack(self, K):
+        """The constraint arrays, of which the method in use fills K per face
+        (constraints.N_CONSTRAINTS)."""
         return self.pack("cons", ConstraintPack, lam=self.lam, g=self.g, grad=self.grad,
                          cm=self.cm, what=self.what, kappa=self.kappa, twist=self.twist,
-                         curv=self.curv)
+                         curv=self.curv, n_per_face=int(K))
 
     def contact_pack(self):
         return self.pack("contacts", ContactPack, contact=self.contact,
                          contact_mu=self.contact_mu, lam_c=self.lam_c, fric=self.fric,
-                         lam_t=self.lam_t, stitch=self.stitch, lam_s=self.lam_s)
+                         lam_t=self.lam_t, stitch=self.stitch, lam_s=self.lam_s,
+                         n_stitches=self.n_stitches)
 
     def vector_pack(self):
         return self.pack("vec", VectorPack, x=self.x, x_hat=self.x_hat, x_trial=self.x_trial,
@@ -211,7 +232,9 @@ class Workspace:
 
     def set_stitch_capacity(self, n):
         """Seams: vertex pairs (a, b) held together, x_a = x_b, and their multipliers
-        (vectors: an equality has a multiplier of either sign per component)."""
+        (vectors: an equality has a multiplier of either sign per component); the first
+        ``n_stitches`` rows are in use (``StrainLimiter.set_stitches``)."""
+        self.n_stitches = 0
         self.s_cap = max(int(n), 1)
         self.stitch = ti.ndarray(ti.types.vector(2, ti.i32), self.s_cap)
         self.lam_s = ti.ndarray(ti.types.vector(3, float), self.s_cap)

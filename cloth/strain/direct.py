@@ -51,13 +51,14 @@ I_SLOPE, I_STEP, I_VIOL, I_COMP, I_ALPHA, I_MERIT, I_LOOPS = range(7)
 
 
 @ti.kernel
-def start(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: float,
-          from_prev: int, tol: float, mesh: MeshPack, metric: MetricPack, cons: ConstraintPack,
-          contacts: ContactPack, vec: VectorPack, stats: A):
+def start(method: ti.template(), mu: float, from_prev: int, tol: float, mesh: MeshPack,
+          metric: MetricPack, cons: ConstraintPack, contacts: ContactPack, vec: VectorPack,
+          stats: A):
     """Constraints at x_hat and the start violation; then, as in ``solve_al``, the start
     point (``choose_start``, its candidate in vec.Wdx) unless x_hat is feasible already."""
     ti.loop_config(serialize=True)
     for _ in range(1):
+        K, nv, nf, ns = cons.n_per_face, mesh.n_verts, mesh.n_faces, contacts.n_stitches
         assemble_all(method, nf, vec.x, mesh, cons)
         stats[ST_START_VIOL] = ti.max(violation_of(K, nf, mesh.rest_area, cons.g),
                                       vertex_violation(nv, ns, vec.x, contacts.contact,
@@ -69,32 +70,33 @@ def start(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: float,
 
 
 @ti.kernel
-def newton_system(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: float,
-                  mesh: MeshPack, metric: MetricPack, cons: ConstraintPack,
-                  contacts: ContactPack, vec: VectorPack):
+def newton_system(method: ti.template(), mu: float, mesh: MeshPack, metric: MetricPack,
+                  cons: ConstraintPack, contacts: ContactPack, vec: VectorPack):
     """vec.r = -grad L_A (via vec.Wdx = W (x - x_hat), a work vector) and the projected-Newton
     matrix H (``al.newton_matrix``: the matrix the PCG path's Newton steps solve with, in W's
     block pattern)."""
     ti.loop_config(serialize=True)
     for _ in range(1):
+        K, nv, nf, ns = cons.n_per_face, mesh.n_verts, mesh.n_faces, contacts.n_stitches
         exact = mesh.params[P_CURVATURE] > 0.0
         metric_gradient(nv, vec.x, metric, vec)
         residual(K, nv, nf, ns, mu, vec.x, mesh, cons, contacts, vec)
-        fill_c_curvature(method, K, nf, mu, vec.x, mesh, cons)
+        if exact:
+            fill_c_curvature(method, K, nf, mu, vec.x, mesh, cons)
         use_twist = mesh.params[P_SVD_DELTA] > 0.0 and ti.static(method == SVD) and not exact
         newton_matrix(K, nv, nf, ns, mu, mesh.params[P_MARGIN], mesh.params[P_CONTACT_SCALE],
                       use_twist, exact, vec.x, mesh, metric, cons, contacts)
 
 
 @ti.kernel
-def line_search(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: float,
-                mesh: MeshPack, metric: MetricPack, cons: ConstraintPack,
-                contacts: ContactPack, vec: VectorPack, info: A):
+def line_search(method: ti.template(), mu: float, mesh: MeshPack, metric: MetricPack,
+                cons: ConstraintPack, contacts: ContactPack, vec: VectorPack, info: A):
     """Backtracking (Armijo) along vec.d from vec.x (vec.r = -grad L_A there), as in
     ``solve_al``; leaves the constraints assembled at the new x. info: slope, largest vertex
     move, alpha (0: no step taken)."""
     ti.loop_config(serialize=True)
     for _ in range(1):
+        K, nv, nf, ns = cons.n_per_face, mesh.n_verts, mesh.n_faces, contacts.n_stitches
         slope = 0.0
         for n in range(nv):
             slope -= vec.r[n].dot(vec.d[n])
@@ -124,22 +126,29 @@ def line_search(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: fl
 
 
 @ti.kernel
-def multipliers(K: int, nv: int, nf: int, ns: int, mu: float, mu_max: float, x: A,
-                mesh: MeshPack, cons: ConstraintPack, contacts: ContactPack, info: A):
+def multipliers(mu: float, mu_max: float, x: A, mesh: MeshPack, cons: ConstraintPack,
+                contacts: ContactPack, info: A):
     ti.loop_config(serialize=True)
     for _ in range(1):
+        K, nv, nf, ns = cons.n_per_face, mesh.n_verts, mesh.n_faces, contacts.n_stitches
         viol, comp = update_multipliers(K, nv, nf, ns, mu, mu_max, mesh.params[P_CONTACT_SCALE],
                                         x, mesh, cons, contacts)
         info[I_VIOL] = viol
         info[I_COMP] = comp
 
 
-def packs(lim, metric):
-    """The argument packs of the limiter ``lim``'s work arrays with the metric ``metric``:
-    (mesh, metric, constraints, contacts, vectors), the direct kernels' arguments."""
+def packs(lim, metric, K):
+    """The argument packs of the limiter ``lim``'s work arrays with the metric ``metric`` and
+    K constraints a face: (mesh, metric, constraints, contacts, vectors), the direct kernels'
+    arguments."""
     ws = lim._ws
-    return (ws.mesh_pack(), ws.metric_pack(metric), ws.constraint_pack(), ws.contact_pack(),
+    return (ws.mesh_pack(), ws.metric_pack(metric), ws.constraint_pack(K), ws.contact_pack(),
             ws.vector_pack())
+
+
+def _multiplier_packs(ws, K):
+    """The packs of the multiplier step (``multipliers``): mesh, constraints, contacts."""
+    return ws.mesh_pack(), ws.constraint_pack(K), ws.contact_pack()
 
 
 def fill_newton_system(lim, mid, K, mu, metric):
@@ -147,14 +156,14 @@ def fill_newton_system(lim, mid, K, mu, metric):
     the residual into ws.r, the Newton matrix values into ws.H."""
     m = lim.model
     if split_kernels():
-        nv, nf, ns = m.n_verts, m.n_faces, len(lim._stitches)
-        pk, info = packs(lim, metric), lim._ws.info
-        newton_rhs(mid, K, nv, nf, ns, mu, 2, *pk, info)
+        nv, nf = m.n_verts, m.n_faces
+        pk, info = packs(lim, metric, K), lim._ws.info
+        newton_rhs(mu, 2, *pk, info)
         check_loops(info.to_numpy(), "newton_rhs", nv, nf)
-        newton_lhs(mid, K, nv, nf, ns, mu, 2, *pk, info)
+        newton_lhs(mid, mu, 2, *pk, info)
         check_loops(info.to_numpy(), "newton_lhs", nv, nf)
         return
-    newton_system(mid, K, m.n_verts, m.n_faces, len(lim._stitches), mu, *packs(lim, metric))
+    newton_system(mid, mu, *packs(lim, metric, K))
 
 
 def solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, margin_mu=None):
@@ -173,36 +182,32 @@ def solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, margin_mu=None):
     lim.last_fallback = False
     if lim.newton_model != "active-set":
         return _solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, False, lim.max_iters)
-    ws = lim._ws
     multipliers_in = lim.multipliers()
     out = _solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, True,
                  min(ACTIVE_SET_ROUNDS, lim.max_iters))
     if out[2] or margin_mu is None:
         return out
     lim.restart_from(multipliers_in)
-    params = ws.params.to_numpy()
-    params[P_MARGIN] = lim.active_margin
-    ws.params.from_numpy(params)
+    lim._upload_params(margin_fallback=True)
     try:
         rounds, newton, converged = _solve(lim, mid, K, metric, chol, margin_mu, mu_max,
                                            step_tol, False, lim.max_iters)
     finally:
-        params[P_MARGIN] = 0.0
-        ws.params.from_numpy(params)
+        lim._upload_params()
     return out[0] + rounds, out[1] + newton, converged
 
 
 def _solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, active_set_model, max_rounds):
     """``solve``'s AL loop with one Newton model, at most ``max_rounds`` rounds."""
     ws, m = lim._ws, lim.model
-    nv, nf, ns = m.n_verts, m.n_faces, len(lim._stitches)
+    nv, nf = m.n_verts, m.n_faces
     info = ws.info
     from_prev = int(lim.coupling == "implicit" and metric is lim._system)
     split = split_kernels()
     if split:
         start_split(lim, mid, K, mu, from_prev, metric)
     else:
-        start(mid, K, nv, nf, ns, mu, from_prev, lim.tol, *packs(lim, metric), ws.stats)
+        start(mid, mu, from_prev, lim.tol, *packs(lim, metric, K), ws.stats)
     stats = ws.stats.to_numpy()
     if stats[ST_START_VIOL] < lim.tol:
         stats[ST_CONVERGED], stats[ST_VIOL] = 1, stats[ST_START_VIOL]
@@ -267,7 +272,7 @@ def _solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, active_set_model, ma
             if split:
                 out = line_search_split(lim, mid, K, mu, metric)
             else:
-                line_search(mid, K, nv, nf, ns, mu, *packs(lim, metric), info)
+                line_search(mid, mu, *packs(lim, metric, K), info)
                 out = info.to_numpy()
             if _DEBUG:
                 print(f"  round {rounds} newton {newton}: |r| {np.linalg.norm(r0):.3e} alpha "
@@ -278,13 +283,11 @@ def _solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, active_set_model, ma
         if converged:
             break
         if split:
-            multipliers_checked(K, nv, nf, ns, mu, mu_max, 2, ws.x, ws.mesh_pack(),
-                                ws.constraint_pack(), ws.contact_pack(), info)
+            multipliers_checked(mu, mu_max, 2, ws.x, *_multiplier_packs(ws, K), info)
             out = info.to_numpy()
             check_loops(out, "multipliers", nv, nf)
         else:
-            multipliers(K, nv, nf, ns, mu, mu_max, ws.x, ws.mesh_pack(), ws.constraint_pack(),
-                        ws.contact_pack(), info)
+            multipliers(mu, mu_max, ws.x, *_multiplier_packs(ws, K), info)
             out = info.to_numpy()
         viol, comp = float(out[I_VIOL]), float(out[I_COMP])
         rounds += 1
@@ -345,6 +348,10 @@ def _solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, active_set_model, ma
 # (before: 17.9 and 16.6 s). GPU drivers have no such cap; the CPU never takes this path.
 LOOP_CAP = 65535
 TRIAL_STEP, TRIAL_X, TRIAL_START = 0, 1, 2
+# What one ``trial`` launch does: where the trial point is (mode, TRIAL_*), and whether it
+# assembles the constraints and evaluates the merit there. (Integers only: a float member's
+# type would be fixed when the pack type is made, before ti.init chooses the precision.)
+TrialPack = ti.types.argpack(mode=ti.i32, assemble=ti.i32, evaluate=ti.i32)
 
 
 LoopCapError = backend.LoopCapError     # (one class for every kernel that probes the cap)
@@ -379,12 +386,12 @@ def loops_ran(two, info: T):
 
 
 @ti.kernel
-def start_values(method: ti.template(), K: int, nv: int, nf: int, ns: int, two: int,
-                 mesh: MeshPack, cons: ConstraintPack, contacts: ContactPack, vec: VectorPack,
-                 stats: A, info: A):
+def start_values(method: ti.template(), two: int, mesh: MeshPack, cons: ConstraintPack,
+                 contacts: ContactPack, vec: VectorPack, stats: A, info: A):
     """``start``'s first part: the constraints at x (= x_hat) and the start violation."""
     ti.loop_config(serialize=True)
     for _ in range(1):
+        K, nv, nf, ns = cons.n_per_face, mesh.n_verts, mesh.n_faces, contacts.n_stitches
         assemble_all(method, nf, vec.x, mesh, cons)
         stats[ST_START_VIOL] = ti.max(violation_of(K, nf, mesh.rest_area, cons.g),
                                       vertex_violation(nv, ns, vec.x, contacts.contact,
@@ -394,11 +401,12 @@ def start_values(method: ti.template(), K: int, nv: int, nf: int, ns: int, two: 
 
 
 @ti.kernel
-def line_start(K: int, nv: int, nf: int, ns: int, mu: float, two: int, metric: MetricPack,
-               cons: ConstraintPack, contacts: ContactPack, vec: VectorPack, info: A):
+def line_start(mu: float, two: int, mesh: MeshPack, metric: MetricPack, cons: ConstraintPack,
+               contacts: ContactPack, vec: VectorPack, info: A):
     """``line_search``'s start: the slope along vec.d and the merit at x."""
     ti.loop_config(serialize=True)
     for _ in range(1):
+        K, nv, nf, ns = cons.n_per_face, mesh.n_verts, mesh.n_faces, contacts.n_stitches
         slope = 0.0
         for n in range(nv):
             slope -= vec.r[n].dot(vec.d[n])
@@ -408,26 +416,26 @@ def line_start(K: int, nv: int, nf: int, ns: int, mu: float, two: int, metric: M
 
 
 @ti.kernel
-def trial(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: float, a: float,
-          mode: int, assemble: int, evaluate: int, two: int, mesh: MeshPack,
-          metric: MetricPack, cons: ConstraintPack, contacts: ContactPack, vec: VectorPack,
-          info: A):
+def trial(method: ti.template(), mu: float, a: float, two: int, what: TrialPack,
+          mesh: MeshPack, metric: MetricPack, cons: ConstraintPack, contacts: ContactPack,
+          vec: VectorPack, info: A):
     """One trial point of ``line_search`` or ``choose_start``: vec.x_trial = x + a d
-    (TRIAL_STEP), x (TRIAL_X) or the start candidate vec.Wdx at unpinned vertices
-    (TRIAL_START); with ``assemble`` the constraints there, with ``evaluate`` the merit there
-    into info[I_MERIT]."""
+    (what.mode TRIAL_STEP), x (TRIAL_X) or the start candidate vec.Wdx at unpinned vertices
+    (TRIAL_START); with ``what.assemble`` the constraints there, with ``what.evaluate`` the
+    merit there into info[I_MERIT]."""
     ti.loop_config(serialize=True)
     for _ in range(1):
+        K, nv, nf, ns = cons.n_per_face, mesh.n_verts, mesh.n_faces, contacts.n_stitches
         for n in range(nv):
-            if mode == TRIAL_STEP:
+            if what.mode == TRIAL_STEP:
                 vec.x_trial[n] = vec.x[n] + a * vec.d[n]
             else:
                 vec.x_trial[n] = vec.x[n]
-                if mode == TRIAL_START and mesh.pinned[n] == 0:
+                if what.mode == TRIAL_START and mesh.pinned[n] == 0:
                     vec.x_trial[n] = vec.Wdx[n]
-        if assemble:
+        if what.assemble:
             assemble_all(method, nf, vec.x_trial, mesh, cons)
-        if evaluate:
+        if what.evaluate:
             info[I_MERIT] = merit(K, nv, nf, ns, mu, vec.x_trial, vec.x_hat, metric, cons,
                                   contacts)
         loops_ran(two, info)
@@ -447,26 +455,27 @@ def accept(nv: int, two: int, vec: VectorPack, info: A):
 
 
 @ti.kernel
-def newton_rhs(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: float, two: int,
-               mesh: MeshPack, metric: MetricPack, cons: ConstraintPack,
+def newton_rhs(mu: float, two: int, mesh: MeshPack, metric: MetricPack, cons: ConstraintPack,
                contacts: ContactPack, vec: VectorPack, info: A):
     """``newton_system``'s first part: vec.Wdx and the residual vec.r."""
     ti.loop_config(serialize=True)
     for _ in range(1):
+        K, nv, nf, ns = cons.n_per_face, mesh.n_verts, mesh.n_faces, contacts.n_stitches
         metric_gradient(nv, vec.x, metric, vec)
         residual(K, nv, nf, ns, mu, vec.x, mesh, cons, contacts, vec)
         loops_ran(two, info)
 
 
 @ti.kernel
-def newton_lhs(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: float, two: int,
-               mesh: MeshPack, metric: MetricPack, cons: ConstraintPack,
-               contacts: ContactPack, vec: VectorPack, info: A):
+def newton_lhs(method: ti.template(), mu: float, two: int, mesh: MeshPack, metric: MetricPack,
+               cons: ConstraintPack, contacts: ContactPack, vec: VectorPack, info: A):
     """``newton_system``'s second part: the Newton matrix."""
     ti.loop_config(serialize=True)
     for _ in range(1):
+        K, nv, nf, ns = cons.n_per_face, mesh.n_verts, mesh.n_faces, contacts.n_stitches
         exact = mesh.params[P_CURVATURE] > 0.0
-        fill_c_curvature(method, K, nf, mu, vec.x, mesh, cons)
+        if exact:
+            fill_c_curvature(method, K, nf, mu, vec.x, mesh, cons)
         use_twist = mesh.params[P_SVD_DELTA] > 0.0 and ti.static(method == SVD) and not exact
         newton_matrix(K, nv, nf, ns, mu, mesh.params[P_MARGIN], mesh.params[P_CONTACT_SCALE],
                       use_twist, exact, vec.x, mesh, metric, cons, contacts)
@@ -474,12 +483,12 @@ def newton_lhs(method: ti.template(), K: int, nv: int, nf: int, ns: int, mu: flo
 
 
 @ti.kernel
-def multipliers_checked(K: int, nv: int, nf: int, ns: int, mu: float, mu_max: float, two: int,
-                        x: A, mesh: MeshPack, cons: ConstraintPack, contacts: ContactPack,
-                        info: A):
+def multipliers_checked(mu: float, mu_max: float, two: int, x: A, mesh: MeshPack,
+                        cons: ConstraintPack, contacts: ContactPack, info: A):
     """``multipliers`` with ``loops_ran``."""
     ti.loop_config(serialize=True)
     for _ in range(1):
+        K, nv, nf, ns = cons.n_per_face, mesh.n_verts, mesh.n_faces, contacts.n_stitches
         viol, comp = update_multipliers(K, nv, nf, ns, mu, mu_max, mesh.params[P_CONTACT_SCALE],
                                         x, mesh, cons, contacts)
         info[I_VIOL] = viol
@@ -489,13 +498,11 @@ def multipliers_checked(K: int, nv: int, nf: int, ns: int, mu: float, mu_max: fl
 
 def _trial(lim, mid, K, mu, metric, a, mode, assemble, evaluate):
     """Launch ``trial`` and return the info array read back."""
-    m, info = lim.model, lim._ws.info
-    nv, nf = m.n_verts, m.n_faces
-    mesh, met, cons, contacts, vec = packs(lim, metric)
-    trial(mid, K, nv, nf, len(lim._stitches), mu, a, mode, assemble, evaluate, 2, mesh, met,
-          cons, contacts, vec, info)
-    out = info.to_numpy()
-    check_loops(out, "trial", nv, nf)
+    ws, m = lim._ws, lim.model
+    what = ws.pack("trial", TrialPack, mode=mode, assemble=assemble, evaluate=evaluate)
+    trial(mid, mu, a, 2, what, *packs(lim, metric, K), ws.info)
+    out = ws.info.to_numpy()
+    check_loops(out, "trial", m.n_verts, m.n_faces)
     return out
 
 
@@ -511,11 +518,9 @@ def start_split(lim, mid, K, mu, from_prev, metric):
     """``start`` in launches (``LOOP_CAP``): ``start_values``, then ``al.choose_start``'s
     three passes on the host."""
     ws, m = lim._ws, lim.model
-    nv, nf = m.n_verts, m.n_faces
-    mesh, _met, cons, contacts, vec = packs(lim, metric)
-    start_values(mid, K, nv, nf, len(lim._stitches), 2, mesh, cons, contacts, vec, ws.stats,
-                 ws.info)
-    check_loops(ws.info.to_numpy(), "start_values", nv, nf)
+    mesh, _met, cons, contacts, vec = packs(lim, metric, K)
+    start_values(mid, 2, mesh, cons, contacts, vec, ws.stats, ws.info)
+    check_loops(ws.info.to_numpy(), "start_values", m.n_verts, m.n_faces)
     if not (from_prev and ws.stats.to_numpy()[ST_START_VIOL] >= lim.tol):
         return
     L_hat = _trial(lim, mid, K, mu, metric, 0.0, TRIAL_X, 0, 1)[I_MERIT]
@@ -529,9 +534,7 @@ def start_split(lim, mid, K, mu, from_prev, metric):
 def line_search_split(lim, mid, K, mu, metric):
     """``line_search`` with its loop on the host (``LOOP_CAP``); returns its info values."""
     ws, m = lim._ws, lim.model
-    mesh, met, cons, contacts, vec = packs(lim, metric)
-    line_start(K, m.n_verts, m.n_faces, len(lim._stitches), mu, 2, met, cons, contacts, vec,
-               ws.info)
+    line_start(mu, 2, *packs(lim, metric, K), ws.info)
     out = ws.info.to_numpy()
     check_loops(out, "line_start", m.n_verts, m.n_faces)
     f32 = np.float32 if out.dtype == np.float32 else np.float64

@@ -44,14 +44,14 @@ def project_face(method: ti.template(), f, jacobi, x: T, mesh: T, acc: T, cnt: T
 
 
 @ti.kernel
-def pbd_solve(method: ti.template(), jacobi: int, nv: int, nf: int, ns: int, tol: float,
-              max_iters: int, omega: float, x: A, mesh: MeshPack, contacts: ContactPack,
-              acc: A, cnt: A, stats: A):
+def pbd_solve(method: ti.template(), jacobi: int, tol: float, max_iters: int, omega: float,
+              x: A, mesh: MeshPack, contacts: ContactPack, acc: A, cnt: A, stats: A):
     """Jacobi (averaged, relaxed by omega) or Gauss-Seidel (in place, serial order) sweeps of
     per-triangle projections, each followed by projecting every vertex onto its contact
     half-space, until the worst violation seen in a sweep is below tol."""
     ti.loop_config(serialize=True)
     for _ in range(1):
+        nv, nf, ns = mesh.n_verts, mesh.n_faces, contacts.n_stitches
         it = 0
         while it < max_iters:
             if jacobi:

@@ -524,19 +524,23 @@ class StrainLimiter:
         """The active-set model in the kernels (PCG, ``al.pdas_resolves``), not on the host."""
         return self.newton_model == "active-set" and self.linear_solver == "pcg"
 
-    def _upload_params(self):
+    def _upload_params(self, margin_fallback=False):
+        """The kernels' ``params`` from the settings (the one place that writes them). With
+        ``margin_fallback`` for the solve again with the margin model after the active-set
+        model did not converge (``_solve_al_with_fallback``, ``direct.solve``): the margin
+        model's matrix and step, the rest as the settings say."""
         if self._ws is None or self.warp is None or self.weft is None:
             return
+        active_set = self.newton_model == "active-set" and not margin_fallback
         params = np.zeros(buffers.N_PARAMS)
         params[buffers.P_WARP:buffers.P_WARP + 2] = self.warp
         params[buffers.P_WEFT:buffers.P_WEFT + 2] = self.weft
         params[buffers.P_SHEAR:buffers.P_SHEAR + 2] = self.shear_band()
         # The active-set model's matrix is the Hessian: no constraint enters it early.
-        params[buffers.P_MARGIN] = 0.0 if self.newton_model == "active-set" else \
-            self.active_margin
+        params[buffers.P_MARGIN] = 0.0 if active_set else self.active_margin
         params[buffers.P_INNER_RTOL] = 0.0 if self._kernel_pdas() else self.inner_rtol
         params[buffers.P_KKT_TOL] = self.kkt_length
-        params[buffers.P_PDAS] = 1.0 if self._kernel_pdas() else 0.0
+        params[buffers.P_PDAS] = 1.0 if self._kernel_pdas() and active_set else 0.0
         params[buffers.P_DELTA] = self.mapping_delta
         params[buffers.P_SVD_DELTA] = self.svd_delta
         params[buffers.P_ISO] = self.mapping_iso
@@ -556,6 +560,7 @@ class StrainLimiter:
         ws = self._ws
         if len(self._stitches) > ws.s_cap:
             ws.set_stitch_capacity(len(self._stitches))
+        ws.n_stitches = len(self._stitches)
         ndarrays.zero(ws.lam_s)
         self._retire_patterns()                # the stitches are part of the pattern
         self._chol = None
@@ -787,9 +792,9 @@ class StrainLimiter:
                 self.last_reverted = True
                 self.reverted_count += 1
         else:
-            pbd.pbd_solve(mid, int(self.solver == "jacobi"), nv, nf, len(self._stitches),
-                          self.tol, self.max_iters, self.jacobi_omega, ws.x, ws.mesh_pack(),
-                          ws.contact_pack(), ws.acc, ws.cnt, ws.stats)
+            pbd.pbd_solve(mid, int(self.solver == "jacobi"), self.tol, self.max_iters,
+                          self.jacobi_omega, ws.x, ws.mesh_pack(), ws.contact_pack(), ws.acc,
+                          ws.cnt, ws.stats)
             # Measure the final positions (a sweep sees each face before moving it).
             self._assemble(mid, ws.x)
             stats = ws.stats.to_numpy()
@@ -826,8 +831,10 @@ class StrainLimiter:
             self._upload_params()
 
     def _assemble(self, mid, pos):
+        """The constraints of the method ``mid`` at ``pos`` into the work arrays (ws.g,
+        ws.grad, ...)."""
         ws = self._ws
-        al.assemble(mid, self.model.n_faces, pos, ws.mesh_pack(), ws.constraint_pack())
+        al.assemble(mid, pos, ws.mesh_pack(), ws.constraint_pack(N_CONSTRAINTS[self.method]))
 
     def _solve_direct(self, mid, K, use_system):
         from . import direct
@@ -914,7 +921,6 @@ class StrainLimiter:
         if not self._kernel_pdas():
             return self._solve_al(mid, K, metric, contacts)
         from .direct import ACTIVE_SET_ROUNDS
-        ws = self._ws
         multipliers_in = self.multipliers()
         budget = self.max_iters
         self.max_iters = min(ACTIVE_SET_ROUNDS, budget)
@@ -925,15 +931,13 @@ class StrainLimiter:
         if out[2]:
             return out
         self.restart_from(multipliers_in)
-        params = ws.params.to_numpy()
-        saved, mu_scale = params.copy(), self.mu_scale
-        params[buffers.P_PDAS], params[buffers.P_MARGIN] = 0.0, self.active_margin
-        ws.params.from_numpy(params)
+        mu_scale = self.mu_scale
+        self._upload_params(margin_fallback=True)
         self.mu_scale = _default_mu_scale(self.coupling, "margin")
         try:
             rounds, newton, converged, stats = self._solve_al(mid, K, metric, contacts)
         finally:
-            ws.params.from_numpy(saved)
+            self._upload_params()
             self.mu_scale = mu_scale
         return out[0] + rounds, out[1] + newton, converged, stats
 
@@ -967,9 +971,9 @@ class StrainLimiter:
         budget[buffers.B_FROM_PREV] = float(self.coupling == "implicit" and
                                             metric is self._system)
         budget[buffers.B_PC_MODE] = pc_mode
-        al.solve_al(mid, self._kernel_curvature(), K, m.n_verts, m.n_faces, len(self._stitches),
-                    ws.budget, ws.mesh_pack(), ws.metric_pack(metric), ws.constraint_pack(),
-                    ws.contact_pack(), ws.vector_pack(), ws.precond_pack(fp, mg), ws.stats)
+        al.solve_al(mid, self._kernel_curvature(), ws.budget, ws.mesh_pack(),
+                    ws.metric_pack(metric), ws.constraint_pack(K), ws.contact_pack(),
+                    ws.vector_pack(), ws.precond_pack(fp, mg), ws.stats)
         stats = ws.stats.to_numpy()
         rounds, newton = int(stats[ST_ITERS]), int(stats[ST_NEWTON])
         self.last_factorizations = int(made_before)
