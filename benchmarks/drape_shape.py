@@ -25,12 +25,9 @@ height and solve) to --out; runs are cached in --out/drape_shape_runs/ (--fresh:
 import argparse
 import json
 import os
-import subprocess
 import sys
-import time
 from concurrent.futures import ThreadPoolExecutor
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 FRAMES = 90
 REST_FRAMES = 30                    # the last frames, over which the resting KE is averaged
 DROPS = (0.95, 0.951, 0.953, 0.957, 0.96, 0.965, 0.97)     # as benchmarks.motion_error
@@ -111,38 +108,18 @@ def child(solve, drop, chaos):
 
 
 def run_one(folder, solve, drop, chaos, fresh):
+    from benchmarks.harness import cached_run
     tag = f"{solve.replace(' ', '_')}__{drop}" + ("__chaos" if chaos else "")
-    path = os.path.join(folder, tag + ".json")
-    if os.path.exists(path) and not fresh:
-        with open(path) as fh:
-            return json.load(fh)
-    t0 = time.time()
-    proc = subprocess.run([sys.executable, "-m", "benchmarks.drape_shape", "--child",
-                           json.dumps([solve, drop, chaos])],
-                          capture_output=True, text=True, cwd=ROOT)
-    if proc.returncode != 0:
-        result = {"error": proc.stderr[-600:]}
-    else:
-        result = json.loads(proc.stdout.strip().splitlines()[-1])
-        result["wall_s"] = time.time() - t0
-        with open(path, "w") as fh:
-            json.dump(result, fh)
-    print(f"  {solve} / drop {drop}" + (" / 1 nm" if chaos else "")
-          + (f": error {result['error'][-300:]}" if "error" in result else
-             f" ({result['wall_s']:.0f} s)"), file=sys.stderr, flush=True)
-    return result
-
-
-def rms(a, b, diagonal):
-    import numpy as np
-    a, b = np.asarray(a), np.asarray(b)
-    return float(np.sqrt(np.mean(np.sum((a - b) ** 2, axis=1))) / diagonal)
+    return cached_run(os.path.join(folder, tag + ".json"), "benchmarks.drape_shape",
+                      [solve, drop, chaos],
+                      f"{solve} / drop {drop}" + (" / 1 nm" if chaos else ""), fresh)
 
 
 def summarize(runs, drops):
     """Per height: each solve's lowest vertex, folds, resting KE, its chaos floor, and the
     default's distance to exact steps."""
     import numpy as np
+    from benchmarks.motion_error import rms
     rows = []
     for drop in drops:
         row = {"drop": drop}

@@ -50,3 +50,30 @@ def configure(scene, overrides):
     module = scenes.get(scene)
     cfg = resolve(module.DEFAULTS, overrides if isinstance(overrides, list) else [overrides])
     return module, cfg, module.build(cfg)
+
+
+def cached_run(path, module, args, label, fresh=False, error_chars=300):
+    """One benchmark run in its own process, cached as JSON at ``path``: ``python -m module
+    --child JSON(args)``, whose last stdout line is the result's JSON. A failed run returns
+    {"error": the end of its stderr} and is not cached; a finished one gets ``wall_s``.
+    Prints ``label`` and the time (or the error) to stderr."""
+    import json
+    import sys
+    import time
+    if os.path.exists(path) and not fresh:
+        with open(path) as fh:
+            return json.load(fh)
+    t0 = time.time()
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    proc = subprocess.run([sys.executable, "-m", module, "--child", json.dumps(args)],
+                          capture_output=True, text=True, cwd=root)
+    if proc.returncode != 0:
+        result = {"error": proc.stderr[-600:]}
+    else:
+        result = json.loads(proc.stdout.strip().splitlines()[-1])
+        result["wall_s"] = time.time() - t0
+        with open(path, "w") as fh:
+            json.dump(result, fh)
+    print(f"  {label}" + (f": error {result['error'][-error_chars:]}" if "error" in result
+                          else f" ({result['wall_s']:.0f} s)"), file=sys.stderr, flush=True)
+    return result

@@ -30,7 +30,6 @@ or pass --fresh, to measure again).
 import argparse
 import json
 import os
-import subprocess
 import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -138,25 +137,11 @@ def _run_file(folder, case, solve, drop):
 
 
 def run_one(folder, case, solve, drop, fresh):
-    path = _run_file(folder, case, solve, drop)
-    if os.path.exists(path) and not fresh:
-        with open(path) as fh:
-            return json.load(fh)
-    t0 = time.time()
-    proc = subprocess.run([sys.executable, "-m", "benchmarks.motion_error", "--child",
-                           json.dumps([case, solve, drop, {solve: SOLVES[solve]}])],
-                          capture_output=True, text=True, cwd=ROOT)
-    if proc.returncode != 0:
-        result = {"error": proc.stderr[-600:]}
-    else:
-        result = json.loads(proc.stdout.strip().splitlines()[-1])
-        result["wall_s"] = time.time() - t0
-        with open(path, "w") as fh:
-            json.dump(result, fh)
-    print(f"  {case} / {solve}" + ("" if drop is None else f" / drop {drop}")
-          + (f": error {result['error'][-200:]}" if "error" in result else
-             f" ({result['wall_s']:.0f} s)"), file=sys.stderr, flush=True)
-    return result
+    from benchmarks.harness import cached_run
+    return cached_run(_run_file(folder, case, solve, drop), "benchmarks.motion_error",
+                      [case, solve, drop, {solve: SOLVES[solve]}],
+                      f"{case} / {solve}" + ("" if drop is None else f" / drop {drop}"),
+                      fresh, error_chars=200)
 
 
 def rms(a, b, diagonal):
