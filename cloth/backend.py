@@ -28,7 +28,35 @@ class LoopCapError(RuntimeError):
     """A serial kernel's loops were cut short by the driver: Mesa's llvmpipe (Debian's
     software Vulkan, lavapipe) runs at most 65535 loop iterations in one shader invocation and
     then ends every loop without an error (cloth/strain/direct.py ``LOOP_CAP``). Raised by the
-    launches that probe for it (``loops_ran`` in strain/direct.py and dynamics.py)."""
+    launches that probe for it (``loop_probe``)."""
+
+
+# The most loop iterations lavapipe runs in one shader invocation (cloth/strain/direct.py).
+LOOP_CAP = 65535
+
+
+@ti.func
+def loop_probe(two):
+    """2 when a loop of ``two`` (= 2, a run-time value: a constant count is unrolled and
+    escapes the cap) iterations runs in full, 1 once the driver's loop cap was hit in this
+    launch (llvmpipe then runs a loop's body once). Serial kernels end with it."""
+    n = 0
+    for _ in range(two):
+        n += 1
+    return n
+
+
+def check_loop_probe(ran, kernel, mesh, largest):
+    """Raise LoopCapError, naming the fix, unless a launch's ``loop_probe`` returned 2.
+    ``kernel``: what was cut short; ``mesh``: its size in words; ``largest``: the largest
+    sheet resolution that runs on this driver."""
+    if int(round(float(ran))) != 2:
+        raise LoopCapError(
+            f"{kernel} stopped early on --arch {arch()}: the driver ended its loops (Mesa's "
+            f"llvmpipe / lavapipe runs at most {LOOP_CAP} loop iterations a shader invocation), "
+            f"so its answer would be wrong; this mesh ({mesh}) is too large for the serial "
+            f"kernels on this driver. Use a lower --resolution ({largest} or less for a sheet) "
+            "or --arch cpu")
 
 
 # LOOM_FAST_COMPILE=1 switches off Taichi's advanced IR optimisation. Measured on this 2-core

@@ -270,18 +270,13 @@ class ImplicitEuler:
         return iters
 
     def _check_loops(self, ran, phase):
-        """Raise backend.LoopCapError unless the launch's probe loop of 2 iterations ran twice
-        (``loops_ran``): a driver that caps loops (lavapipe) ends every loop of the launch
-        once the cap is hit, and the step would be silently wrong (measured with
-        benchmarks/loop_cap.py: linearise runs ~50 loop iterations a vertex, so it is cut
-        short from ~1300 vertices, a CG iteration ~26 a vertex)."""
-        if int(round(float(ran))) != 2:
-            raise backend.LoopCapError(
-                f"dynamics kernel {phase} stopped early on --arch {backend.arch()}: the driver "
-                f"ended its loops (Mesa's llvmpipe / lavapipe runs at most 65535 loop "
-                f"iterations a shader invocation), so the step would be wrong; this mesh "
-                f"({self.model.n_verts} vertices) is too large for the serial dynamics kernels "
-                "on this driver. Use a lower --resolution (35 or less for a sheet) or --arch cpu")
+        """Raise backend.LoopCapError unless the launch's ``loop_probe`` ran in full: a driver
+        that caps loops (lavapipe) ends every loop of the launch once the cap is hit, and the
+        step would be silently wrong (measured with benchmarks/loop_cap.py: linearise runs ~50
+        loop iterations a vertex, so it is cut short from ~1300 vertices, a CG iteration ~26
+        a vertex)."""
+        backend.check_loop_probe(ran, f"dynamics kernel {phase}",
+                                 f"{self.model.n_verts} vertices", 35)
 
     def energy(self):
         """Elastic energy (membrane + bending + stitches) of the current positions, J."""
@@ -755,18 +750,7 @@ def _step(coef: A, mesh: MeshPack, state: StatePack, elems: ElementPack,
 # dropped, 33 crashed). What counts is the arrays a kernel uses, not the pack members it is
 # given (measured: a 40-member pack of which 31 are used runs right, 32 used does not, with
 # one loose array besides); _linearise uses 27 (with ``coef``), _start 29, _iteration 25.
-# Each launch ends with ``loops_ran`` and returns its count (``ImplicitEuler._check_loops``).
-@ti.func
-def loops_ran(two):
-    """2.0 when a loop of ``two`` (= 2, a run-time value: a constant count is unrolled and
-    escapes the cap) iterations runs in full, 1.0 once the driver's loop cap was hit (llvmpipe
-    then runs a loop's body once)."""
-    n = 0.0
-    for _ in range(two):
-        n += 1.0
-    return n
-
-
+# Each launch ends with ``backend.loop_probe`` and returns it (``ImplicitEuler._check_loops``).
 @ti.kernel
 def _linearise(two: int, coef: A, mesh: MeshPack, state: StatePack, elems: ElementPack,
                cg: SolvePack) -> float:
@@ -775,7 +759,7 @@ def _linearise(two: int, coef: A, mesh: MeshPack, state: StatePack, elems: Eleme
     for _ in range(1):
         c = constants(coef)
         linearise(c, mesh, state, elems, cg)
-        ran = loops_ran(two)
+        ran = backend.loop_probe(two)
     return ran
 
 
@@ -787,7 +771,7 @@ def _start(two: int, coef: A, mesh: MeshPack, state: StatePack, elems: ElementPa
     for _ in range(1):
         c = constants(coef)
         rb = cg_start(c, mesh, state, elems, cg)
-        out = ti.Vector([rb[0], rb[1], loops_ran(two)])
+        out = ti.Vector([rb[0], rb[1], backend.loop_probe(two)])
     return out
 
 
@@ -799,7 +783,7 @@ def _iteration(two: int, rz: float, coef: A, mesh: MeshPack, elems: ElementPack,
     for _ in range(1):
         c = constants(coef)
         it = cg_iteration(rz, c, mesh, elems, cg)
-        out = ti.Vector([it[0], it[1], loops_ran(two)])
+        out = ti.Vector([it[0], it[1], backend.loop_probe(two)])
     return out
 
 
@@ -810,5 +794,5 @@ def _advance(two: int, coef: A, mesh: MeshPack, state: StatePack, cg: SolvePack)
     for _ in range(1):
         c = constants(coef)
         advance(c, mesh, state, cg)
-        ran = loops_ran(two)
+        ran = backend.loop_probe(two)
     return ran

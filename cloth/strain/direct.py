@@ -346,7 +346,7 @@ def _solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, active_set_model, ma
 # Measured on hanging at resolution 25: 4, 4, 3 rounds and violation 1.3e-5, 3.7e-5, 9.1e-5
 # over frames 1-3 (before: 100 rounds, 0.071, 0.19, 0.33), 2.5 and 1.7 s for frames 2 and 3
 # (before: 17.9 and 16.6 s). GPU drivers have no such cap; the CPU never takes this path.
-LOOP_CAP = 65535
+LOOP_CAP = backend.LOOP_CAP
 TRIAL_STEP, TRIAL_X, TRIAL_START = 0, 1, 2
 # What one ``trial`` launch does: where the trial point is (mode, TRIAL_*), and whether it
 # assembles the constraints and evaluates the merit there. (Integers only: a float member's
@@ -365,13 +365,8 @@ def split_kernels():
 def check_loops(out, kernel, nv, nf):
     """Raise LoopCapError unless ``out`` (an info array read back) says that every loop of
     ``kernel`` ran (``loops_ran``)."""
-    if out[I_LOOPS] != 2:
-        raise LoopCapError(
-            f"strain kernel {kernel} stopped early on --arch {backend.arch()}: the driver ended "
-            f"its loops (Mesa's llvmpipe / lavapipe runs at most {LOOP_CAP} loop iterations a "
-            f"shader invocation), so the projection would be wrong; this mesh ({nv} vertices, "
-            f"{nf} faces) is too large for the serial strain kernels on this driver. Use a "
-            "lower --resolution (31 or less for a sheet) or --arch cpu")
+    backend.check_loop_probe(out[I_LOOPS], f"strain kernel {kernel}",
+                             f"{nv} vertices, {nf} faces", 31)
 
 
 @ti.func
@@ -379,10 +374,7 @@ def loops_ran(two, info: T):
     """info[I_LOOPS] = 2 when a loop of ``two`` (= 2, a run-time value: a constant count is
     unrolled and escapes the cap) iterations runs in full, 1 once the driver's loop cap was hit
     (llvmpipe runs a capped loop's body once)."""
-    n = 0
-    for _ in range(two):
-        n += 1
-    info[I_LOOPS] = n
+    info[I_LOOPS] = backend.loop_probe(two)
 
 
 @ti.kernel
