@@ -55,8 +55,8 @@ def child(bending, solve, overrides=None, drops=DROPS):
     mod = scenes.get("drape")
     runs = []
     for drop in drops:
-        # The scene itself now takes exact steps (scenes/drape.py): every other solve sets
-        # the PCG steps explicitly (settings: the simulator's one copy of them).
+        # Every solve names its linear solver, so a scene default changed later cannot
+        # silently change a row (settings: the simulator's one copy of them).
         strain = {"linear_solver": "cholesky" if solve == "cholesky" else "pcg"}
         if solve.startswith("jacobi"):
             strain["precondition"] = "jacobi"
@@ -118,11 +118,12 @@ def main():
          "Draped: the lowest vertex at the last frame below the sphere's equator "
          f"({DRAPED_BELOW} m; the sphere spans 0.25-0.85 m). KE kept: kinetic energy at frame 8 "
          "over frame 6, through the landing. Solve: the AL projection's Newton steps by PCG "
-         "(default: the library's default, block Jacobi with contacts; the drape scene itself "
-         "takes exact steps), by "
+         "(default: the library's default, block Jacobi with contacts, which the drape "
+         "scene uses), by "
          "block-Jacobi PCG (`strain.precondition = \"jacobi\"`) with the default per-method "
          "budget or 50 (`StrainLimiter.max_cg`), or exact (`strain.linear_solver = "
-         "\"cholesky\"`).\n",
+         "\"cholesky\"`). SL ms/frame: strain limiting, the median of frames 2-30 of a drop, "
+         "then the median over the drops.\n",
          "| solve | draped | lowest y per drop (m) | KE kept (median) | SL ms/frame (median) |",
          "| --- | --- | --- | --- | --- |"]
     import numpy as np
