@@ -474,12 +474,12 @@ def precondition(pc_mode, nv, pc: T, r: T, z: T):
 
 
 @ti.func
-def newton_direction(method: ti.template(), exact: ti.template(), K, nv, nf, ns, mu, max_cg,
-                     rtol, margin, use_twist, c_scale, pc_mode, mesh: T, metric: T, cons: T,
-                     contacts: T, vec: T, pc: T):
+def newton_direction(method: ti.template(), exact: ti.template(), pdas: ti.template(), K, nv,
+                     nf, ns, mu, max_cg, rtol, margin, use_twist, c_scale, pc_mode, mesh: T,
+                     metric: T, cons: T, contacts: T, vec: T, pc: T):
     """pcg_direction's matrix and PCG solve at vec.x, with r = -grad L_A already in vec.r
-    (and the active-set re-solves when params[P_PDAS] is set; vec.x_trial is their
-    scratch)."""
+    (and, in a kernel compiled with ``pdas``, the active-set re-solves when params[P_PDAS] is
+    set; vec.x_trial is their scratch)."""
     if ti.static(exact):
         fill_c_curvature(method, K, nf, mu, vec.x, mesh, cons)
     newton_matrix(K, nv, nf, ns, mu, margin, c_scale, use_twist, exact, vec.x, mesh, metric,
@@ -494,9 +494,10 @@ def newton_direction(method: ti.template(), exact: ti.template(), K, nv, nf, ns,
     it = pcg_loop(False, K, nv, nf, mu, max_cg, rtol, rr, pc_mode, mesh, metric, cons,
                   contacts, vec, pc, vec.x_trial, cons.kappa)
     slope = -dot(vec.b, vec.d, nv)
-    if mesh.params[P_PDAS] > 0.0:
-        slope, it = pdas_resolves(K, nv, nf, mu, max_cg, rtol, it, pc_mode, mesh, metric, cons,
-                                  contacts, vec, pc, cons.kappa, vec.x_trial)
+    if ti.static(pdas):
+        if mesh.params[P_PDAS] > 0.0:
+            slope, it = pdas_resolves(K, nv, nf, mu, max_cg, rtol, it, pc_mode, mesh, metric,
+                                      cons, contacts, vec, pc, cons.kappa, vec.x_trial)
     return slope, it
 
 
@@ -703,9 +704,9 @@ def pcg_loop(flipped: ti.template(), K, nv, nf, mu, max_cg, rtol, rr, pc_mode, m
 
 
 @ti.func
-def pcg_direction(method: ti.template(), exact: ti.template(), K, nv, nf, ns, mu, max_cg, rtol,
-                  margin, use_twist, c_scale, pc_mode, skip_rr, mesh: T, metric: T, cons: T,
-                  contacts: T, vec: T, pc: T):
+def pcg_direction(method: ti.template(), exact: ti.template(), pdas: ti.template(), K, nv, nf,
+                  ns, mu, max_cg, rtol, margin, use_twist, c_scale, pc_mode, skip_rr, mesh: T,
+                  metric: T, cons: T, contacts: T, vec: T, pc: T):
     """Projected-Newton direction at vec.x: solve H d = -grad L_A (H from ``newton_matrix``)
     by PCG with H's 3x3 diagonal blocks as preconditioner (block Jacobi), from d = 0 to
     |r| <= rtol |grad L_A| (an inexact Newton step: measured on the hanging scene, rtol = 0.1
@@ -716,9 +717,9 @@ def pcg_direction(method: ti.template(), exact: ti.template(), K, nv, nf, ns, mu
     rr0 = dot(vec.r, vec.r, nv)
     slope, it = 0.0, 0
     if rr0 > skip_rr:
-        slope, it = newton_direction(method, exact, K, nv, nf, ns, mu, max_cg, rtol, margin,
-                                     use_twist, c_scale, pc_mode, mesh, metric, cons, contacts,
-                                     vec, pc)
+        slope, it = newton_direction(method, exact, pdas, K, nv, nf, ns, mu, max_cg, rtol,
+                                     margin, use_twist, c_scale, pc_mode, mesh, metric, cons,
+                                     contacts, vec, pc)
     else:
         for n in range(nv):
             vec.d[n] = ti.Vector([0.0, 0.0, 0.0])
@@ -831,7 +832,8 @@ def choose_start(method: ti.template(), from_prev, K, nv, nf, ns, mu, mesh: T, m
 
 
 @ti.kernel
-def solve_al(method: ti.template(), exact: ti.template(), budget: A, mesh: MeshPack,
+def solve_al(method: ti.template(), exact: ti.template(), with_pdas: ti.template(), budget: A,
+             mesh: MeshPack,
              metric: MetricPack, cons: ConstraintPack, contacts: ContactPack, vec: VectorPack,
              pc: PrecondPack, stats: A):
     """The whole AL projection (METHOD 4) in one launch (measured: with one launch per
@@ -843,7 +845,12 @@ def solve_al(method: ti.template(), exact: ti.template(), budget: A, mesh: MeshP
     (complementarity) are below tol (strain units). Stops early, with every multiplier kept,
     if x (= x_hat) is already feasible. Fills stats (rounds, violation, converged, CG,
     Newton steps, complementarity, line-search trials). The solve's controls (penalty,
-    budgets, tolerances, preconditioner) are read from ``budget`` (buffers.B_*)."""
+    budgets, tolerances, preconditioner) are read from ``budget`` (buffers.B_*).
+
+    ``with_pdas`` compiles the active-set re-solves in (strain.newton_model = "active-set"
+    under PCG). They are a template, not only a runtime switch, because inlined into every
+    solve they tripled the optimised compile of the default solve (svd: 261 s with them,
+    91 s before they were added, on the 2-core CPU); a kernel without them is the default's."""
     ti.loop_config(serialize=True)
     for _ in range(1):
         K, nv, nf, ns = cons.n_per_face, mesh.n_verts, mesh.n_faces, contacts.n_stitches
@@ -893,10 +900,10 @@ def solve_al(method: ti.template(), exact: ti.template(), budget: A, mesh: MeshP
                     skip = NO_SKIP
                     if inner > 0:
                         skip = mesh.params[P_INNER_RTOL] ** 2 * rr_first
-                    slope, cg_it, rr = pcg_direction(method, exact, K, nv, nf, ns, mu, max_cg,
-                                                     rtol, margin, use_twist, c_scale, pc_mode,
-                                                     skip, mesh, metric, cons, contacts, vec,
-                                                     pc)
+                    slope, cg_it, rr = pcg_direction(method, exact, with_pdas, K, nv, nf, ns, mu,
+                                                     max_cg, rtol, margin, use_twist, c_scale,
+                                                     pc_mode, skip, mesh, metric, cons,
+                                                     contacts, vec, pc)
                     if inner == 0:
                         rr_first = rr
                     cg_total += cg_it

@@ -971,7 +971,7 @@ class StrainLimiter:
         budget[buffers.B_FROM_PREV] = float(self.coupling == "implicit" and
                                             metric is self._system)
         budget[buffers.B_PC_MODE] = pc_mode
-        al.solve_al(mid, self._kernel_curvature(), ws.budget, ws.mesh_pack(),
+        al.solve_al(mid, self._kernel_curvature(), self._kernel_pdas(), ws.budget, ws.mesh_pack(),
                     ws.metric_pack(metric), ws.constraint_pack(K), ws.contact_pack(),
                     ws.vector_pack(), ws.precond_pack(fp, mg), ws.stats)
         stats = ws.stats.to_numpy()
