@@ -621,8 +621,11 @@ class Simulator:
             st = self.settings.strain
             method = self.strain.method if method is None else method
             fast_path = st.solver == "al" and st.linear_solver == "pcg"
+            # The active-set re-solves are compiled in only for that model (al.solve_al's
+            # with_pdas): about 260 / 12 s against 100 / 6 s without (svd, 2026-12-05).
+            estimate = (260, 12) if st.newton_model == "active-set" else (120, 5)
             return (f"the strain solver for {method}", self.strain_solver_key(method),
-                    (120, 5) if fast_path else None)
+                    estimate if fast_path else None)
         if stage == "dynamics":
             return ("the dynamics step", f"dynamics:{self.settings.sim.linear_solver}",
                     (8, None))
@@ -634,7 +637,8 @@ class Simulator:
         """The compile key of the strain solver's kernels for ``method`` under this
         simulator's strain settings (the template variant: cloth/compile_notice.py)."""
         st = self.settings.strain
-        return f"strain solver:{method}:{st.solver}:{st.linear_solver}:{st.curvature}"
+        return (f"strain solver:{method}:{st.solver}:{st.linear_solver}:{st.curvature}"
+                f":{st.newton_model}")
 
     def compile_pending(self):
         """The notice line when the next frame's strain solve will compile its kernels (a

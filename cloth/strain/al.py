@@ -833,9 +833,8 @@ def choose_start(method: ti.template(), from_prev, K, nv, nf, ns, mu, mesh: T, m
 
 @ti.kernel
 def solve_al(method: ti.template(), exact: ti.template(), with_pdas: ti.template(), budget: A,
-             mesh: MeshPack,
-             metric: MetricPack, cons: ConstraintPack, contacts: ContactPack, vec: VectorPack,
-             pc: PrecondPack, stats: A):
+             mesh: MeshPack, metric: MetricPack, cons: ConstraintPack, contacts: ContactPack,
+             vec: VectorPack, pc: PrecondPack, stats: A):
     """The whole AL projection (METHOD 4) in one launch (measured: with one launch per
     phase, Python's argument handling cost as much as the solve): rounds of inexact
     minimisation of L_A by projected Newton + PCG with a backtracking (Armijo) line search,
