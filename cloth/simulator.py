@@ -562,6 +562,34 @@ class Simulator:
     def method(self):
         return self.settings.strain.method
 
+    # -- one substep tried several ways (benchmarks, tests) ------------------------------------
+    def substep_state(self):
+        """Positions, velocities and the strain solver's state: what the next substep starts
+        from (``set_substep_state`` puts it back)."""
+        return (self.model.positions(), self.model.velocities(),
+                None if self.strain is None else self.strain.solve_state())
+
+    def set_substep_state(self, state):
+        x, v, solve = state
+        self.model.set_positions(x)
+        self.model.set_velocities(v)
+        if solve is not None:
+            self.strain.set_solve_state(solve)
+
+    def run_substep_through(self, name):
+        """Run the next substep's stages up to and including the stage ``name``, without
+        moving the clock (the substep can be put back and run again another way). Returns
+        the positions just before that stage ran (for the strain projection: its start)."""
+        for s in self.stages:
+            if s.enabled and s.per_substep:
+                if s.name == name:
+                    before = self.model.positions()
+                    self._run_stage(s)
+                    return before
+                self._run_stage(s)
+        raise ValueError(f"no enabled per-substep stage '{name}' (stages: "
+                         f"{', '.join(s.name for s in self.stages)})")
+
     # -- the frame loop -----------------------------------------------------------------------
     def _move_pins(self):
         self._update_pins(self.time + self.h)

@@ -144,29 +144,11 @@ def _hanging(method, coupling, linear_solver="pcg", res=6, **strain):
     return Simulator(mod.build(cfg), cfg)
 
 
-def _saved_state(sim):
-    """What ``_redo_dynamics`` puts back: positions, velocities, the solver's face state and
-    its last projection's velocities (the next projection's start, al.begin_solve)."""
-    ws = sim.strain._ws
-    return (sim.model.positions(), sim.model.velocities(), sim.strain.face_state(),
-            (ws.v_last.to_numpy(), sim.strain._v_last_valid))
-
-
-def _put_back(sim, state):
-    """The state ``_saved_state`` took, back in the model and the solver."""
-    x, v, faces, (v_last, v_last_valid) = state
-    sim.model.set_positions(x)
-    sim.model.set_velocities(v)
-    sim.strain.set_face_state(faces)
-    sim.strain._ws.v_last.from_numpy(v_last)
-    sim.strain._v_last_valid = v_last_valid
-
-
 def _redo_dynamics(sim, state):
     """Put a saved state back and run the next substep up to its strain projection (pins,
     dynamics, the implicit step's matrix); returns that matrix's BlockMatrix. The caller
     then calls ``sim.strain.project(sim.h)``."""
-    _put_back(sim, state)
+    sim.set_substep_state(state)
     sim._update_pins(sim.time + sim.h)
     sim.dynamics.step(sim.h)
     metric = sim.strain.system_metric()
@@ -268,7 +250,7 @@ def test_inner_loop_stops_on_the_residual_under_implicit_coupling():
     saved = []
     for _ in range(5):
         sim.step_frame()
-        state = _saved_state(sim)
+        state = sim.substep_state()
         out = {}
         for rtol in (0.0, INNER_RTOL["implicit"]):
             lim.inner_rtol = rtol
@@ -284,7 +266,7 @@ def test_inner_loop_stops_on_the_residual_under_implicit_coupling():
         # solved projection (docs/speed/projection_error.md).
         assert np.abs(x_cut - x_full).max() < 0.03 * edge
         saved.append(newton_cut < newton_full)
-        _put_back(sim, state)                      # back on the scene's own trajectory
+        sim.set_substep_state(state)               # back on the scene's own trajectory
     assert any(saved)
 
 
@@ -308,7 +290,7 @@ def test_kkt_stop_reaches_its_stationarity_with_exact_steps(method):
     sim = _hanging(method, "implicit", "cholesky", res=9)
     for _ in range(6):
         sim.step_frame()
-    state = _saved_state(sim)
+    state = sim.substep_state()
     lim = sim.strain
     sim._change("strain", stop="violation")
     _redo_dynamics(sim, state)

@@ -11,7 +11,7 @@ from cloth.strain import factor_precond
 from cloth.strain import al
 from cloth.strain.buffers import PC_FACTOR, PC_JACOBI, PC_MULTIGRID, A, PrecondPack
 from cloth.strain.multigrid import MultigridPreconditioner, MultigridStub
-from tests.test_coupling import _hanging, _saved_state, _tight_projection
+from tests.test_coupling import _hanging, _tight_projection
 
 pytestmark = pytest.mark.skipif(not linalg.HAVE_CHOLMOD,
                                 reason="the factor preconditioner needs CHOLMOD")
@@ -60,7 +60,7 @@ def test_factor_and_block_jacobi_give_the_same_projection():
     lim = sim.strain
     for _ in range(12):
         sim.step_frame()
-    state = _saved_state(sim)
+    state = sim.substep_state()
     out = {}
     for precondition in ("factor", "jacobi"):
         pc, _, out[precondition] = _tight_projection(sim, state, precondition)

@@ -11,7 +11,7 @@ from cloth import linalg
 from cloth.strain import multigrid
 from cloth.strain.buffers import PC_MULTIGRID, A
 from cloth.strain.factor_precond import pinned_values
-from tests.test_coupling import _hanging, _saved_state, _tight_projection
+from tests.test_coupling import _hanging, _tight_projection
 
 
 @ti.kernel
@@ -97,7 +97,7 @@ def test_multigrid_and_block_jacobi_give_the_same_projection():
     sim._change("strain", precondition="multigrid")
     for _ in range(12):
         sim.step_frame()
-    state = _saved_state(sim)
+    state = sim.substep_state()
     out = {}
     for precondition in ("multigrid", "jacobi"):
         pc, usable, out[precondition] = _tight_projection(sim, state, precondition)

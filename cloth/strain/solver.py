@@ -685,6 +685,19 @@ class StrainLimiter:
         return {"lam": self._ws.lam.to_numpy()[:n].copy(),
                 "area": np.asarray(self.model.rest_area[:n], np.float64).copy()}
 
+    def solve_state(self):
+        """What the next projection depends on besides the positions and velocities: the
+        faces' multipliers and the last projection's velocities (where its start moves each
+        vertex on to, ``al.begin_solve``). With ``set_solve_state``: one substep tried several
+        ways from the same state (``Simulator.substep_state``)."""
+        return self.face_state(), self._ws.v_last.to_numpy(), self._v_last_valid
+
+    def set_solve_state(self, state):
+        faces, v_last, valid = state
+        self.set_face_state(faces)
+        self._ws.v_last.from_numpy(v_last)
+        self._v_last_valid = valid
+
     def set_face_state(self, data):
         """After a remesh (and ``on_mesh_changed``): each new face starts from the multipliers
         of the face it was cut from. A multiplier acts as a force lam grad g with |grad g| ~
