@@ -39,6 +39,9 @@ SETTINGS = {
     "active-set, kkt stop, exact curvature": ACTIVE_SET,
     "active-set, kkt 1 mm/s": dict(ACTIVE_SET, kkt_velocity=1e-3),
     "active-set, tol 1e-5": dict(ACTIVE_SET, tol=1e-5),
+    # The host loop's active-set step (sparse Cholesky): where the kernels' PCG step falls back
+    # (tshirt's seams: block Jacobi does not see the stitch couplings).
+    "active-set, exact steps": dict(ACTIVE_SET, linear_solver="cholesky"),
     "exact steps (cholesky)": dict(linear_solver="cholesky"),
     "exact steps, kkt stop": dict(linear_solver="cholesky", stop="kkt"),
     "inner_rtol 0 (every round runs max_newton steps)": dict(inner_rtol=0.0),
