@@ -1,7 +1,7 @@
 """How far the strain-limited motion lands from exactly solved motion, per solve setting, with
 the cost of each (issue #32): speed against error on moving scenes.
 
-    python -m benchmarks.motion_error --out docs/speed            # every case (~1 h)
+    python -m benchmarks.motion_error --out docs/speed            # every case (~4 h of runs)
     python -m benchmarks.motion_error --cases hanging25 --out /tmp/me   # one case
 
 Each case is a scene run from its start (one substep per frame). Each *solve* is a setting of
@@ -160,8 +160,6 @@ def summarize(runs):
     import numpy as np
     rows = []
     for case, by_solve in runs.items():
-        if case == "drape":
-            continue
         ref = by_solve.get("reference")
         if not ref or "error" in ref:
             continue
@@ -217,6 +215,7 @@ def trade_off(rows, drows, runs):
     """The issue's targets read off the runs: per moving case the default's error at frame 10
     against the chaos floor, and the cheapest solve within 3 floors with its cost against the
     default's; for the drape, the default against exact steps."""
+    import numpy as np
     L = ["## The default on the speed-against-error curve\n",
          "Per case: the default's error at frame 10 in chaos floors (target: 3); the same for "
          "*active-set*, the projection solved to its minimiser at the library's tolerance "
@@ -254,7 +253,9 @@ def trade_off(rows, drows, runs):
               f"{d['n']} drape (exact steps {e['draped']} of {e['n']}); KE kept "
               f"{d['ke_kept']:.3f} against {e['ke_kept']:.3f} "
               f"({d['ke_kept'] / e['ke_kept']:.2f}x); lowest vertex at most {100 * gap:.1f} cm "
-              f"from exact steps' (per drop); {d['ms']:.0f} against {e['ms']:.0f} ms a frame."]
+              f"from exact steps' (per drop; medians {np.median(d['lowest']):.3f} and "
+              f"{np.median(e['lowest']):.3f} m); {d['ms']:.0f} against {e['ms']:.0f} ms a "
+              "frame."]
         twin = runs.get("drape", {})
         if all(k in twin and "error" not in twin[k] for k in ("reference", "chaos")):
             L[-1] += (" Whether a sheet slides off the top decides the lowest vertex: the "
@@ -287,7 +288,9 @@ def write_report(out, runs, drape):
          "\"cholesky\"`); *active-set*, the converging model at the default tolerances "
          "(`strain.newton_model = \"active-set\"`, exact curvature, Cholesky, kkt stop: 1e-4 "
          "strain, 1 cm/s). ms: strain limiting per frame, median of frames 5-30, two runs "
-         "sharing the two cores. conv: frames whose strain solve converged (of 30).\n",
+         "sharing the two cores. conv: frames whose strain solve converged (of 30). Why the "
+         "default stays the fast end of this curve: docs/speed/motion.md section 14; one "
+         "projection's distance and damping: projection_error.md.\n",
          "| case | faces | solve | ms | conv | error f5 | f10 | f30 | f10 / floor |",
          "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for r in rows:
