@@ -50,10 +50,10 @@ CASES = {
     "drape": ("drape", {}),
     "tshirt": ("tshirt", {}),
 }
-# Solves: overrides of the strain settings. "reference" and "chaos" are the exact solve (chaos
-# with its start moved by 1 nm; "chaos 2" and "chaos 3" with other random moves, since one
-# move's distance varied 6-36x between commits: the floor is their median)
-# with its start moved by 1 nm); the others are what a user can choose.
+# Solves: overrides of the strain settings. "reference" and the "chaos" runs are the exact
+# solve, the chaos runs with the start moved by 1 nm in different random directions (one move's
+# distance varied 6-36x between commits, so the floor is their median); the others are what a
+# user can choose.
 ACTIVE_SET = {"newton_model": "active-set", "curvature": "exact", "linear_solver": "cholesky",
               "stop": "kkt"}
 REFERENCE = {**ACTIVE_SET, "tol": 1e-7, "kkt_velocity": 1e-5}
