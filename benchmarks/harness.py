@@ -1,16 +1,59 @@
-"""What the benchmarks share: the machine and commit lines every report starts with, and a
-scene's configuration and set-up (``configure``). A new Simulator per run is cheap: every
-kernel compiles once per process (issue #15), so no benchmark keeps Simulators around.
+"""What the benchmarks share: the header every results page starts with (``header``: the
+command, commit, date and CPU model), its JSON (``write_json``), a scene's configuration and
+set-up (``configure``), a start moved by 1 nm (``nudge_start``) and a cached child run
+(``cached_run``). A new Simulator per run is cheap: every kernel compiles once per process, so
+no benchmark keeps Simulators around.
 
-Benchmarks run as modules from the repository root (``python -m benchmarks.NAME``), so they
-import ``cloth``, ``scenes`` and this module without editing ``sys.path``.
+Every benchmark backs a page listed in docs/index.md and follows one protocol:
+``python -m benchmarks.NAME --out DIR`` writes the page (NAME.md) and its JSON into DIR. Run from
+the repository root, so they import ``cloth``, ``scenes`` and this module without editing
+``sys.path``.
 """
 import os
 import platform
+import shlex
 import subprocess
+import sys
+import time
 
 
-def machine():
+def command(module, argv=None):
+    """The command line that ran a benchmark: ``python -m benchmarks.NAME ARGS`` (ARGS: this
+    process's arguments unless given)."""
+    argv = sys.argv[1:] if argv is None else argv
+    return " ".join(["python -m " + module] + [shlex.quote(str(a)) for a in argv])
+
+
+def header(cmd, seconds=None):
+    """The lines under a results page's title: the command (and how long it took), the commit
+    measured, the date and the machine (CPU model)."""
+    took = f" ({seconds:.0f} s)" if seconds is not None else ""
+    return (f"Command: `{cmd}`{took}  \n"
+            f"Commit {commit()}, run {time.strftime('%Y-%m-%d')}; machine: {machine(date=False)}.")
+
+
+def write_json(out, name, data, cmd, seconds=None):
+    """NAME.json in ``out`` beside its page: ``data`` with the header's fields."""
+    import json
+    os.makedirs(out, exist_ok=True)
+    path = os.path.join(out, name + ".json")
+    with open(path, "w") as fh:
+        json.dump({"command": cmd, "commit": commit(), "date": time.strftime("%Y-%m-%d"),
+                   "machine": machine(date=False), "seconds": seconds, **data}, fh, indent=1)
+    return path
+
+
+def nudge_start(setup, size=1e-9, seed=11):
+    """Move the free vertices of a set-up's start by ``size`` m at random (1 nm: far below f32's
+    resolution at 1 m); returns the set-up."""
+    import numpy as np
+    noise = np.random.default_rng(seed).normal(0.0, size, setup.mesh.x.shape)
+    noise[setup.mesh.pinned] = 0.0
+    setup.mesh.x = setup.mesh.x + noise
+    return setup
+
+
+def machine(date=True):
     model = platform.processor() or "unknown CPU"
     try:
         out = subprocess.run(["lscpu"], capture_output=True, text=True).stdout
@@ -20,11 +63,9 @@ def machine():
         pass
     import taichi as ti
     version = ".".join(str(v) for v in ti.__version__)
-    import time
-    # The date goes with the machine into every results page's header (with the command and
-    # the commit: docs/index.md lists them).
     return (f"{os.cpu_count()}-core CPU ({model}), Taichi {version} cpu backend, f64, "
-            f"Python {platform.python_version()}, run {time.strftime('%Y-%m-%d')}")
+            f"Python {platform.python_version()}"
+            + (f", run {time.strftime('%Y-%m-%d')}" if date else ""))
 
 
 def commit():
@@ -58,8 +99,6 @@ def cached_run(path, module, args, label, fresh=False, error_chars=300):
     {"error": the end of its stderr} and is not cached; a finished one gets ``wall_s``.
     Prints ``label`` and the time (or the error) to stderr."""
     import json
-    import sys
-    import time
     if os.path.exists(path) and not fresh:
         with open(path) as fh:
             return json.load(fh)

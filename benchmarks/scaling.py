@@ -16,7 +16,7 @@ Each size runs in its own child process (so its peak memory is its own):
                         continuous sampling per vertex), ``self_collision`` the spatial-hash
                         pass;
   remesh                ``cloth.remesh.remesh`` on the moving analytic sheet of the remesher's
-                        own benchmark (``benchmarks.remesh_speed.sheet_shape``, 'hanging'), with
+                        own test sheet (``sheet_shape``, a gently curved swaying sheet), with
                         size_max 1.8 x the grid spacing so the count stays near N.
 Every run starts from the scene's start; frame 1 is untimed (it compiles the kernels), then
 the median over the next --frames frames (frames 2 to 4 by default: the start of the sheet's
@@ -39,7 +39,7 @@ import time
 
 import numpy as np
 
-from benchmarks.harness import commit, machine
+from benchmarks.harness import command, header, write_json
 
 from cloth.strain.families import METHODS
 STAGES = ("dynamics", "collision", "self_collision", "remesh") + tuple(
@@ -48,6 +48,27 @@ STAGES = ("dynamics", "collision", "self_collision", "remesh") + tuple(
 # 181: 64.8k triangles, the top of #13's 2k-64k range.
 FULL = [17, 33, 46, 65, 91, 129, 181, 225]
 QUICK = [17, 33, 65]
+
+
+def sheet_shape(uv, kind, t):
+    """World positions and velocities of a 1 m sheet at time t (the remesh stage's moving
+    test sheet): 'hanging' (gently curved, slowly swaying) or 'fold' (a sharp fold whose line
+    drifts across the sheet)."""
+    u, v = uv[:, 0], uv[:, 1]
+    if kind == "hanging":
+        # A generalised cylinder (isometric, like hanging drapes): the u-lines follow a plane
+        # curve of curvature 4 sin(4 pi u + t) per metre, the v-lines hang straight down.
+        s = np.linspace(0.0, 1.0, 2001)
+        phi = -np.cos(4 * np.pi * s + t) / np.pi
+        cx = np.concatenate([[0], np.cumsum(np.cos(phi[1:]) + np.cos(phi[:-1])) * 2.5e-4])
+        cy = np.concatenate([[0], np.cumsum(np.sin(phi[1:]) + np.sin(phi[:-1])) * 2.5e-4])
+        x = np.c_[np.interp(u, s, cx), np.interp(u, s, cy), -v]
+        vel = np.c_[np.zeros_like(u), 0.05 * np.sin(np.pi * u) * v, np.zeros_like(u)]
+        return x, vel
+    at = 0.4 + 0.02 * t
+    d = u - at
+    x = np.c_[np.where(d < 0, u, at + d * np.cos(2.0)), v, np.where(d < 0, 0.0, d * np.sin(2.0))]
+    return x, np.zeros_like(x)
 
 
 # ---- child: one size -------------------------------------------------------------------------
@@ -94,7 +115,6 @@ def child(res, methods, frames, strain_frames=None):
     from cloth import backend
     backend.init("cpu", "f64")
     import scenes
-    from benchmarks.remesh_speed import sheet_shape
     from cloth import remesh
     from cloth.collision import Plane, Sphere
     from cloth.model import MeshArrays
@@ -276,7 +296,7 @@ def there_and_back(rows, frames, timeout, log=print, strain_frames=None):
             f"{s} {v:.1f}" for s, v in b["ms"].items()) + f" ms/frame; child {b['wall_s']:.0f} s")
 
 
-def write_outputs(base, rows, skipped, out, command, seconds, budget_s):
+def write_outputs(base, rows, skipped, out, cmd, seconds, budget_s):
     os.makedirs(out, exist_ok=True)
     good = [r for r in rows if "error" not in r]
     fits = {}
@@ -300,18 +320,13 @@ def write_outputs(base, rows, skipped, out, command, seconds, budget_s):
                    if key in r and s in r[key] and 2000 <= stage_n(r, s) <= 70000]
             if len(one) > 1:
                 fits[s][f"k_2k_64k_{key[3:]}"] = fit_exponent(*zip(*one))
-    with open(os.path.join(out, "scaling.json"), "w") as fh:
-        json.dump({"command": command, "machine": machine(), "commit": commit(),
-                   "seconds": seconds, "budget": budget_s, "baseline": base, "rows": rows,
-                   "fits": fits,
-                   "skipped": skipped}, fh, indent=1)
+    write_json(out, "scaling", {"budget": budget_s, "baseline": base, "rows": rows,
+                                "fits": fits, "skipped": skipped}, cmd, seconds)
     names = {"dynamics": "dynamics", "collision": "collision (obstacles)",
              "self_collision": "self-collision", "remesh": "remesh",
              **{f"strain_limit:{m}": f"strain limit {m}" for m in METHODS}}
-    lines = ["# Scaling with triangle count", "",
-             f"Command: `{command}` ({seconds:.0f} s). Machine: {machine()}; commit "
-             f"{commit()}. Other jobs shared the two cores while this ran: times carry noise of "
-             "tens of percent.", "",
+    lines = ["# Scaling with triangle count", "", header(cmd, seconds), "",
+             "On a machine shared with other jobs, times carry noise of tens of percent.", "",
              "Hanging soft sheet, one 1/30 s substep per frame; ms per frame of each stage, "
              "median over the timed frames (see `benchmarks/scaling.py` for the set-up of each "
              "stage; remesh runs on its own test sheet, whose triangle count after remeshing is "
@@ -461,7 +476,7 @@ def main(argv=None):
     base, rows, skipped = sweep(sorted(sizes), frames, args.budget, args.timeout,
                                 strain_frames=args.strain_frames, back=args.there_and_back)
     seconds = time.perf_counter() - t0
-    write_outputs(base, rows, skipped, args.out, "python -m benchmarks.scaling " + " ".join(argv),
+    write_outputs(base, rows, skipped, args.out, command("benchmarks.scaling", argv),
                   seconds, args.budget)
     print(f"wrote {args.out}/scaling.md in {seconds:.0f} s")
     return 0

@@ -31,8 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from cloth.strain.families import METHODS
-from benchmarks.harness import commit, configure, machine
-from benchmarks.speed_vs_error import nudge_start, snapshot
+from benchmarks.harness import command, configure, header, nudge_start, write_json
 
 GRAVITY_DROP = 2.0      # m: the pins' height above the ground in every scene used here
 SETTLE = 15             # frames over which ``ke_end_max`` averages
@@ -42,7 +41,7 @@ SNAPSHOTS = ("_final", "_compare")    # (x, uv, faces) a case keeps: at the end,
 # close to the f64 run as either
 #  - the f64 run is to a converged reference: its solution error at frame 3 (same
 #    configuration: AL, one substep, resolution 13; the sweep's 32-round budget, which these
-#    runs never exhaust) in docs/speed/speed_vs_error.md, F32_BOUND; or
+#    runs never exhaust) in docs/history/speed_vs_error.md, F32_BOUND; or
 #  - F32_FLOOR_FACTOR x as close as f64 is to itself from a start moved by F32_RESOLUTION, a
 #    rounding of the start at f32's resolution (the "f64 from a start moved by" cases). With
 #    the default tolerance 1e-4 the AL stops on a round whose count a tiny change can shift, so
@@ -142,18 +141,16 @@ def cases():
                         fast=band == 0.0, viol_end_max=1e-3,
                         note="zero-width bands allow only isometric motion: the mesh locks "
                              "and hardly moves" if band == 0.0 else ""))
-    for solver in ("al", "jacobi"):
-        # The corner ends 0.21 m beyond its rest distance from the top-left pin along the
-        # warp (21 % strain against a 1 % band) at 0.5 s and is then held for 0.5 s.
-        out.append(Case(f"infeasible pins: corner dragged 21 % beyond rest ({solver})", "pull",
-                        {"cloth": {"resolution": 13},
-                         "strain": {"method": "mapping", "solver": solver,
-                                    "iters": 50 if solver == "al" else 2000},
-                         "pull": {"displacement": [-0.1, -0.2, 0.1], "duration": 0.5}},
-                        frames=30, fast=True, ke_end_max=0.01,
-                        note="no feasible state: bounded violation, and once the corner is "
-                             "held (0.5 s) the cloth must come to rest (mean KE of the last "
-                             f"{SETTLE} frames < 0.01 J)"))
+    # The corner ends 0.21 m beyond its rest distance from the top-left pin along the warp
+    # (21 % strain against a 1 % band) at 0.5 s and is then held for 0.5 s.
+    out.append(Case("infeasible pins: corner dragged 21 % beyond rest", "pull",
+                    {"cloth": {"resolution": 13},
+                     "strain": {"method": "mapping", "iters": 50},
+                     "pull": {"displacement": [-0.1, -0.2, 0.1], "duration": 0.5}},
+                    frames=30, fast=True, ke_end_max=0.01,
+                    note="no feasible state: bounded violation, and once the corner is "
+                         "held (0.5 s) the cloth must come to rest (mean KE of the last "
+                         f"{SETTLE} frames < 0.01 J)"))
     for method in METHODS:
         out.append(Case(f"exactly isotropic 4 % stretch, free sheet ({method})", "hanging",
                         dict(hang, strain={"method": method}), frames=15,
@@ -334,16 +331,17 @@ def compare_precisions(results, selected):
         r["passed"], r["why"] = judge(c, r)
 
 
-def write_report(results, out, command, seconds):
-    os.makedirs(out, exist_ok=True)
+def snapshot(sim):
+    m = sim.model
+    return (m.positions(), m.uv.copy(), m.faces.copy())
+
+
+def write_report(results, out, cmd, seconds):
     clean = [{k: v for k, v in r.items() if not k.startswith("_")} for r in results]
-    with open(os.path.join(out, "stability.json"), "w") as fh:
-        json.dump({"command": command, "machine": machine(), "commit": commit(),
-                   "seconds": seconds, "results": clean}, fh, indent=1)
+    write_json(out, "stability", {"results": clean}, cmd, seconds)
     n_pass = sum(r["passed"] for r in results)
-    lines = ["# Stability suite", "",
-             f"Command: `{command}` ({seconds:.0f} s). Machine: {machine()}; commit "
-             f"{commit()}. Other jobs shared the two cores, so the seconds column is noisy.",
+    lines = ["# Stability suite", "", header(cmd, seconds), "",
+             "Other jobs may share the cores, so the seconds column is noisy.",
              "", f"**{n_pass} of {len(results)} cases pass.** Criteria (see "
              "`benchmarks/stability.py`): finite state; kinetic-energy peak under the bound "
              "(default: the energy of the cloth falling 2 m); where pins stop, a mean "
@@ -420,7 +418,7 @@ def main(argv=None):
                         for c in selected if c.precision == "f32"]
     compare_precisions(results, selected)
     seconds = time.perf_counter() - t0
-    write_report(results, args.out, "python -m benchmarks.stability " + " ".join(argv), seconds)
+    write_report(results, args.out, command("benchmarks.stability", argv), seconds)
     print(f"wrote {args.out}/stability.md: {sum(r['passed'] for r in results)} of "
           f"{len(results)} cases pass")
     return 0 if all(r["passed"] for r in results) else 1

@@ -103,15 +103,49 @@ def test_residual_is_minus_the_merit_gradient(method):
         assert abs(merit - along) <= 1e-12 * abs(merit), (a, merit, along)
 
 
+def _newton_system_at(lim, mid, K, mu, metric):
+    """A function x -> (r, H) at positions x (numpy, the work array's shape): the residual
+    -grad L_A (flattened) and the Newton matrix (scipy CSR) as ``direct.newton_system``
+    assembles them for the limiter ``lim`` with penalty ``mu``."""
+    from cloth.strain import direct
+    ws, nv = lim._ws, lim.model.n_verts
+
+    def residual_and_matrix(xs):
+        ws.x.from_numpy(xs)
+        lim._assemble(mid, ws.x)
+        direct.fill_newton_system(lim, mid, K, mu, metric)
+        return ws.r.to_numpy()[:nv].ravel().copy(), metric.to_scipy(ws.H)
+    return residual_and_matrix
+
+
+def _directional_errors(residual_and_matrix, x0, nv, free, rng, directions, eps=1e-7, H=None):
+    """Along random directions d (zero where ``free`` is False): the relative error
+    |H d - H_true d| / |H_true d| and the Rayleigh ratio d.H.d / d.H_true.d, with H_true d
+    the central difference of the residual (H: the matrix at x0, if the caller has it).
+    Returns (errors, ratios) per direction."""
+    if H is None:
+        _, H = residual_and_matrix(x0)
+    rel, ratio = [], []
+    for _ in range(directions):
+        d = np.zeros_like(x0)
+        d[:nv] = rng.standard_normal((nv, 3)) * free
+        rp, _ = residual_and_matrix(x0 + eps * d)
+        rm, _ = residual_and_matrix(x0 - eps * d)
+        true_d = -(rp - rm) / (2 * eps)
+        model_d = H @ d[:nv].ravel()
+        rel.append(np.linalg.norm(model_d - true_d) / np.linalg.norm(true_d))
+        ratio.append(d[:nv].ravel() @ model_d / (d[:nv].ravel() @ true_d))
+    return rel, ratio
+
+
 @pytest.mark.parametrize("method", ["mapping", "svd", "warp-weft"])
 def test_newton_matrix_is_the_merit_hessian_without_the_margin(method):
     """``al.newton_matrix`` (the matrix both Newton paths solve with) against the central
     difference of the residual: with active_margin 0 it is the merit's Hessian up to the
     curvature model's error (measured here: relative error of H d 2.6 % for mapping, 5e-4 for
     svd, 1e-9 for warp-weft); with the default margin it is 2-5 times stiffer along every
-    direction tried (the near constraints enter; docs/speed/inner_solver.md).
+    direction tried (the near constraints enter; docs/history/inner_solver.md).
     It is symmetric, and the identity on pinned rows."""
-    from benchmarks.newton_model import directional_errors, newton_system_at
     from tests.test_coupling import _hanging
     sim = _hanging(method, "implicit", res=6)
     for _ in range(3):
@@ -126,7 +160,7 @@ def test_newton_matrix_is_the_merit_hessian_without_the_margin(method):
     free = (m.pinned == 0)[:, None]
     x0 = ws.x.to_numpy()
     x0[:nv] += 2e-4 * rng.standard_normal((nv, 3)) * free
-    residual_and_matrix = newton_system_at(lim, mid, K, mu, W)
+    residual_and_matrix = _newton_system_at(lim, mid, K, mu, W)
     errors, ratios = [], []
     for margin in (0.0, lim.active_margin):
         lim.active_margin = margin
@@ -135,7 +169,7 @@ def test_newton_matrix_is_the_merit_hessian_without_the_margin(method):
         assert abs(H - H.T).max() <= 1e-12 * abs(H).max()
         pinned = np.repeat(m.pinned, 3)
         assert np.array_equal(H[pinned].toarray(), np.eye(3 * nv)[pinned])
-        err, ratio = directional_errors(residual_and_matrix, x0, nv, free, rng, 3, H=H)
+        err, ratio = _directional_errors(residual_and_matrix, x0, nv, free, rng, 3, H=H)
         errors.append(max(err))
         ratios.append(min(ratio))
     assert errors[0] < 0.1

@@ -170,10 +170,3 @@ def test_help_describes_every_option():
     text = " ".join(res.stdout.split())
     assert "--arch ARCH Taichi backend to simulate on: cpu" in text
     assert "(default: None)" not in text and "(default: False)" not in text
-
-
-def test_quick_sweep_says_not_measured_where_no_chaos_run_was_made():
-    from benchmarks.speed_vs_error import chaos_text
-    assert chaos_text(None) == "not measured"
-    assert chaos_text(float("nan")) == "not measured"
-    assert chaos_text(3.8e-6) == "3.8e-06"

@@ -32,7 +32,7 @@ def settings(**kw):
     return DynamicsSettings(stitch_stiffness=30.0, **kw)
 
 
-@pytest.mark.parametrize("solver", ["llt"])   # ldlt: python -m benchmarks.linear_solver
+@pytest.mark.parametrize("solver", ["llt"])   # ldlt: git log -- benchmarks/linear_solver.py
 def test_sparse_direct_step_matches_tight_matrix_free_step(rng, solver):
     m = pinned_sheet(rng)
     x0, v0 = m.positions(), m.velocities()

@@ -11,7 +11,8 @@ invocation, all its loops together, and then ends every loop at once without an 
   run the CG loop on the host (``ImplicitEuler.host_loop``). (Most likely the same cap; not
   re-measured.)
 - 2026-12-05: at resolution 25 (625 vertices) the strain solve's line search lost its loops
-  from the fourth trial on (measured: benchmarks/loop_cap.py): a step it reported taken was
+  from the fourth trial on (measured with a probe since removed:
+  `git log -- benchmarks/loop_cap.py`): a step it reported taken was
   never written, the AL ran its 100 rounds every frame and the violation grew (0.071, 0.19,
   0.33 over frames 1-3), while resolution 20, which this test ran until then, held its
   limits. The direct path now runs in launches below the cap and stops with an error when one
@@ -57,7 +58,8 @@ def test_hanging_cloth_falls_and_keeps_its_limits_on_vulkan(tmp_path):
 
 @pytest.mark.slow
 def test_a_mesh_too_large_for_the_drivers_loop_cap_stops_with_the_fix(tmp_path):
-    """The dynamics' serial launches run ~50 loop iterations a vertex (benchmarks/loop_cap.py),
+    """The dynamics' serial launches run ~50 loop iterations a vertex (a removed probe's
+    measure: `git log -- benchmarks/loop_cap.py`),
     past lavapipe's cap from ~1300 vertices; there the step was silently wrong. Now the run
     stops at once and names the fix (on a GPU driver, which has no cap, it simply runs)."""
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
