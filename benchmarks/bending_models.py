@@ -1,6 +1,6 @@
 """Bending energies compared on the calibration's strips (#16), without the simulator:
 
-    python -m benchmarks.bending_models     # ~1 min -> docs/calibration/bending_models_table.md
+    python -m benchmarks.bending_models --out docs/calibration   # -> bending_models_table.md
 
 Every energy here is quadratic in the positions, E = (B / 2) sum_c x_c^T K x_c over the three
 coordinates (constant Hessian K, exact for an isometric bend of the flat sheet, see below), so
@@ -29,7 +29,7 @@ mixed      (tr H)^2 / 2 by finite volumes over the vertices' cells (the cotangen
            deviatoric part |dev H|^2: again |H|^2 in the continuum. The simulator's isotropic
            bending (cloth/bending.py).
 
-ledge      (mixed only) the linearised ledge cantilever of benchmarks/ledge.py at widths
+ledge      (mixed only) the linearised ledge cantilever of ``calibration.ledge`` at widths
            2-16 cm: the clamp (pinned rows) and the free long edges, which the back-to-back
            strips do not test.
 """
@@ -154,9 +154,9 @@ def cantilever_ratio(m, K):
 
 
 def ledge_ratio(pattern, direction, h, width, K_of=K_mixed):
-    """B_eff / B of the linearised ledge cantilever (benchmarks.ledge's strip: its vertices
-    on the ledge, u <= 0, pinned; overhang L_HALF): w_tip = q L^4 / (8 B)."""
-    from benchmarks.ledge import ledge_mesh
+    """B_eff / B of the linearised ledge cantilever (``calibration.ledge``'s strip: its
+    vertices on the ledge, u <= 0, pinned; overhang L_HALF): w_tip = q L^4 / (8 B)."""
+    from benchmarks.calibration import ledge_mesh
     from cloth.model import build_edges, signed_material_areas
     uv, faces, _ = ledge_mesh(width, h, pattern, direction, L=L_HALF)
     ev, ef, eo = build_edges(faces)
@@ -172,8 +172,7 @@ def ledge_ratio(pattern, direction, h, width, K_of=K_mixed):
 
 
 def run_ledge():
-    from benchmarks.calibration import IRREGULAR
-    from benchmarks.ledge import WIDTHS
+    from benchmarks.calibration import IRREGULAR, WIDTHS
     rows = []
     for pattern in PATTERNS + (IRREGULAR,):
         for h in SIZES:
@@ -200,17 +199,16 @@ def run():
     return rows
 
 
-def _commit():
-    from benchmarks.harness import commit
-    return commit()
-
-
-def report(rows, out, seconds, ledge_rows=()):
+def report(rows, out, seconds, ledge_rows=(), cmd="python -m benchmarks.bending_models"):
+    """bending_models_table.md and bending_models_table.json in ``out``."""
+    from benchmarks.harness import header, write_json
     names = [n for n, _ in MODELS]
+    write_json(out, "bending_models_table", {"rows": rows, "ledge_rows": list(ledge_rows)}, cmd,
+               seconds)
     L = ["# Bending energies on the calibration strips: hinge, per-edge quadratic, isotropic fits\n",
-         f"Command: `python -m benchmarks.bending_models` ({seconds:.0f} s), "
-         f"{time.strftime('%Y-%m-%d')}, commit {_commit()}; the energies and "
-         "measures are defined in the module docstring (benchmarks/bending_models.py). "
+         header(cmd, seconds) + "\n",
+         "The energies and measures are defined in the module docstring "
+         "(benchmarks/bending_models.py). "
          "B_eff / B of the linearised cantilever (small deflection, G -> 0) and E / E_plate of "
          "an isometric cylinder along the strip (curvature 2 / m), 2 x 20 cm strips 8 cm wide.\n",
          "| pattern | h (cm) | direction | " + " | ".join(f"cantilever: {n}" for n in names)
@@ -225,10 +223,10 @@ def report(rows, out, seconds, ledge_rows=()):
              "stand-in: " + f"{min(r['cyl_hinge_exact'] / r['cyl ' + names[0]] for r in rows):.4f}"
              " ... " + f"{max(r['cyl_hinge_exact'] / r['cyl ' + names[0]] for r in rows):.4f}.")
     if ledge_rows:
-        from benchmarks.ledge import WIDTHS
+        from benchmarks.calibration import WIDTHS
         v = [x for r in ledge_rows for x in r["ratios"] if x is not None]
         L += ["", "## Linearised ledge cantilever (isotropic energy, #35)\n",
-              "The ledge of benchmarks/ledge.py linearised like the cantilever above: the "
+              "The ledge of `calibration.ledge` linearised like the cantilever above: the "
               "strip's vertices on the 10 cm ledge pinned, the 20 cm overhang under its weight; "
               "B_eff / B = q L^4 / (8 B w_tip), by strip width (cm); a dash where the strip is "
               f"narrower than two triangles. All: **{min(v):.3f} ... {max(v):.3f}**.\n",
@@ -248,7 +246,8 @@ def main():
     a = ap.parse_args()
     t0 = time.perf_counter()
     rows, ledge_rows = run(), run_ledge()
-    report(rows, a.out, time.perf_counter() - t0, ledge_rows)
+    from benchmarks.harness import command
+    report(rows, a.out, time.perf_counter() - t0, ledge_rows, command("benchmarks.bending_models"))
     print(f"wrote {os.path.join(a.out, 'bending_models_table.md')}")
 
 

@@ -39,8 +39,14 @@ def write_json(out, name, data, cmd, seconds=None):
     path = os.path.join(out, name + ".json")
     with open(path, "w") as fh:
         json.dump({"command": cmd, "commit": commit(), "date": time.strftime("%Y-%m-%d"),
-                   "machine": machine(date=False), "seconds": seconds, **data}, fh, indent=1)
+                   "machine": machine(date=False), "seconds": seconds, **data}, fh, indent=1,
+                  default=_plain)
     return path
+
+
+def _plain(v):
+    """numpy scalars and arrays as JSON numbers and lists."""
+    return v.tolist() if hasattr(v, "tolist") else str(v)
 
 
 def nudge_start(setup, size=1e-9, seed=11):

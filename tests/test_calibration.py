@@ -96,8 +96,7 @@ def test_narrow_ledge_cantilever_has_the_rigidity_k_bend(rig):
     # there pinned, overhanging 20 cm at the test's 41.5 deg (G = 8). The pinned rows must
     # hold the slope and the free long edges carry no moment: with both counted as bendable
     # cloth the strip read 0.73 B (issue #35).
-    from benchmarks import ledge
-    r = ledge.ledge(rig, G=8.0, h=0.01, pattern="alternating", direction="warp", width=0.025)
+    r = cal.ledge(rig, G=8.0, h=0.01, pattern="alternating", direction="warp", width=0.025)
     assert r["chord_deg"] > 30.0                                   # it did bend
     B_eff = 8.0 / G_read_back(np.radians(r["chord_deg"]), 8.0)
     assert B_eff == pytest.approx(1.0, abs=0.05), r
@@ -108,10 +107,9 @@ def test_ledge_cantilevers_of_every_width_read_the_same_rigidity(rig, pattern, d
     # The plate energy has no Poisson coupling, so a strip's width must not change the B it
     # reads: ledges 2, 4, 8 and 16 cm wide at 1 cm (before #35: 0.79 ... 0.89 B, a spread of
     # 13 %, the narrower the softer through the free edges).
-    from benchmarks import ledge
     G = 0.15 * G_ACC * 0.2 ** 3 / 1e-3                             # B = 1e-3 N m: 11.8
-    B = [G / G_read_back(np.radians(ledge.ledge(rig, G=G, h=0.01, pattern=pattern,
-                                                direction=direction, width=w)["chord_deg"]), G)
+    B = [G / G_read_back(np.radians(cal.ledge(rig, G=G, h=0.01, pattern=pattern,
+                                              direction=direction, width=w)["chord_deg"]), G)
          for w in (0.02, 0.04, 0.08, 0.16)]
     assert max(B) / min(B) - 1.0 < 0.02, B
     assert np.mean(B) == pytest.approx(1.0, abs=0.05), B
@@ -144,11 +142,10 @@ def test_benchmark_report_writes_table_and_plot(rig, tmp_path):
     case = dict(G=1.0, h=0.02, pattern="regular", direction="warp", L=0.2, width=0.08)
     cant = cal.cantilever(rig, **case)
     cant["ratio_hinge"] = cal.cantilever(cal.Rig(capacity=400, bending="hinge"), **case)["ratio"]
-    from benchmarks import ledge
     rows = [cant, cal.hanging_strip(rig, h=0.05, pattern="random", direction="weft", L=0.5,
                                     width=0.05),
-            ledge.ledge(rig, G=1.0, h=0.02, pattern="regular", direction="bias", width=0.02),
-            ledge.ledge(rig, G=1.0, h=0.02, pattern="regular", direction="bias", width=0.04)]
+            cal.ledge(rig, G=1.0, h=0.02, pattern="regular", direction="bias", width=0.02),
+            cal.ledge(rig, G=1.0, h=0.02, pattern="regular", direction="bias", width=0.04)]
     cal.report(rows, str(tmp_path), 1.0, "test")
     md = (tmp_path / "calibration.md").read_text()
     assert "| regular | 2 | warp | 1 |" in md and "| random | 5 | weft |" in md
@@ -157,7 +154,7 @@ def test_benchmark_report_writes_table_and_plot(rig, tmp_path):
     assert (tmp_path / "ledge.png").stat().st_size > 10000
 
 
-# ---- bending models compared (docs/calibration/bending_models.md) ----------------------------
+# ---- bending models compared (docs/history/bending_models.md) ----------------------------------
 def test_bias_strip_is_straight_and_its_halves_mirror_each_other():
     # A saw-tooth outline read 25 % soft and unequal halves tilted the strip (the benchmark's
     # history): the outline is the rectangle and the two halves weigh the same.
