@@ -1,4 +1,4 @@
-"""The three strain-limiting constraint families (METHOD.md 3) against reference data, finite
+"""The three strain-limiting constraint families (docs/method.md §3) against reference data, finite
 differences and the closed-form 2x2 eigen-solver."""
 import json
 import os
@@ -8,10 +8,9 @@ import pytest
 
 from cloth.strain import constraints as C
 
-TESTDATA = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "testdata",
+# Reference values from an independent float64 implementation (docs/method.md §3.3).
+TESTDATA = os.path.join(os.path.dirname(os.path.abspath(__file__)), "data",
                         "constraint_vectors.json")
-if not os.path.exists(TESTDATA):
-    TESTDATA = "/work/shared/testdata/constraint_vectors.json"
 FAMILIES = {"svd": "svd", "warp-weft": "warp_weft", "mapping": "mapping"}
 
 
@@ -33,7 +32,7 @@ def evaluate_one(method, x, Dm_inv, area, warp, weft, shear, grain=np.eye(2), **
 
 
 def numpy_mapping_pieces(x, Dm_inv, area, grain=np.eye(2)):
-    """Independent numpy pieces of the mapping gradient (METHOD 3.3): for each (i, j) the
+    """Independent numpy pieces of the mapping gradient (docs/method.md §3.3): for each (i, j) the
     eta part sqrt(a) c_ij d eta_j and the principal-frame part sqrt(a)(eta_j - 1)(e_i.dv_j),
     to be combined with the sign s_ij of e_i . v_j; also e_i . v_j itself."""
     F = np.stack([x[1] - x[0], x[2] - x[0]], axis=1) @ Dm_inv
