@@ -717,7 +717,7 @@ def _step(coef: A, mesh: MeshPack, state: StatePack, elems: ElementPack,
           cg: SolvePack) -> ti.types.vector(2, float):
     """(relative residual, CG iterations), also left in scalars[0] and scalars[1]."""
     # The whole step runs in one serial kernel: on a 2-core CPU, launching a kernel per CG
-    # phase costs more than the work below ~50k triangles (METHOD.md section 4 hints).
+    # phase costs more than the work below ~50k triangles (docs/method.md §4, cost notes).
     # Returning both numbers costs less than reading them back (~0.05 vs ~0.17 ms).
     ti.loop_config(serialize=True)
     for _ in range(1):

@@ -65,7 +65,7 @@ def kinetic_energy(v, mass):
 
 def default_bias_band(warp_band, weft_band):
     """The bias band (in bias-strain units) that keeps every unsheared state inside the warp
-    and weft bands feasible (METHOD.md 3.2 [fix]): ||w_u + w_v|| between
+    and weft bands feasible (docs/method.md §3.2 [fix]): ||w_u + w_v|| between
     sqrt((1+warp_min)^2 + (1+weft_min)^2) and the same with the maxima, divided by sqrt 2."""
     lo = np.hypot(1.0 + warp_band[0], 1.0 + weft_band[0]) / np.sqrt(2.0) - 1.0
     hi = np.hypot(1.0 + warp_band[1], 1.0 + weft_band[1]) / np.sqrt(2.0) - 1.0
@@ -193,7 +193,7 @@ def energy_drift(total_energy, scale):
 
 
 # -- what each method limits: its constraints on the host (the teaching view, its tests) ------
-# The constraints of METHOD.md section 3 in strain units (g / sqrt(a), <= 0 where they hold), in
+# The constraints of docs/method.md §3 in strain units (g / sqrt(a), <= 0 where they hold), in
 # the order of cloth/strain/constraints.py (mapping: principal pairs ordered by alignment with
 # the warp, A the principal direction nearer it, as the solver orders them). The teaching
 # view's points, regions and binding map come from here; tests/test_teaching.py checks these
@@ -209,7 +209,7 @@ CONSTRAINT_NAMES = {
 def principal_stretches(F):
     """Thin SVD of F (n, 3, 2): ``eta`` (n, 2) descending, ``V`` (n, 2, 2) with columns the
     principal directions in material space, ``U`` (n, 3, 2) with columns their world images
-    (METHOD 2).
+    (docs/method.md §2).
 
     In closed form from C = F^T F (2 x 2 symmetric), about 10x faster than numpy's batched
     SVD (the teaching view calls it every frame): eta^2 = m +- r, m = (C00 + C11) / 2,
@@ -234,7 +234,7 @@ def principal_stretches(F):
 
 
 def mapping_factors(F, grain, iso=0.0, svd=None):
-    """The inverse mapping's factors c~_ij (METHOD 3.3) as (n, 2, 2) [grain i (warp, weft),
+    """The inverse mapping's factors c~_ij (docs/method.md §3.3) as (n, 2, 2) [grain i (warp, weft),
     pair j (A, B)] with the principal stretches of the pairs (n, 2). A is the major principal
     direction (eta1; the one nearer the warp under strain.families.MAPPING_PAIRS_BY_ALIGNMENT). ``iso`` is the solver's closure at isotropy
     (``strain.isotropy``; constraints.MAPPING_ISO): c~ = sqrt(w c^2 + (1 - w) / 2),

@@ -9,7 +9,7 @@ into it, so every new model recompiled every kernel: 4-10 s per Simulator, issue
 
 Units are SI throughout: metres, kilograms, seconds, newtons.
 
-Triangle kinematics (METHOD.md section 2): for face (i, j, k) with material coordinates u_n and
+Triangle kinematics (docs/method.md §2): for face (i, j, k) with material coordinates u_n and
 world positions x_n, ``Dm = [u_j - u_i, u_k - u_i]`` and ``F = Ds Dm^-1``. We store
 ``face_Dm_inv`` and the grain frame ``face_grain`` (columns: warp and weft unit directions in
 material space), so the strain along the warp is ``||F e_warp|| - 1``.
@@ -294,7 +294,7 @@ class ClothModel:
             self._filled = (self.v_cap, self.f_cap, self.e_cap, self.q_cap)
         self.n_verts, self.n_faces, self.n_edges, self.n_bend = nv, nf, ne, nq
 
-        # Per-face rest quantities (METHOD.md section 2).
+        # Per-face rest quantities (docs/method.md §2).
         Dm_inv = metrics.material_Dm_inv(uv, faces)    # (F, 2, 2): inverse of the edge matrix
         grain = mesh.grain / np.linalg.norm(mesh.grain, axis=1, keepdims=True)
         mass = np.zeros(nv)

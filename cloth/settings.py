@@ -47,7 +47,7 @@ COMMON_DEFAULTS = {
         "method": "none",         # svd | warp-weft | mapping | none
         "warp": [-0.01, 0.01],    # strain band along the warp (material u; vertical in hanging)
         "weft": [-0.05, 0.05],    # strain band along the weft
-        "bias": [],               # bias-strain band; [] = automatic (METHOD.md 3.2)
+        "bias": [],               # bias-strain band; [] = automatic (docs/method.md §3.2)
         "solver": "al",           # al (augmented Lagrangian) | jacobi (baseline)
         # How the limits meet the dynamics: "implicit" projects in the implicit step's metric
         # (one linearised backward-Euler step with the limits as constraints: a cloth at rest
@@ -153,7 +153,7 @@ SCHEMA = {
         "warp": Key(**STRAIN_BAND, doc="strain band [min, max] along the warp (material u "
                     "unless the mesh says otherwise)"),
         "weft": Key(**STRAIN_BAND, doc="strain band [min, max] along the weft"),
-        "bias": Key(**STRAIN_BAND, doc="bias-strain band; [] = automatic (METHOD.md 3.2)"),
+        "bias": Key(**STRAIN_BAND, doc="bias-strain band; [] = automatic (docs/method.md §3.2)"),
         "solver": Key("", "al = augmented Lagrangian; jacobi = per-triangle projection "
                       "(baseline)", choices=("al", "jacobi")),
         "coupling": Key("", "how the limits meet the dynamics: the paper's split step "

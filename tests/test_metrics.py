@@ -25,7 +25,7 @@ def test_band_violation_and_default_bias_band():
     v = metrics.band_violation(np.array([-0.03, 0.0, 0.02]), (-0.01, 0.01))
     assert np.allclose(v, [0.02, 0.0, 0.01])
     lo, hi = metrics.default_bias_band((-0.01, 0.01), (-0.05, 0.05))
-    # METHOD.md 3.2: ||w_s|| in [1.372079, 1.456915] for warp +-1 %, weft +-5 %.
+    # docs/method.md §3.2: ||w_s|| in [1.372079, 1.456915] for warp +-1 %, weft +-5 %.
     assert np.isclose((1 + lo) * np.sqrt(2), 1.372079, atol=1e-6)
     assert np.isclose((1 + hi) * np.sqrt(2), 1.456915, atol=1e-6)
 

@@ -19,7 +19,7 @@ def test_hanging_meets_its_own_constraints_every_frame(method):
         assert sim.strain.last_converged, f"{method} did not converge at frame {sim.frame}"
         assert row["own_violation_max"] < TOL, (method, sim.frame, row["own_violation_max"])
     # Without limiting this soft cloth stretches tens of percent along the warp; limited, the
-    # stretch stays at the 1 % band (mapping: up to sqrt(2) x 1 %, METHOD.md 3.3).
+    # stretch stays at the 1 % band (mapping: up to sqrt(2) x 1 %, docs/method.md §3.3).
     warp = sim.face_strains()["warp"].max()
     assert warp < np.sqrt(2) * 0.01 + TOL
 

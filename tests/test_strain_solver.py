@@ -1,4 +1,4 @@
-"""StrainLimiter: the augmented-Lagrangian projection (METHOD.md 4) and the per-triangle
+"""StrainLimiter: the augmented-Lagrangian projection (docs/method.md §4) and the per-triangle
 baselines, on small sheets so the whole file stays fast."""
 import numpy as np
 import pytest

@@ -87,7 +87,8 @@ def test_every_run_meets_its_own_constraints_and_settles(table, bands, method):
 @pytest.mark.parametrize("bands", list(BANDS))
 def test_svd_is_isotropic_within_each_setting(table, bands):
     r = table[bands, "svd"]
-    first = BANDS[bands]["warp"][1]     # the paper gives the first band to eta1 (METHOD 3.1)
+    # The paper gives the first band to eta1 (docs/method.md §3.1).
+    first = BANDS[bands]["warp"][1]
     # Every directional stretch is at most the largest principal stretch eta1 <= 1 + first
     # band, so both warp and weft stay within the FIRST band, whichever direction it names.
     assert r["warp_max"] < first + TOL
@@ -107,7 +108,7 @@ def test_svd_is_isotropic_within_each_setting(table, bands):
 def test_warp_weft_follows_the_material_bands(table, bands):
     r = table[bands, "warp-weft"]
     tight, loose = _tight_loose(bands)
-    # Its constraints bound the directional stretches themselves (METHOD 3.2).
+    # Its constraints bound the directional stretches themselves (docs/method.md §3.2).
     assert r[f"{tight}_max"] < TIGHT + TOL
     assert r[f"{loose}_max"] < LOOSE + TOL
     # Both bands bind on this soft cloth (measured 1.00 % and 5.00 %).
@@ -121,7 +122,7 @@ def test_mapping_stretches_the_tight_direction_beyond_its_band(table, bands):
     tight, loose = _tight_loose(bands)
     # Directional stretch along e_i is sqrt(sum_j eta_j^2 c_ij^2) with eta_j - 1 <= eps/c_ij,
     # hence at most 1 + sqrt(2) eps (equality: isotropic stretch, principal axes at 45
-    # degrees; METHOD 3.3). The isotropy closure (strain.isotropy = 0.01) keeps it: a grid
+    # degrees; docs/method.md §3.3). The isotropy closure (strain.isotropy = 0.01) keeps it: a grid
     # search over (eta1, eta2, axis angle) finds no state it accepts beyond. Measured 1.24 %
     # (V1H5 warp) and 1.20 % (V5H1 weft) against 1.414 %.
     assert r[f"{tight}_max"] < np.sqrt(2.0) * TIGHT + TOL

@@ -71,7 +71,7 @@ def test_every_point_of_a_converged_frame_lies_in_the_drawn_region(sims, method)
         lo, hi = metrics.feasible_region("warp-weft", "bias", sim.bands())
         assert sp["bias"].min() >= lo - tol and sp["bias"].max() <= hi + tol
     if method == "mapping":
-        # The threads themselves pass the box (the sqrt 2 of METHOD 3.3): the faint points.
+        # The threads themselves pass the box (the sqrt 2 of docs/method.md §3.3): the faint points.
         assert region.faint[:, 0].max() > x1 + 1e-3
 
 

@@ -5,7 +5,7 @@ a pose ``(c, R)`` maps local to world, ``x = R p + c``. A static obstacle has a 
 scripted one gets its pose from ``path(t)`` (a Python callable of time), evaluated once per
 substep on the host at the substep's start and end time and sent to the kernel as arguments.
 
-The collider runs once per substep (METHOD.md section 1, step 5):
+The collider runs once per substep (docs/method.md §1, step 5):
 
     col = Collider(model, [Plane(...), Sphere(...)], thickness=0.005, self_collision=False)
     col.resolve(h, t)          # t = time at the *start* of the substep, h = substep length

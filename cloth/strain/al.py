@@ -1,4 +1,4 @@
-"""The augmented-Lagrangian solve of the strain limits in one kernel (METHOD 4, paper eqs.
+"""The augmented-Lagrangian solve of the strain limits in one kernel (docs/method.md §4, paper eqs.
 25-27): constraint assembly, merit, residual, the PCG Newton direction with its
 block-Jacobi preconditioner, multiplier updates, and the small bookkeeping kernels around it.
 Why one kernel and ndarray arguments: ``buffers.py``. Why one long module: every func
@@ -74,7 +74,7 @@ def assemble(method: ti.template(), pos: A, mesh: MeshPack, cons: ConstraintPack
         assemble_all(method, mesh.n_faces, pos, mesh, cons)
 
 
-# ---- augmented Lagrangian pieces (METHOD 4, paper eqs. 25-27) ----------------------------------
+# ---- augmented Lagrangian pieces (docs/method.md §4, paper eqs. 25-27) -------------------------
 @ti.func
 def scatter(vec: T, ids, val, scale):
     for n in ti.static(range(3)):
@@ -835,7 +835,7 @@ def choose_start(method: ti.template(), from_prev, K, nv, nf, ns, mu, mesh: T, m
 def solve_al(method: ti.template(), exact: ti.template(), with_pdas: ti.template(), budget: A,
              mesh: MeshPack, metric: MetricPack, cons: ConstraintPack, contacts: ContactPack,
              vec: VectorPack, pc: PrecondPack, stats: A):
-    """The whole AL projection (METHOD 4) in one launch (measured: with one launch per
+    """The whole AL projection (docs/method.md §4) in one launch (measured: with one launch per
     phase, Python's argument handling cost as much as the solve): rounds of inexact
     minimisation of L_A by projected Newton + PCG with a backtracking (Armijo) line search,
     then lambda <- max(0, lambda + mu g) (eq. 27, capped at mu_max sqrt(a) so that an
@@ -1104,7 +1104,7 @@ def copy_vectors(n: int, src: A, dst: A):
 @ti.kernel
 def finish_solve(nv: int, h: float, cap: float, extrapolate: int, settle: float,
                  step_start: int, x: A, io: StepPack, contacts: ContactPack):
-    """v += dx / h (METHOD 4): the projection's correction becomes a velocity change, of at
+    """v += dx / h (docs/method.md §4): the projection's correction becomes a velocity change, of at
     most ``cap`` (m/s) per vertex when cap > 0; x and v are copied to x_in and v_in (the
     model's state) and v to v_last (the next projection's start, ``begin_solve``).
 

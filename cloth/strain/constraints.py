@@ -1,7 +1,7 @@
-"""Strain-limiting constraints of one triangle (METHOD.md sections 2 and 3) as Taichi funcs.
+"""Strain-limiting constraints of one triangle (docs/method.md §2 and §3) as Taichi funcs.
 
 Every family returns a ``Constraints`` struct of K constraints, each ``g <= 0`` when satisfied
-and scaled by ``sqrt(a)`` (METHOD 3: refining the mesh must not change how hard a region is
+and scaled by ``sqrt(a)`` (docs/method.md §3: refining the mesh must not change how hard a region is
 held). Per constraint c the struct holds
 
   g[c]         value (sqrt(a) * strain units, metres)
@@ -12,21 +12,21 @@ held). Per constraint c the struct holds
                d2g/dx_n dx_m ~= kappa (M_n.e)(M_m.e) (I - w^ w^T).
 
 The curvature model is the exact Hessian of ``sqrt(a) ||F e||`` for the material direction e
-(METHOD 4 hint: plain Gauss-Newton cannot see that moving a row of vertices along u shears the
+(docs/method.md §4: plain Gauss-Newton cannot see that moving a row of vertices along u shears the
 v edges; adding the curvature of ||w|| for constraints in tension makes the projection
 converge). Constraints whose true curvature is negative (lower bounds: -||w||) get kappa = 0,
 the "projected" part of projected Newton.
 
-Families and their order (the order of ``testdata/constraint_vectors.json``):
+Families and their order (the order of ``tests/data/constraint_vectors.json``):
   svd (4)        eta1 lower/upper (warp band), eta2 lower/upper (weft band)     (paper eq. 7)
   warp-weft (6)  ||w_u|| lower/upper, ||w_v|| lower/upper, ||w_s|| lower/upper (eqs. 10-12)
   mapping (8)    (warp, v1) upper/lower, (warp, v2) upper/lower,
                  (weft, v1) upper/lower, (weft, v2) upper/lower               (eqs. 15, 23)
 The mapping family can instead order its principal pairs by alignment with the warp
 (``by_alignment=True``): pair "A" is the principal direction closer to the warp. The set of 8
-constraints is the same, but indices no longer swap when eta1 and eta2 cross (METHOD 3.3); they
-swap at 45 degrees instead, where the values jump, so the solver orders by magnitude
-(families.MAPPING_PAIRS_BY_ALIGNMENT).
+constraints is the same, but indices no longer swap when eta1 and eta2 cross; they swap at
+45 degrees instead, where the values jump, so the solver orders by magnitude
+(families.MAPPING_PAIRS_BY_ALIGNMENT; docs/method.md §3.3).
 
 Bands are passed as 2-vectors (min, max) of strains; the shear band of warp-weft is in
 ||w_s|| units (sqrt 2 at rest), see ``StrainLimiter`` for the conversion from bias strain.
@@ -54,7 +54,7 @@ SVD_DELTA = 1e-4
 # resolution 9) and passes the stability case.
 SVD_ISO_GAP = 1e-3
 
-# Regularisation of 1/(eta1^2 - eta2^2) in the principal-direction derivative (METHOD 3.3).
+# Regularisation of 1/(eta1^2 - eta2^2) in the principal-direction derivative (docs/method.md §3.3).
 # 1/D -> D/(D^2 + delta^2): bounded by 1/(2 delta), zero at D = 0 (where V is arbitrary and the
 # exact value is 0 * inf). Error: the V-term is multiplied by D^2/(D^2 + delta^2), a relative
 # error of exactly delta^2/(D^2 + delta^2) -- below 1e-6 wherever D > 1e-3 for delta = 1e-6,
@@ -63,7 +63,7 @@ SVD_ISO_GAP = 1e-3
 # Measured on a nearly isotropic projection (23x23 sheet stretched 3 %/3 %, mapping +-1 %,
 # StrainLimiter defaults): delta = 1e-4 ... 1e-10 behave alike (38-40 AL rounds, final
 # violation 0.6-4e-4); that problem is hard for every delta, the feasible set is not closed
-# there (METHOD 3.3). delta = 1e-6 is chosen for accuracy, as small as f64 allows without
+# there (docs/method.md §3.3). delta = 1e-6 is chosen for accuracy, as small as f64 allows without
 # letting round-off in D (~1e-16) matter.
 MAPPING_DELTA = 1e-6
 
@@ -81,7 +81,7 @@ def _constraints_type(k):
 Constraints4, Constraints6, Constraints8 = (_constraints_type(k) for k in (4, 6, 8))
 
 
-# ---- kinematics (METHOD 2) ---------------------------------------------------------------
+# ---- kinematics (docs/method.md §2) -------------------------------------------------------
 @ti.func
 def shape_rows(Dm_inv):
     """Rows M_i, M_j, M_k of the paper's eq. 3 matrix as a 3x2 matrix: F = sum_n x_n M_n^T."""
@@ -191,10 +191,10 @@ def set_band(out: ti.template(), c_lo: ti.template(), c_hi: ti.template(), sqa, 
              sqa * kappa)
 
 
-# ---- the three families (METHOD 3.1-3.3) ---------------------------------------------------
+# ---- the three families (docs/method.md §3.1-3.3) -------------------------------------------
 @ti.func
 def svd_constraints(x0, x1, x2, Dm_inv, sqa, warp, weft, delta):
-    """METHOD 3.1 / paper eq. 7: eta1 in the warp band, eta2 in the weft band; the grain is
+    """docs/method.md §3.1 / paper eq. 7: eta1 in the warp band, eta2 in the weft band; the grain is
     ignored on purpose (isotropic limit). d eta_j / dx_n = (M_n . v_j) U_j (eq. 8/9).
 
     Curvature: ``kappa`` models eta_j as ||F v_j|| with v_j frozen. The exact second
@@ -236,7 +236,7 @@ def svd_constraints(x0, x1, x2, Dm_inv, sqa, warp, weft, delta):
 
 @ti.func
 def warp_weft_constraints(x0, x1, x2, Dm_inv, grain, sqa, warp, weft, shear):
-    """METHOD 3.2 / paper eqs. 10-12: ||w_u||, ||w_v|| in the warp/weft bands and
+    """docs/method.md §3.2 / paper eqs. 10-12: ||w_u||, ||w_v|| in the warp/weft bands and
     ||w_s|| = ||w_u + w_v|| in ``shear`` (||w_s|| units). w_u = F e_warp, w_v = F e_weft."""
     out = Constraints6(0)
     F = deformation_gradient(x0, x1, x2, Dm_inv)
@@ -263,7 +263,7 @@ def warp_weft_constraints(x0, x1, x2, Dm_inv, grain, sqa, warp, weft, shear):
 @ti.func
 def mapping_constraints(x0, x1, x2, Dm_inv, grain, sqa, warp, weft, delta, iso,
                         by_alignment: ti.template()):
-    """METHOD 3.3 / paper eqs. 13-15 and 23, multiplied form [fix]:
+    """docs/method.md §3.3 / paper eqs. 13-15 and 23, multiplied form [fix]:
         c_ij = |e_i . v_j|,  g+_ij = sqrt(a)(c_ij (eta_j - 1) - eps_i^max),
                              g-_ij = sqrt(a)(eps_i^min - c_ij (eta_j - 1)).
     Gradient: sqrt(a)[c_ij d eta_j + (eta_j - 1) s_ij (e_i . d v_j)] with the rotation of the

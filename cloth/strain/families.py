@@ -1,4 +1,4 @@
-"""The strain-limiting families' names, ids and constraint counts (METHOD.md section 3), with
+"""The strain-limiting families' names, ids and constraint counts (docs/method.md §3), with
 no Taichi types: importable before ``backend.init`` (the benchmarks list the methods before
 they choose the precision; ``constraints.py`` builds its structs at import, in whatever float
 type Taichi has then)."""
