@@ -6,8 +6,8 @@ give the same drape, the same fold count, within the chaos floor").
     python -m benchmarks.drape_shape --drops 0.95 --out /tmp/ds   # one height
 
 The drape scene (resolution 25, the default settings otherwise) runs FRAMES frames from each
-height in DROPS, once per solve: the default PCG steps and exact (Cholesky) Newton steps, and
-each again with every free vertex's start moved by 1 nm in a random direction. The sheet
+height in DROPS, once per solve (``strain.solve``: "fast", the default, and "exact", each
+projection solved to its minimiser), and each again with every free vertex's start moved by 1 nm in a random direction. The sheet
 rests from about frame 40; the shape it rests in is what a user sees. Per run: the final
 positions, the lowest vertex, the hem's folds (``fold_count``) and the mean kinetic energy
 over the last 30 frames.
@@ -15,7 +15,7 @@ over the last 30 frames.
 The *chaos floor* of a solve at a height is the RMS distance between its resting sheet and
 the same solve's from the start moved by 1 nm: the landing buckles the sheet, and a buckle's
 side is decided by rounding, so no solve can be held to a closer answer than that. The
-default gives the same drape as exact steps when its distance to them is within that floor,
+default gives the same drape as the exact solve when its distance to them is within that floor,
 and the fold counts agree as a distribution over the heights (one height's count is one
 draw of a chaotic outcome).
 
@@ -31,7 +31,7 @@ from concurrent.futures import ThreadPoolExecutor
 FRAMES = 90
 REST_FRAMES = 30                    # the last frames, over which the resting KE is averaged
 DROPS = (0.95, 0.951, 0.953, 0.957, 0.96, 0.965, 0.97)     # as benchmarks.motion_error
-SOLVES = {"default": {}, "exact steps": {"linear_solver": "cholesky"}}
+SOLVES = {"fast": {"solve": "fast"}, "exact": {"solve": "exact"}}     # strain settings
 # A fold: an outward lobe of the hem, standing at least this far (m) out from the hem on both
 # sides of it (about one edge of the resolution-25 sheet, 4.2 cm: smaller bumps are single
 # triangles, not folds).
@@ -117,7 +117,7 @@ def run_one(folder, solve, drop, chaos, fresh):
 
 def summarize(runs, drops):
     """Per height: each solve's lowest vertex, folds, resting KE, its chaos floor, and the
-    default's distance to exact steps."""
+    default's (fast) distance to the exact solve's."""
     import numpy as np
     from benchmarks.motion_error import rms
     rows = []
@@ -133,7 +133,7 @@ def summarize(runs, drops):
                 ke_rest=float(np.mean(run["ke"][-REST_FRAMES:])),
                 ms=float(np.median(run["ms"][5:])),
                 floor=rms(run["x"], twin["x"], run["diagonal"]))
-        d, e = runs[("default", drop, False)], runs[("exact steps", drop, False)]
+        d, e = runs[("fast", drop, False)], runs[("exact", drop, False)]
         row["default_vs_exact"] = rms(d["x"], e["x"], d["diagonal"])
         rows.append(row)
     return rows
@@ -153,20 +153,19 @@ def permutation_p(a, b, draws=20000):
     return hits / draws
 
 
-def write_report(out, rows, seconds):
+def write_report(out, rows, seconds, cmd):
     import numpy as np
-    from benchmarks.harness import commit, machine
+    from benchmarks.harness import header, write_json
     solves = list(SOLVES)
     lines = [
-        "# Does the resting drape depend on the strain solve? (issue #32)", "",
-        f"Command: `python -m benchmarks.drape_shape --out {out}` (about {seconds / 60:.0f} min "
-        f"of runs, two at a time). Commit {commit()}; {machine()}.", "",
+        "# Does the resting drape depend on the strain solve?", "",
+        header(cmd, seconds) + " (The seconds: the runs' own, two at a time.)", "",
         f"The drape scene (resolution 25, 1152 faces) for {FRAMES} frames from each height, "
         "once per solve and once more with every vertex's start moved by 1 nm. *floor*: the "
         "RMS distance between a run's resting sheet and its 1 nm twin's, over the sheet's "
         "diagonal (the chaos floor: how far the same solve's rest moves when rounding decides "
         "a buckle differently). *default vs exact*: the same distance between the default's "
-        "and exact steps' resting sheets from the same height. *folds*: outward lobes of the "
+        "(`strain.solve = \"fast\"`) and the exact solve's resting sheets from the same height. *folds*: outward lobes of the "
         f"hem at least {100 * FOLD_PROMINENCE:.0f} cm deep (`fold_count`), the 1 nm twin's "
         f"after the slash. KE: mean over the last {REST_FRAMES} frames. ms: strain limiting a "
         "frame, median of frames 6 on.", "",
@@ -174,7 +173,7 @@ def write_report(out, rows, seconds):
         "folds, exact | lowest (m), default / exact | resting KE (J), default / exact |",
         "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     for r in rows:
-        d, e = r["default"], r["exact steps"]
+        d, e = r["fast"], r["exact"]
         lines.append(
             f"| {r['drop']:.3f} | {r['default_vs_exact']:.3f} | {d['floor']:.3f} | "
             f"{e['floor']:.3f} | {d['folds']} / {d['folds_1nm']} | {e['folds']} / "
@@ -201,12 +200,11 @@ def write_report(out, rows, seconds):
               "", "![the hems from above](drape_shape.png)", ""]
     with open(os.path.join(out, "drape_shape.md"), "w") as fh:
         fh.write("\n".join(lines))
-    with open(os.path.join(out, "drape_shape.json"), "w") as fh:
-        json.dump(rows, fh, indent=1)
+    write_json(out, "drape_shape", {"rows": rows}, cmd, seconds)
 
 
 def plot(out, runs, drops):
-    """The resting hems seen from above: a panel per height, default and exact steps (and
+    """The resting hems seen from above: a panel per height, the fast and exact solves (and
     their 1 nm twins, thin), over the sphere's outline."""
     import matplotlib
     matplotlib.use("Agg")
@@ -217,7 +215,7 @@ def plot(out, runs, drops):
     fig, axes = plt.subplots(rows, cols, figsize=(2.7 * cols, 2.8 * rows + 0.4), squeeze=False)
     for ax in axes.flat[len(drops):]:
         ax.axis("off")
-    colors = {"default": "tab:blue", "exact steps": "tab:orange"}
+    colors = {"fast": "tab:blue", "exact": "tab:orange"}
     for ax, drop in zip(axes.flat, drops):
         for solve, color in colors.items():
             for chaos in (False, True):
@@ -227,7 +225,7 @@ def plot(out, runs, drops):
                 ax.plot(p[:, 0], p[:, 2], color=color, lw=0.6 if chaos else 1.6,
                         alpha=0.6 if chaos else 1.0,
                         label=None if chaos else solve)
-        c = runs[("default", drop, False)]["sphere"]
+        c = runs[("fast", drop, False)]["sphere"]
         t = np.linspace(0, 2 * np.pi, 100)
         ax.plot(c[0] + 0.3 * np.cos(t), c[2] + 0.3 * np.sin(t), color="0.6", lw=0.8, ls=":")
         ax.set_aspect("equal")
@@ -241,14 +239,14 @@ def plot(out, runs, drops):
     fig.savefig(os.path.join(out, "drape_shape.png"), dpi=110)
 
 
-def main():
+def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--out", default="docs/speed")
     p.add_argument("--drops", type=float, nargs="+", default=list(DROPS))
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--fresh", action="store_true")
     p.add_argument("--child", help=argparse.SUPPRESS)
-    a = p.parse_args()
+    a = p.parse_args(argv)
     if a.child:
         print(json.dumps(child(*json.loads(a.child))))
         return
@@ -265,7 +263,9 @@ def main():
     runs = dict(zip(plan, results))
     rows = summarize(runs, a.drops)
     # The runs' own time (cached runs count what they took when they ran).
-    write_report(a.out, rows, sum(r.get("wall_s", 0.0) for r in results) / a.jobs)
+    from benchmarks.harness import command
+    write_report(a.out, rows, sum(r.get("wall_s", 0.0) for r in results) / a.jobs,
+                 command("benchmarks.drape_shape", argv))
     plot(a.out, runs, a.drops)
     print(open(os.path.join(a.out, "drape_shape.md")).read())
 

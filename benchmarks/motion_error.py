@@ -1,5 +1,5 @@
 """How far the strain-limited motion lands from exactly solved motion, per solve setting, with
-the cost of each (issue #32): speed against error on moving scenes.
+the cost of each: speed against error on moving scenes.
 
     python -m benchmarks.motion_error --out docs/speed            # every case (~4 h of runs)
     python -m benchmarks.motion_error --cases hanging25 --out /tmp/me   # one case
@@ -8,13 +8,10 @@ Each case is a scene run from its start (one substep per frame). Each *solve* is
 the strain solve (``SOLVES``); every (case, solve) runs in its own process and records the
 positions at ``FRAMES_AT``, the strain-limiting time per frame and the kinetic energy. The
 error of a run is the RMS vertex distance to the *reference* run at the same frame, divided by
-the cloth's diagonal in material space. The reference solves each projection to its minimiser:
-the active-set Newton model (the merit's Hessian, ``strain.newton_model = "active-set"``) with
-exact curvature and sparse Cholesky, stopped only when the limits hold to 1e-7 and the Newton
-step at the answer moves no vertex by more than 1e-5 m/s x h. (The margin model's own tight
-solves do not converge to one answer, docs/speed/motion.md section 4: as a reference its noise
-set the chaos floor, 0.8-4.8x below the default's error; "margin reference" keeps it for
-comparison.) The *chaos floor* is how far the reference itself moves when its start is moved
+the cloth's diagonal in material space. The reference solves each projection to its minimiser
+(``strain.solve = "exact"``) with the limits held to 1e-7 strain (``strain.tol``). (The fast
+solve's own tight solves do not converge to one answer: docs/history/motion.md section 4.) The
+*chaos floor* is how far the reference itself moves when its start is moved
 by 1 nm: past a buckling or a landing, no run can be nearer the reference than that, so an
 error within a few floors is as right as the reference.
 
@@ -51,33 +48,19 @@ CASES = {
     "tshirt": ("tshirt", {}),
 }
 # Solves: overrides of the strain settings. "reference" and the "chaos" runs are the exact
-# solve, the chaos runs with the start moved by 1 nm in different random directions (one move's
-# distance varied 6-36x between commits, so the floor is their median); the others are what a
-# user can choose.
-ACTIVE_SET = {"newton_model": "active-set", "curvature": "exact", "linear_solver": "cholesky",
-              "stop": "kkt"}
-REFERENCE = {**ACTIVE_SET, "tol": 1e-7, "kkt_velocity": 1e-5}
+# solve held to a tight tolerance, the chaos runs with the start moved by 1 nm in different
+# random directions (one move's distance varied 6-36x between commits, so the floor is their
+# median); the others are what a user can choose.
+REFERENCE = {"solve": "exact", "tol": 1e-7}
 SOLVES = {
     "reference": REFERENCE,
     "chaos": REFERENCE,
     "chaos 2": REFERENCE,
     "chaos 3": REFERENCE,
-    "default": {},
-    "active-set": ACTIVE_SET,
-    "margin reference": {"linear_solver": "cholesky", "tol": 1e-7, "kkt_velocity": 1e-5,
-                         "stop": "kkt"},
-    # The default as it was before the start moved on (StrainLimiter.start_extrapolate).
-    "substep start": {"linear_solver": "pcg", "attr.start_extrapolate": False},
-    # The default as it was before slow contact vertices took the substep's true start
-    # (StrainLimiter.true_start_at_contacts; docs/speed/motion.md section 12).
-    "contacts from x - h v": {"attr.true_start_at_contacts": False},
-    "kkt stop": {"stop": "kkt"},
-    "exact steps": {"linear_solver": "cholesky"},
-    "kkt stop 1 mm per s": {"stop": "kkt", "kkt_velocity": 1e-3},
-    "exact steps, kkt stop": {"linear_solver": "cholesky", "stop": "kkt"},
+    "default": {"solve": "fast"},
+    "exact": {"solve": "exact"},
 }
-DRAPE_SOLVES = ("reference", "default", "substep start", "contacts from x - h v", "exact steps",
-                "active-set")
+DRAPE_SOLVES = ("reference", "default", "exact")
 
 
 def child(case, solve, drop=None):
@@ -90,9 +73,7 @@ def child(case, solve, drop=None):
     from cloth.simulator import Simulator
     scene, overrides = CASES[case]
     overrides = json.loads(json.dumps(overrides))
-    settings = {k: v for k, v in SOLVES[solve].items() if not k.startswith("attr.")}
-    attrs = {k[5:]: v for k, v in SOLVES[solve].items() if k.startswith("attr.")}
-    overrides.setdefault("strain", {}).update(settings)
+    overrides.setdefault("strain", {}).update(SOLVES[solve])
     if drop is not None:
         overrides.setdefault("cloth", {})["drop"] = drop
     _, cfg, setup = configure(scene, overrides)
@@ -103,11 +84,6 @@ def child(case, solve, drop=None):
         step /= np.linalg.norm(step, axis=1, keepdims=True)
         setup.mesh.x[free] += 1e-9 * step[free]
     sim = Simulator(setup, cfg)
-    for key, value in attrs.items():
-        if not hasattr(sim.strain, key):
-            raise SystemExit(f"--extra: StrainLimiter has no setting '{key}'")
-        setattr(sim.strain, key, value)
-    sim.strain._upload_params()
     out = {"x": {}, "ms": [], "ke": [], "converged": 0, "stationarity": [], "rounds": []}
     # AL rounds a frame, over every projection in it (the contact re-projections included).
     rounds = [0]
@@ -214,15 +190,15 @@ def _run_minutes(runs, drape):
 def trade_off(rows, drows, runs):
     """The issue's targets read off the runs: per moving case the default's error at frame 10
     against the chaos floor, and the cheapest solve within 3 floors with its cost against the
-    default's; for the drape, the default against exact steps."""
+    default's; for the drape, the default against the exact solve."""
     import numpy as np
     L = ["## The default on the speed-against-error curve\n",
          "Per case: the default's error at frame 10 in chaos floors (target: 3); the same for "
-         "*active-set*, the projection solved to its minimiser at the library's tolerance "
+         "*exact*, the projection solved to its minimiser at the library's tolerance "
          "(1e-4 strain): what that tolerance itself costs in motion, stopping early aside; and "
          "the cheapest solve measured here within 3 floors, with its strain-limiting time over "
          "the default's.\n",
-         "| case | default ms | default f10 / floor | active-set f10 / floor | "
+         "| case | default ms | default f10 / floor | exact f10 / floor | "
          "cheapest within 3 floors | its ms | x default's time |",
          "| --- | --- | --- | --- | --- | --- | --- |"]
     for case in sorted({r["case"] for r in rows}):
@@ -233,7 +209,7 @@ def trade_off(rows, drows, runs):
             continue
         within = sorted((r for r in sub if r["error"][10] <= 3 * floor), key=lambda r: r["ms"])
         head = f"| {case} | {dflt['ms']:.1f} | {dflt['error'][10] / floor:.1f} | "
-        conv = next((r for r in sub if r["solve"] == "active-set"), None)
+        conv = next((r for r in sub if r["solve"] == "exact"), None)
         head += "- | " if conv is None else f"{conv['error'][10] / floor:.1f} | "
         if within:
             best = within[0]
@@ -245,15 +221,15 @@ def trade_off(rows, drows, runs):
                      f"{nearest['error'][10] / floor:.0f} floors) | {nearest['ms']:.1f} | "
                      f"{nearest['ms'] / dflt['ms']:.1f} |")
     by = {d["solve"]: d for d in drows}
-    if "default" in by and "exact steps" in by:
-        d, e = by["default"], by["exact steps"]
+    if "default" in by and "exact" in by:
+        d, e = by["default"], by["exact"]
         gap = max(abs(a - b) for a, b in zip(d["lowest"], e["lowest"]))
-        L += ["", f"Drape, default against exact steps (targets: 7 of 7 drape, KE kept "
-              f"0.75-1.33x exact steps', lowest vertex within 2 cm): {d['draped']} of "
-              f"{d['n']} drape (exact steps {e['draped']} of {e['n']}); KE kept "
+        L += ["", f"Drape, default against the exact solve (targets: 7 of 7 drape, KE kept "
+              f"0.75-1.33x exact's, lowest vertex within 2 cm): {d['draped']} of "
+              f"{d['n']} drape (exact {e['draped']} of {e['n']}); KE kept "
               f"{d['ke_kept']:.3f} against {e['ke_kept']:.3f} "
               f"({d['ke_kept'] / e['ke_kept']:.2f}x); lowest vertex at most {100 * gap:.1f} cm "
-              f"from exact steps' (per drop; medians {np.median(d['lowest']):.3f} and "
+              f"from exact's (per drop; medians {np.median(d['lowest']):.3f} and "
               f"{np.median(e['lowest']):.3f} m); {d['ms']:.0f} against {e['ms']:.0f} ms a "
               "frame."]
         twin = runs.get("drape", {})
@@ -265,32 +241,25 @@ def trade_off(rows, drows, runs):
     return L
 
 
-def write_report(out, runs, drape):
-    from benchmarks.harness import commit, machine
+def write_report(out, runs, drape, cmd):
+    from benchmarks.harness import header, write_json
     from cloth import backend
     rows, drows = summarize(runs), summarize_drape(drape)
-    with open(os.path.join(out, "motion_error.json"), "w") as fh:
-        json.dump({"rows": rows, "drape": drows}, fh, indent=1)
+    seconds = 60 * _run_minutes(runs, drape)
+    write_json(out, "motion_error", {"rows": rows, "drape": drows}, cmd, seconds)
     mode = backend.forced_compile_mode() or "optimised"
-    L = ["# Motion error against exactly solved motion (issue #32)\n",
-         f"Command: `python -m benchmarks.motion_error --out {out}` "
-         f"({_run_minutes(runs, drape):.0f} min of runs, two at a time). Commit {commit()}; "
-         f"{machine()}; {mode} kernels.\n",
+    L = ["# Motion error against exactly solved motion\n",
+         header(cmd, seconds) + f" (The seconds: the runs' own, two at a time; {mode} "
+         "kernels.)\n",
          "Each case runs from its start, one substep per frame. Error: RMS vertex distance to "
          "the reference run at that frame over the cloth's diagonal. The reference solves each "
-         "projection to its minimiser (the active-set Newton model, exact curvature, sparse "
-         "Cholesky) and stops when the limits hold to 1e-7 and the Newton step at the answer "
-         "is below 1e-5 m/s x h; the chaos floor is how far the reference moves when its "
-         "start moves by 1 nm. Solves: *default*, the library's default (PCG steps, stopped "
-         "once the limits hold, started where each vertex was going); *kkt stop*, the same "
-         "stopped also on the Newton step (`strain.stop = \"kkt\"`, 1 cm/s); *exact steps*, "
-         "the default with sparse Cholesky Newton steps (`strain.linear_solver = "
-         "\"cholesky\"`); *active-set*, the converging model at the default tolerances "
-         "(`strain.newton_model = \"active-set\"`, exact curvature, Cholesky, kkt stop: 1e-4 "
-         "strain, 1 cm/s). ms: strain limiting per frame, median of frames 5-30, two runs "
-         "sharing the two cores. conv: frames whose strain solve converged (of 30). Why the "
-         "default stays the fast end of this curve: docs/speed/motion.md section 14; one "
-         "projection's distance and damping: projection_error.md.\n",
+         "projection to its minimiser (`strain.solve = \"exact\"`) with the limits held to "
+         "1e-7 strain; the chaos floor is how far the reference moves when its start moves by "
+         "1 nm. Solves: *default* (`strain.solve = \"fast\"`: stopped once the limits hold, "
+         "started where each vertex was going); *exact* (`strain.solve = \"exact\"` at the "
+         "default tolerance, 1e-4 strain). ms: strain limiting per frame, median of frames "
+         "5-30, two runs sharing the two cores. conv: frames whose strain solve converged (of "
+         "30). One projection's distance and damping: projection_error.md.\n",
          "| case | faces | solve | ms | conv | error f5 | f10 | f30 | f10 / floor |",
          "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for r in rows:
@@ -372,18 +341,18 @@ def plot(out, rows):
     fig.savefig(os.path.join(out, "motion_error.png"), dpi=110)
 
 
-def main():
+def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=os.path.join(ROOT, "docs", "speed"))
     ap.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
     ap.add_argument("--solves", nargs="+", default=list(SOLVES))
     ap.add_argument("--extra", nargs="+", default=[], metavar="NAME=JSON",
-                    help="more solves: a name and strain settings (solver attributes "
-                         "prefixed with 'attr.'), e.g. 'mu10={\"attr.mu_scale\": 10}'")
+                    help="more solves: a name and strain settings, e.g. "
+                         "'tol5={\"solve\": \"exact\", \"tol\": 1e-5}'")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--fresh", action="store_true", help="measure again, ignoring cached runs")
-    ap.add_argument("--child")
-    a = ap.parse_args()
+    ap.add_argument("--child", help=argparse.SUPPRESS)
+    a = ap.parse_args(argv)
     drape_solves = list(DRAPE_SOLVES)
     for item in a.extra:
         name, _, value = item.partition("=")
@@ -420,7 +389,8 @@ def main():
         else:
             runs.setdefault(case, {})[solve] = run
     del results
-    write_report(a.out, runs, drape)
+    from benchmarks.harness import command
+    write_report(a.out, runs, drape, command("benchmarks.motion_error", argv))
     print(f"wrote {os.path.join(a.out, 'motion_error.md')}")
 
 

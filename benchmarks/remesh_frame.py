@@ -1,7 +1,6 @@
-"""Where a remeshed frame's time goes, per step, old code against new side by side (issue #34).
+"""Where a remeshed frame's time goes, per step, optionally beside an older tree's.
 
-    python -m benchmarks.remesh_frame                          # this tree only
-    python -m benchmarks.remesh_frame --base /tmp/base         # and an exported older tree
+    python -m benchmarks.remesh_frame --out DIR                      # this tree only
     python -m benchmarks.remesh_frame --base /tmp/base --out docs/remesh --repeats 2
 
 Each run is one subprocess per (tree, case, repeat), the trees alternating so that the load of
@@ -304,7 +303,7 @@ def main():
     trees = {args.name: here}
     if args.base:
         trees = {args.base_name: os.path.abspath(args.base), args.name: here}
-    from benchmarks.harness import commit, machine
+    from benchmarks.harness import command, header
     t0 = time.time()
     raw = {case: {name: [] for name in trees} for case in args.cases}
     for rep in range(args.repeats):
@@ -321,31 +320,30 @@ def main():
                       flush=True)
     results = {case: {name: summarise(raw[case][name], args.skip) for name in trees}
                for case in args.cases}
-    cmd = "python -m benchmarks.remesh_frame " + " ".join(sys.argv[1:])
-    base_line = (f"  \nBase tree `{args.base}` (commit as exported), named *{args.base_name}*"
+    cmd = command("benchmarks.remesh_frame")
+    base_line = (f"Base tree `{args.base}` (commit as exported), named *{args.base_name}*; "
                  if args.base else "")
-    header = [f"# Remeshed frames: where the time goes (issue #34)", "",
-              f"Command: `{cmd}` ({time.time() - t0:.0f} s wall clock)  ",
-              f"Commit: {commit()} (named *{args.name}*){base_line}  ",
-              f"Machine: {machine()}  ",
-              f"Scene: `hanging`, mapping, `--resolution {args.resolution}`, remeshed every "
-              f"frame (the *grid* columns: the sheet not remeshed, at the resolution "
-              f"named), {args.frames} frames; medians over frames {args.skip}-{args.frames} of "
-              f"{args.repeats} runs per tree, the trees alternating. Rows are indented under "
-              "the stage they belong to; *anywhere* rows count their work in whichever stage "
-              "it happens. Wall clock on a 2-core machine shared with other jobs."]
+    head = ["# Remeshed frames: where the time goes", "",
+            header(cmd, time.time() - t0) + "  ",
+            f"{base_line}this tree named *{args.name}*.  ",
+            f"Scene: `hanging`, mapping, `--resolution {args.resolution}`, remeshed every "
+            f"frame (the *grid* columns: the sheet not remeshed, at the resolution "
+            f"named), {args.frames} frames; medians over frames {args.skip}-{args.frames} of "
+            f"{args.repeats} runs per tree, the trees alternating. Rows are indented under "
+            "the stage they belong to; *anywhere* rows count their work in whichever stage "
+            "it happens. Wall clock, on a machine that may be shared with other jobs."]
     if args.out:
         os.makedirs(args.out, exist_ok=True)
         write_report(os.path.join(args.out, "remesh_frame.md"), results, list(trees), args,
-                     header)
+                     head)
         with open(os.path.join(args.out, "remesh_frame.json"), "w") as fh:
-            json.dump({"results": results, "raw": raw, "command": cmd, "header": header}, fh)
+            json.dump({"results": results, "raw": raw, "command": cmd, "header": head}, fh)
         plot(os.path.join(args.out, "remesh_frame.png"), results, list(trees), args.cases)
         print(f"wrote {args.out}/remesh_frame.md")
     else:
         import tempfile
         path = os.path.join(tempfile.gettempdir(), "remesh_frame.md")
-        write_report(path, results, list(trees), args, header)
+        write_report(path, results, list(trees), args, head)
         print(open(path).read())
 
 

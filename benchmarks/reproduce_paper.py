@@ -1,16 +1,20 @@
 """Reproduce the paper's experiments as numbers and pictures.
 
-    python -m benchmarks.reproduce_paper --table 1 --out results/table1
-    python -m benchmarks.reproduce_paper --table 1 --quick      # coarse, for a smoke test
+    python -m benchmarks.reproduce_paper --table 1 --resolution 25 --out docs/table1
+    python -m benchmarks.reproduce_paper --table 1 --quick --out /tmp/t1   # coarse smoke test
     python -m benchmarks.reproduce_paper --table 1 --remesh --out docs/table1_remesh
+    python -m benchmarks.reproduce_paper --table 2 --frames 90 --seeds 3 --out docs/table2
 
 Table 1 (paper section 6): the cloth hanging from its two top corners at rest, for the three
 methods x two band settings (vertical +-1 % / horizontal +-5 %, and swapped); the warp hangs
 vertically. Writes ``table1.md`` (strain distributions, violations, wrinkle measures, size,
-time) and ``table1.png`` (shaded and warp-strain images from one camera).
+time), ``table1.json`` and ``table1.png`` (shaded and warp-strain images from one camera).
+Table 2: the T-shirt at rest under three settings (``benchmarks/table2.py``): ``table2.md``,
+``table2.json``, ``table2.png``.
 """
 import argparse
 import os
+import time
 
 
 from benchmarks.paper_common import (BANDS, METHODS, label, measure,  # noqa: F401
@@ -47,7 +51,8 @@ def table1(args):
                 tiles[(band_name, method)] = label(render_pair(renderer, sim),
                                                    f"{method}  {band_name}")
     os.makedirs(args.out, exist_ok=True)
-    write_table1_md(rows, os.path.join(args.out, "table1.md"), res, frames, args.remesh)
+    write_table1_md(rows, os.path.join(args.out, "table1.md"), res, frames, args.remesh,
+                    args.cmd, time.time() - args.t0)
     if tiles:
         import imageio.v2 as imageio
         grid = np.concatenate([np.concatenate([tiles[(b, m)] for m in METHODS], axis=1)
@@ -56,7 +61,10 @@ def table1(args):
     return rows
 
 
-def write_table1_md(rows, path, res, frames, remeshed=False):
+def write_table1_md(rows, path, res, frames, remeshed=False, cmd=None, seconds=None):
+    from benchmarks.harness import header, write_json
+    cmd = cmd or "python -m benchmarks.reproduce_paper --table 1"
+    write_json(os.path.dirname(path) or ".", "table1", {"rows": rows}, cmd, seconds)
     cols = [("bands", "bands"), ("method", "method"), ("warp_max", "warp max"),
             ("warp_rms", "warp RMS"), ("warp_p95", "warp p95"), ("weft_max", "weft max"),
             ("weft_rms", "weft RMS"), ("weft_p95", "weft p95"), ("bias_max", "|bias| max"),
@@ -69,7 +77,7 @@ def write_table1_md(rows, path, res, frames, remeshed=False):
             f"{res} x {res} vertices; triangles at the end in the table" if remeshed
             else f"{rows[0]['faces']} triangles")
     lines = [f"# Paper Table 1: hanging cloth at rest ({size}, "
-             f"{frames} frames at 30 fps, one substep)", "",
+             f"{frames} frames at 30 fps, one substep)", "", header(cmd, seconds), "",
              "Strains are stretch - 1; V1H5 = warp (vertical) +-1 %, weft (horizontal) +-5 %.", "",
              "| " + " | ".join(c[1] for c in cols) + " |",
              "|" + "---|" * len(cols)]
@@ -83,7 +91,7 @@ def write_table1_md(rows, path, res, frames, remeshed=False):
         fh.write("\n".join(lines) + "\n")
 
 
-def main():
+def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--table", type=int, choices=[1, 2], required=True)
     ap.add_argument("--out", default=None)
@@ -96,8 +104,10 @@ def main():
     ap.add_argument("--seeds", type=int, default=1,
                     help="Table 2: runs per setting; runs after the first start from positions "
                          "perturbed by 1 micrometre, to show how much the measures move by chance")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     args.out = args.out or os.path.join("results", f"table{args.table}")
+    from benchmarks.harness import command
+    args.cmd, args.t0 = command("benchmarks.reproduce_paper", argv), time.time()
     from cloth import backend
     backend.init("cpu", "f64")
     if args.table == 1:

@@ -5,6 +5,7 @@ Claim under test (paper section 6): mapping at +-5 % removes the fine wrinkles a
 only does at +-3 %. The fine-wrinkle measure is the curvature energy and mean |dihedral| of the
 front panel over the chest (world height 1.15-1.40 m, |x| < 0.15 m)."""
 import os
+import time
 
 import numpy as np
 
@@ -129,13 +130,17 @@ def table2(args):
             ("curvature_energy", "whole-shirt curv. energy"), ("kinetic_energy", "KE (J)"),
             ("ms_per_frame", "ms/frame")] + [(f"ms_{st}", f"ms {st}") for st in STAGES] + \
         [("check", "check_final")]
-    from benchmarks.harness import commit
-    rev = commit()
+    from benchmarks.harness import header, write_json
+    cmd = getattr(args, "cmd", "python -m benchmarks.reproduce_paper --table 2")
+    seconds = time.time() - args.t0 if hasattr(args, "t0") else None
+    write_json(args.out, "table2", {"rows": rows, "spread": [
+        dict(method=m, band=b, chest_curvature_energy=e) for (m, b), e in spread.items()]},
+        cmd, seconds)
     lines = [f"# Paper Table 2: T-shirt at rest ({rows[0]['faces']} triangles, {frames} frames)",
-             "", f"Command: `python -m benchmarks.reproduce_paper --table 2 --frames {frames} "
-             f"--seeds {seeds} --out {args.out}` at commit {rev}; mapping with its isotropy closure "
+             "", header(cmd, seconds), "",
+             "Mapping with its isotropy closure "
              f"(`strain.isotropy` = {sim.settings.strain.isotropy}); ms/frame on a "
-             "2-core CPU (often shared with other jobs: +-30 %). Chest = front panel, world "
+             "machine that may be shared with other jobs (+-30 %). Chest = front panel, world "
              "height 1.15-1.40 m, |x| < 0.15 m.",
              "", "| " + " | ".join(c[1] for c in cols) + " |", "|" + "---|" * len(cols)]
     for r in rows:
