@@ -176,25 +176,27 @@ def test_sliders_change_the_time_step_and_the_material_live(st):
     assert st.settings.strain.iters == 7
 
 
-def test_exact_steps_switch_the_strain_solve_live(st):
-    """The panel's "exact Newton steps" box: the strain solve takes Cholesky steps from the
-    next substep (the settings follow), still meets the limits, and switches back; a name
-    the schema does not know is refused with the key."""
+def test_exact_solve_switches_the_strain_solve_live(st):
+    """The panel's "exact solve" box: ``settings.strain.solve`` follows it live (the limiter
+    too), the next frame's solve still holds the limits, and it switches back; a name the
+    schema does not know is refused with the key."""
     from cloth.config import ConfigError
     st.switch_method("mapping")
     run(st, 2)
-    assert not st.exact_steps
-    assert st.set_exact_steps(True) and st.exact_steps
-    assert st.sim.strain.linear_solver == "cholesky"
-    assert st.sim.settings.strain.linear_solver == "cholesky"
-    run(st, 3)
-    assert st.sim.strain.last_converged and st.sim.strain.last_factorizations > 0
-    assert st.set_exact_steps(False) and st.sim.strain.linear_solver == "pcg"
+    assert not st.exact_solve and st.sim.settings.strain.solve == "fast"
+    assert st.set_exact_solve(True) and st.exact_solve
+    assert st.sim.settings.strain.solve == "exact" and st.sim.strain.solve == "exact"
     run(st, 1)
-    assert st.sim.strain.last_converged
-    with pytest.raises(ConfigError, match="strain.linear_solver"):
-        st.sim.set_strain_linear_solver("lu")
-    assert st.sim.strain.linear_solver == "pcg"
+    r = st.readouts()
+    assert st.sim.strain.last_converged and r["own_violation"][0] < 2 * r["tol"]
+    assert st.set_exact_solve(False) and st.sim.settings.strain.solve == "fast"
+    assert st.sim.strain.solve == "fast"
+    run(st, 1)
+    r = st.readouts()
+    assert st.sim.strain.last_converged and r["own_violation"][0] < 2 * r["tol"]
+    with pytest.raises(ConfigError, match="strain.solve"):
+        st.sim.set_strain_solve("lu")
+    assert st.sim.settings.strain.solve == "fast" and st.sim.strain.solve == "fast"
 
 
 def test_scripted_vertex_drag_moves_the_cloth_and_releases_it(st):
