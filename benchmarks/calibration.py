@@ -734,7 +734,7 @@ def report(rows, out, seconds, command):
              "mesh's diagonals are such lines across the strip in `bias`; along it (`bias-`) "
              "there are none and the strip reads 2.2-2.7 times too stiff (a smooth bend with "
              "its curvature along the diagonals turns the edges of all three families). No "
-             "per-edge weight can cure that (docs/calibration/bending_models.md); the "
+             "per-edge weight can cure that (docs/history/bending_models.md); the "
              "isotropic energy has no preferred direction.\n")
     lock = [r for r in rows_all if r["kind"] == "locking"]
     if lock:

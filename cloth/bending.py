@@ -8,7 +8,7 @@ derivatives are X_ab = II_ab n, so the plate energy density (B / 2) |II|^2 equal
 (B / 2) (|X_uu|^2 + |X_vv|^2 + 2 |X_uv|^2), which is quadratic in the positions: its matrix
 is constant, its forces are exact and linear (-B Q x) and its Hessian is B Q itself. It is
 isotropic by construction, with Poisson ratio 0. The hinge energy it replaces bends a strip
-at 45 degrees to the mesh lines 0.8-3.8 times too stiffly (docs/calibration/bending_models.md).
+at 45 degrees to the mesh lines 0.8-3.8 times too stiffly (docs/history/bending_models.md).
 
 |II|^2 is split as (tr II)^2 / 2 + |dev II|^2:
 

@@ -272,7 +272,8 @@ class ImplicitEuler:
     def _check_loops(self, ran, phase):
         """Raise backend.LoopCapError unless the launch's ``loop_probe`` ran in full: a driver
         that caps loops (lavapipe) ends every loop of the launch once the cap is hit, and the
-        step would be silently wrong (measured with benchmarks/loop_cap.py: linearise runs ~50
+        step would be silently wrong (measured with a probe since removed, `git log --
+        benchmarks/loop_cap.py`: linearise runs ~50
         loop iterations a vertex, so it is cut short from ~1300 vertices, a CG iteration ~26
         a vertex)."""
         backend.check_loop_probe(ran, f"dynamics kernel {phase}",

@@ -62,7 +62,7 @@ class CapacityExceeded(RuntimeError):
 # a direction-dependent energy); it takes a bending energy that couples a triangle's edges.
 # That is the isotropic energy (cloth/bending.py), the default for a flat rest shape; the
 # hinge stays for a curved rest shape (rest_x) and as ``sim.bending = "hinge"``. The energies
-# compared: docs/calibration/bending_models.md.
+# compared: docs/history/bending_models.md.
 BEND_CONSTANT = 1.17
 
 

@@ -32,7 +32,7 @@ class RemeshParams:
         create edges up to 1, the split threshold (``_collapse_limit``).
     warm_multipliers: carry the strain solver's per-face multipliers to the faces a remesh
         makes (``face_data``, scaled by sqrt of the area ratio) so the projection after the
-        remesh starts warm. Off: measured on hanging (docs/remesh/remesh_ops.md section 3, 30
+        remesh starts warm. Off: measured on hanging (docs/history/remesh_ops.md section 3, 30
         frames), the warm re-projection took 8 / 9.4 / 23 AL rounds (median / mean / max)
         against 6 / 6.4 / 8 from zero multipliers with mapping (8 / 8.9 / 14 against 5 / 5.2 /
         7 with warp-weft). That projection is the substep's second, on cloth already

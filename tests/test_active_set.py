@@ -214,7 +214,7 @@ def test_active_set_projection_with_seams_lands_on_the_tight_solve():
     within 0.2 mm of the tight one (measured 0.07-0.08 mm), while the margin model, even run
     to 100 rounds at tol 1e-8, stops on a feasible point 14 mm from it at a seam vertex whose
     objective is 3.6 % higher: its Newton matrix, stiff along every constraint near its band,
-    makes its steps vanish short of the minimiser (docs/speed/motion.md section 14). The
+    makes its steps vanish short of the minimiser (docs/history/motion.md section 14). The
     default lands 15 mm away."""
     sim, state = _scene_at("tshirt", 8)
     assert len(sim.dynamics.stitches_np) > 0

@@ -304,7 +304,7 @@ def test_mapping_values_in_the_solvers_order_are_continuous(path):
     function of the positions: along a path of deformations, consecutive values differ by
     O(step). Ordered by alignment with the warp, pairs swap where the principal axes cross 45
     degrees and the values jump by c (eta1 - eta2) (~1.4e-2 here): the AL merit then jumps
-    and Newton stalls (docs/speed/motion.md section 7). Ordered by magnitude they swap where
+    and Newton stalls (docs/history/motion.md section 7). Ordered by magnitude they swap where
     eta1 = eta2, and the isotropy closure makes both pairs equal there."""
     uv = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
     Dm_inv, area = triangle_arrays(uv, np.c_[uv, np.zeros(3)])

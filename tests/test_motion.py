@@ -49,7 +49,7 @@ def test_a_sheet_resting_on_the_sphere_comes_to_rest():
     moving start from, and take their velocity over, the substep's true start instead
     (StrainLimiter.true_start_at_contacts). Measured at resolution 13, mean kinetic energy
     over frames 31-40: 1.4e-5 J, against 5.0e-4 J with the rule before; resolution 25 over
-    frames 31-150: 2e-7 to 2e-6 J against 3.5-5.2e-5 J (docs/speed/motion.md section 12)."""
+    frames 31-150: 2e-7 to 2e-6 J against 3.5-5.2e-5 J (docs/history/motion.md section 12)."""
     ke, _ = _drop("pcg", frames=40)
     ke_old, _ = _drop("pcg", frames=40, true_start=False)
     assert ke[30:40].mean() < 5e-5, ke[30:40]

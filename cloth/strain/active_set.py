@@ -7,7 +7,7 @@ Why: the default Newton model puts every constraint within ``active_margin`` (1e
 its band into the Newton matrix. That keeps the line search from running into constraints the
 step switches on, but the matrix is then 2.4-6.6x stiffer than the merit's Hessian, the inner
 loop converges linearly and the projection stops 0.6-4 mm from its minimiser; the shortfall
-acts as damping (docs/speed/motion.md). The active-set step instead solves the Newton step of
+acts as damping (docs/history/motion.md). The active-set step instead solves the Newton step of
 the merit with its constraints *linearised*,
 
     min_d  -r.d + 1/2 d^T H0 d + sum_i (mu/2) max(0, t_i + J_i d)^2,   t = g + lambda / mu,
@@ -17,7 +17,8 @@ which is piecewise quadratic: guess the set A of constraints the step leaves act
 predict the set again from t + J d > 0 and re-solve until it stops changing (a few solves,
 each re-using the last factorisation). With the margin 0 the matrix is the Hessian of the
 merit wherever the set is right, so the Newton loop converges fast and the KKT stop is honest.
-Measured with host prototypes (benchmarks/al_variants.py, hanging resolution 9, frame 6):
+Measured with host prototypes (hanging resolution 9, frame 6; `git log --
+benchmarks/al_variants.py` finds them):
 0.001-0.09 mm from a tight solve, against 1.8-4.1 mm for the margin model.
 
 H0 is the kernels' Newton matrix with margin 0 (``al.newton_matrix``): it holds the

@@ -5,7 +5,7 @@ Why: at rest most of an exact Newton step's energy lies in the cloth's soft glob
 (swinging, bending), which block-Jacobi CG barely reaches: on resting substeps at resolution
 25, 16 block-Jacobi iterations left 96 % of the step's H-norm unresolved, while the factor of
 the *previous* substep's matrix left 0.3-7 % after 16 and 5-18 % after 8
-(``benchmarks.newton_precond``). The unresolved motion is what the "resting" cloth's velocity
+(docs/history/newton_precond.md). The unresolved motion is what the "resting" cloth's velocity
 was made of. A factorisation costs ~25 triangular solves, so it is made on the host (CHOLMOD,
 the lumped pattern of ``linalg.SparseCholesky``, ordered by vertices) only when the old one
 has gone stale, and the kernel applies it by two block triangular solves with L (6.2k 3x3

@@ -9,12 +9,11 @@ faster than the mesh. An application of this one costs less than a product with 
 Measured on captured Newton systems of the falling hanging sheet (frames 3-4, mapping,
 linearised at x_hat; |d_8 - d*|_H / |d*|_H after 8 PCG iterations, 1 = nothing found):
 block Jacobi 0.82 / 0.88 / 0.90 at 4k / 16k / 32.8k faces, this preconditioner 0.29 / 0.36 /
-0.38 (``python -m benchmarks.newton_precond --at hat ...``,
-docs/speed/multigrid/newton_precond_at_hat.md; a scratch run gave 0.36 at 64.8k, and the
+0.38 (docs/history/multigrid/newton_precond_at_hat.md; a scratch run gave 0.36 at 64.8k, and the
 exact factor of A 0.41 / 0.44 at 4k / 16k). Linearised at the previous positions instead,
 neither finds much of the step (0.85-0.98 left after 16, block Jacobi 0.96-0.99) and a
 two-level space of rigid motions on 8 x 8 patches does best (0.34-0.86;
-docs/speed/multigrid/newton_precond.md): a lead not followed.
+docs/history/multigrid/newton_precond.md): a lead not followed.
 
 What: the hierarchy is made on the host by pyamg (``smoothed_aggregation_solver`` with
 smooth=None: vertices grouped into aggregates of ~10-20 by the strength of their coupling,
