@@ -37,10 +37,20 @@ RECORD_NAME = "loom_compile_times.json"
 # estimate for the next cold compile.
 COMPILED_ABOVE_S = 5.0
 
+# The strain solve's one-kernel compile (al.solve_al), cold on 2 cores, in s: (optimised,
+# LOOM_FAST_COMPILE). The exact solve compiles the active-set re-solves in as well.
+STRAIN_COMPILE_S = {"fast": (120, 5), "exact": (260, 12)}
+
 _used = set()            # keys whose first use in this process is over
 _fingerprint = None
 # Called before a notice is printed (a progress bar ends its line there).
 before_print = []
+
+
+def strain_estimate(solve, host_loop):
+    """The estimate (optimised, fast) in s of the strain solve's first compile, or None for
+    the host loop (its kernels are small)."""
+    return None if host_loop else STRAIN_COMPILE_S[solve]
 
 
 def _record_path():

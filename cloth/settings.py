@@ -21,7 +21,7 @@ from .config import ConfigError, NUMBER_OR_WORD, merge
 from .materials import MATERIAL_PRESETS  # noqa: F401 (re-exported)
 from .remesh_params import RemeshParams
 from .strain.families import METHODS
-from .strain.defaults import AL_ROUNDS, KKT_VELOCITY, MAPPING_ISO, STOP
+from .strain.defaults import AL_ROUNDS, MAPPING_ISO, SOLVES
 
 STRAIN_METHODS = METHODS + ("none",)
 
@@ -48,48 +48,14 @@ COMMON_DEFAULTS = {
         "warp": [-0.01, 0.01],    # strain band along the warp (material u; vertical in hanging)
         "weft": [-0.05, 0.05],    # strain band along the weft
         "bias": [],               # bias-strain band; [] = automatic (docs/method.md §3.2)
-        "solver": "al",           # al (augmented Lagrangian) | jacobi (baseline)
-        # How the limits meet the dynamics: "implicit" projects in the implicit step's metric
-        # (one linearised backward-Euler step with the limits as constraints: a cloth at rest
-        # is an exact fixed point); "projection" is the paper's split step (eq. 6: the
-        # mass-weighted projection of the unconstrained x_hat), which never comes to rest.
-        "coupling": "implicit",
-        # Newton steps of the AL: "cholesky" (sparse direct, CHOLMOD) or "pcg" (PCG in one
-        # kernel).
-        "linear_solver": "pcg",
-        # The PCG's preconditioner under coupling "implicit" (on the CPU, without contacts;
-        # block Jacobi elsewhere): "auto" (a sparse Cholesky factor of the implicit step's
-        # matrix up to 2000 faces, its aggregation multigrid above, both remade every 10
-        # substeps), "factor" or "multigrid" at every size, or "jacobi" (block Jacobi, the
-        # earlier one). Both reach the cloth's soft global modes, which block Jacobi does not:
-        # hanging at resolution 25 rested at a median of 6.6e-8 J against 6.9e-7 J
-        # (docs/speed/rest_ensemble.md), and the multigrid's PCG finds the same share of a
-        # Newton step per iteration at 4k and 64k faces (cloth/strain/multigrid.py).
-        "precondition": "auto",
-        # The constraints' curvature in the Newton matrix: "model" (the curvature of ||F e||
-        # with e frozen; it misses the mapping family's rotating frame) or "exact" (mapping:
-        # through C = F^T F, made positive semi-definite; svd and warp-weft keep the model,
-        # which is already theirs). "exact" needs 1 AL round where "model" needs 2-3 and is
-        # 1.2-1.4x faster at 1k triangles, but it stops the AL earlier with inexact inner
-        # solves and the hanging res 25 cloth then rested at 6.6e-7 J against 8.1e-8 J
-        # (issue #13's target: 3e-7), so it is not the default (docs/speed/curvature.md).
-        "curvature": "model",
-        "iters": AL_ROUNDS,       # outer-round budget per projection (why 100: strain/solver.py)
+        # How hard each projection is solved (cloth/strain/solver.py): "fast" stops once the
+        # limits hold; "exact" solves to the projection's minimiser (about 2x the time on small
+        # meshes, 20-500x on large ones and garments: docs/speed/projection_error.md).
+        "solve": "fast",
+        "iters": AL_ROUNDS,       # outer-round budget per projection (why 100: strain/defaults.py)
         "tol": 1e-4,              # largest violation accepted, in strain
-        # When a projection is done: "violation" (the limits hold) or "kkt" (the limits hold
-        # and the answer is stationary: its Newton step is below kkt_velocity x h). Why not
-        # "kkt" by default: cloth/strain/defaults.py.
-        "stop": STOP,
-        "kkt_velocity": KKT_VELOCITY,
-        # The AL's Newton model: "margin" (constraints within 1e-2 strain of their band already
-        # in the matrix; the fast PCG kernels) or "active-set" (the merit's Hessian with the
-        # step's active set predicted and re-solved: converges to the minimiser; in the kernels
-        # under linear_solver "pcg", a host loop under "cholesky"). Why not the default:
-        # docs/speed/motion.md.
-        "newton_model": "margin",
         # mapping only: width (in eta1^2 - eta2^2) of the closure of its feasible set at
-        # isotropy, where the paper's constraint depends on an arbitrary principal frame;
-        # 0 = the paper's constraint exactly (why 0.01: cloth/strain/defaults.py).
+        # isotropy; 0 = the paper's constraint exactly (why 0.01: cloth/strain/defaults.py).
         "isotropy": MAPPING_ISO,
     },
     # Adaptive remeshing in material space, once per frame (Narain et al. 2012); lengths in m.
@@ -154,38 +120,11 @@ SCHEMA = {
                     "unless the mesh says otherwise)"),
         "weft": Key(**STRAIN_BAND, doc="strain band [min, max] along the weft"),
         "bias": Key(**STRAIN_BAND, doc="bias-strain band; [] = automatic (docs/method.md §3.2)"),
-        "solver": Key("", "al = augmented Lagrangian; jacobi = per-triangle projection "
-                      "(baseline)", choices=("al", "jacobi")),
-        "coupling": Key("", "how the limits meet the dynamics: the paper's split step "
-                        "(projection: mass-weighted projection of x_hat) or one implicit step "
-                        "with the limits as constraints (implicit: projection in the implicit "
-                        "step's metric)", choices=("projection", "implicit")),
-        "linear_solver": Key("", "the AL's Newton steps: block-Jacobi PCG or sparse Cholesky",
-                             choices=("pcg", "cholesky")),
-        "precondition": Key("", "the PCG's preconditioner under implicit coupling (CPU, no "
-                            "contacts): auto (a sparse Cholesky factor of the implicit step's "
-                            "matrix up to 2000 faces, its aggregation multigrid above), either "
-                            "one at every size, or block Jacobi",
-                            choices=("auto", "factor", "multigrid", "jacobi")),
-        "curvature": Key("", "the constraints' curvature in the AL's Newton matrix: exact "
-                         "(mapping: through C = F^T F) or the earlier model (||F e|| with e "
-                         "frozen)",
-                         choices=("exact", "model")),
+        "solve": Key("", "how hard each projection is solved: fast (stops once the limits "
+                     "hold, a few mm short of the exact projection) or exact (to the "
+                     "projection's minimiser; slower)", choices=SOLVES),
         "iters": Key("", "outer-iteration budget per projection", lo=1),
         "tol": Key("strain", "largest constraint violation accepted", lo=0, lo_open=True),
-        "stop": Key("", "when a projection is done: violation (the limits hold; the answer "
-                    "depends on where the solve started) or kkt (the limits hold and the "
-                    "answer is stationary: its Newton step below kkt_velocity x h; meant for "
-                    "exact steps, strain.linear_solver = cholesky)",
-                    choices=("violation", "kkt")),
-        "kkt_velocity": Key("m/s", "stationarity tolerance of the kkt stop, as a velocity",
-                            lo=0, lo_open=True),
-        "newton_model": Key("", "the AL's Newton model: margin (constraints near their band "
-                            "enter the matrix early; fast, stops short of the minimiser) or "
-                            "active-set (the Hessian with the step's predicted active set; "
-                            "converges, slower: in the kernels with pcg, in a host loop with "
-                            "cholesky)",
-                            choices=("margin", "active-set")),
         "isotropy": Key("", "mapping only: width of the closure of its feasible set at "
                         "isotropy; 0 = the paper's constraint exactly", lo=0),
     },
@@ -363,6 +302,16 @@ def _check_across(sections):
     if rm is not None and getattr(rm, "size_max", 1) < getattr(rm, "size_min", 0):
         raise ConfigError(f"remesh.size_max = {rm.size_max} must be >= remesh.size_min "
                           f"({rm.size_min}) m: raise size_max or lower size_min")
+
+
+def section(name, **changes):
+    """One section's settings on their own: its defaults with ``changes``, checked as a scene's
+    would be (for a part built without a whole configuration, e.g. ``StrainLimiter(model,
+    section("strain", method="svd"))`` in a test or a script)."""
+    merged = merge(copy.deepcopy(COMMON_DEFAULTS[name]), changes, name + ".")
+    for key in changes:
+        check_value(f"{name}.{key}", merged[key], SCHEMA.get(name, {}).get(key, Key()))
+    return section_class(name, merged)(**merged)
 
 
 class Settings:

@@ -218,15 +218,14 @@ class Simulator:
 
     def _make_strain_limiter(self, settings):
         """The strain limiter of ``settings.strain`` (``StrainLimiter.configure``)."""
-        self.strain = StrainLimiter(self.model, stitches=self.dynamics.stitches_np)
-        self.strain.configure(settings.strain)
+        self.strain = StrainLimiter(self.model, settings.strain,
+                                    stitches=self.dynamics.stitches_np)
 
     def _dynamics_step(self):
-        """The implicit step. Under coupling "implicit" its matrix then becomes the strain
-        projection's metric (cloth/system_matrix.py)."""
+        """The implicit step. Its matrix then becomes the strain projection's metric
+        (cloth/system_matrix.py)."""
         self.dynamics.step(self.h)
-        if self.strain is not None and self.strain.coupling == "implicit" and \
-                self.stage("strain_limit").enabled:
+        if self.strain is not None and self.stage("strain_limit").enabled:
             self.dynamics.system_matrix(self.h, self.strain.system_metric())
 
     def _strain_limit(self):
@@ -488,11 +487,10 @@ class Simulator:
         """The AL round budget per projection."""
         self._change("strain", iters=int(n))
 
-    def set_strain_linear_solver(self, name):
-        """The strain solve's Newton steps, live: "pcg" (the one-kernel default) or
-        "cholesky" (exact steps; slower, but a cloth that lands on an obstacle keeps falling
-        around it instead of stopping dead: docs/speed/drape_depth.md)."""
-        self._change("strain", linear_solver=name)      # the schema refuses other names
+    def set_strain_solve(self, solve):
+        """How hard each projection is solved, live: "fast" (stops once the limits hold) or
+        "exact" (to the projection's minimiser; slower)."""
+        self._change("strain", solve=solve)      # the schema refuses other names
 
     def set_substeps(self, n):
         """Time steps per frame (h = 1 / (fps x substeps))."""
@@ -646,14 +644,10 @@ class Simulator:
         (cloth/compile_notice.py; estimates measured cold on 2 cores, full optimisation and
         LOOM_FAST_COMPILE)."""
         if stage == "strain_limit":
-            st = self.settings.strain
             method = self.strain.method if method is None else method
-            fast_path = st.solver == "al" and st.linear_solver == "pcg"
-            # The active-set re-solves are compiled in only for that model (al.solve_al's
-            # with_pdas): about 260 / 12 s against 100 / 6 s without (svd, 2026-12-05).
-            estimate = (260, 12) if st.newton_model == "active-set" else (120, 5)
             return (f"the strain solver for {method}", self.strain_solver_key(method),
-                    estimate if fast_path else None)
+                    compile_notice.strain_estimate(self.settings.strain.solve,
+                                                   self.strain.uses_host_loop()))
         if stage == "dynamics":
             return ("the dynamics step", f"dynamics:{self.settings.sim.linear_solver}",
                     (8, None))
@@ -664,9 +658,7 @@ class Simulator:
     def strain_solver_key(self, method):
         """The compile key of the strain solver's kernels for ``method`` under this
         simulator's strain settings (the template variant: cloth/compile_notice.py)."""
-        st = self.settings.strain
-        return (f"strain solver:{method}:{st.solver}:{st.linear_solver}:{st.curvature}"
-                f":{st.newton_model}")
+        return f"strain solver:{method}:{self.settings.strain.solve}"
 
     def compile_pending(self):
         """The notice line when the next frame's strain solve will compile its kernels (a

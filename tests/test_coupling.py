@@ -1,13 +1,15 @@
-"""The constrained step (issue #13): the implicit step's matrix as a block-sparse matrix, the
-sparse Cholesky Newton solver against the PCG one, and a strain-limited cloth that comes to
-rest under coupling "implicit"."""
+"""The constrained step: the implicit step's matrix as a block-sparse matrix, the sparse
+Cholesky factor and its reuse, the host loop's Newton path against the kernels', a
+strain-limited cloth that comes to rest, and the exact solve's stationarity stop."""
 import numpy as np
 import pytest
 
 from cloth import linalg, metrics, system_matrix
 from cloth.dynamics import DynamicsSettings, ImplicitEuler
 from cloth.model import Material
-from cloth.strain.solver import StrainLimiter, StrainLimitError
+from cloth.strain import solver
+from cloth.strain.buffers import PC_JACOBI
+from cloth.strain.defaults import CG_BUDGET, KKT_VELOCITY
 from tests.helpers import set_positions, sheet_model
 
 
@@ -131,7 +133,7 @@ def test_lumped_core_factor_bounds_the_matrix_and_preconditions_it():
     assert np.linalg.norm(A @ got - b) <= 1e-10 * np.linalg.norm(b)
 
 
-def _hanging(method, coupling, linear_solver="pcg", res=6, **strain):
+def _hanging(method, res=6, **strain):
     """hanging at resolution ``res`` with these strain settings (``strain``: any other key of
     the section)."""
     import scenes
@@ -139,8 +141,7 @@ def _hanging(method, coupling, linear_solver="pcg", res=6, **strain):
     from scenes.common import resolve
     mod = scenes.get("hanging")
     cfg = resolve(mod.DEFAULTS, [{"cloth": {"resolution": res},
-                                  "strain": {"method": method, "coupling": coupling,
-                                             "linear_solver": linear_solver, **strain}}])
+                                  "strain": {"method": method, **strain}}])
     return Simulator(mod.build(cfg), cfg)
 
 
@@ -156,45 +157,60 @@ def _redo_dynamics(sim, state):
     return metric
 
 
-def _tight_projection(sim, state, precondition):
+def force_preconditioner(mp, kind):
+    """Make the PCG solve use ``kind`` ("factor", "multigrid" or "jacobi") whatever the mesh
+    size (the product picks by size: FACTOR_MAX_FACES), through the pytest monkeypatch
+    ``mp``."""
+    if kind == "jacobi":
+        mp.setattr(solver.StrainLimiter, "_pcg_preconditioner", lambda self, metric: None)
+    else:
+        mp.setattr(solver, "FACTOR_MAX_FACES", 10 ** 9 if kind == "factor" else 0)
+
+
+def _tight_projection(sim, state, precondition, monkeypatch):
     """The substep after ``state`` projected tightly with this PCG preconditioner (the same
     Newton and PCG budgets whatever it is, so that solves can be compared). Returns (the
     preconditioner object the solve had, whether it was usable, the positions)."""
     lim = sim.strain
-    sim._change("strain", precondition=precondition)
-    lim.inner_rtol, lim.cg_rtol, lim.max_cg = 0.0, 1e-10, 400
-    lim.factor_cg = lim.multigrid_cg = 400
-    lim.max_newton = 5
+    with monkeypatch.context() as mp:
+        force_preconditioner(mp, precondition)
+        mp.setattr(solver.StrainLimiter, "pcg_budget", lambda self, pc_mode: 400)
+        mp.setattr(solver.StrainLimiter, "newton_budget", lambda self, pc_mode: 5)
+        mp.setattr(lim, "inner_rtol", 0.0)
+        mp.setattr(lim, "cg_rtol", 1e-10)
+        lim._upload_params()
+        metric = _redo_dynamics(sim, state)
+        pc = lim._pcg_preconditioner(metric)
+        usable = pc is not None and pc.usable(sim.model.pinned[: sim.model.n_verts])
+        lim.project(sim.h)
     lim._upload_params()
-    metric = _redo_dynamics(sim, state)
-    pc = lim._pcg_preconditioner(metric)
-    usable = pc is not None and pc.usable(sim.model.pinned[: sim.model.n_verts])
-    lim.project(sim.h)
     assert lim.last_converged and lim.last_violation_max < lim.tol
     return pc, usable, sim.model.positions()
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("linear_solver", ["pcg", "cholesky"])
-def test_direct_and_pcg_newton_give_the_same_projection(linear_solver):
-    """The same substep solved with both Newton solvers lands on the same constrained
-    positions (within what the tolerance allows)."""
-    ref = _hanging("warp-weft", "implicit", "pcg")
-    sim = _hanging("warp-weft", "implicit", linear_solver)
+def test_host_loop_and_kernel_newton_give_the_same_projection(monkeypatch):
+    """The same substep solved by the one-kernel PCG solve and by the host loop with
+    Cholesky steps (the path of Vulkan and Metal, taken here on the CPU) lands on the same
+    constrained positions (within what the tolerance allows)."""
+    ref = _hanging("warp-weft")
     ref.step_frame()
+    monkeypatch.setattr(solver.StrainLimiter, "uses_host_loop", lambda self: True)
+    sim = _hanging("warp-weft")
     sim.step_frame()
     assert sim.strain.last_converged and ref.strain.last_converged
     assert sim.strain.last_violation_max < 1e-4 and ref.strain.last_violation_max < 1e-4
+    assert sim.strain.last_factorizations > 0            # it did take Cholesky steps
     edge = np.sqrt(np.mean(sim.model.rest_area))
     assert np.abs(sim.model.positions() - ref.model.positions()).max() < 20 * 1e-4 * edge
 
 
 @pytest.mark.parametrize("method", ["svd", "warp-weft", "mapping"])
 def test_strain_limited_cloth_comes_to_rest(method):
-    """hanging at resolution 9 (soft cloth, +-1 % / +-5 %) under coupling "implicit": the
-    mean kinetic energy over frames 120-150 is below issue #13's 1e-6 J and a warm substep
-    needs at most two AL rounds (the split projection kept this cloth at 0.7-4.8e-4 J)."""
-    sim = _hanging(method, "implicit", res=9)
+    """hanging at resolution 9 (soft cloth, +-1 % / +-5 %): the mean kinetic energy over
+    frames 120-150 is below 1e-6 J and a warm substep needs at most two AL rounds (the
+    paper's split projection, which projects x_hat in the mass metric, kept this cloth at
+    0.7-4.8e-4 J)."""
+    sim = _hanging(method, res=9)
     ke = []
     for f in range(150):
         sim.step_frame()
@@ -205,102 +221,36 @@ def test_strain_limited_cloth_comes_to_rest(method):
     assert sim.strain.last_iterations <= 2
 
 
-def test_pcg_budget_is_per_method_under_implicit_coupling():
-    """Under coupling "implicit" each method has its measured PCG budget (CG_BUDGET, per 1000
-    faces, growing like sqrt(faces / 1000) above); the split projection keeps its own; an
-    explicit max_cg overrides both, and a method switch follows the table."""
-    from cloth.strain.solver import CG_BUDGET, CG_BUDGET_PROJECTION
-    sim = _hanging("mapping", "implicit", res=6)
-    lim = sim.strain
-    assert lim.max_cg is None
+def test_pcg_budget_is_per_method_and_grows_with_the_mesh():
+    """Block Jacobi's PCG budget per Newton step is the method's CG_BUDGET per 1000 faces,
+    growing like sqrt(faces / 1000) above."""
+    sim = _hanging("mapping", res=6)
     for method in ("mapping", "svd", "warp-weft"):
-        lim.set_method(method)
-        assert lim.cg_budget() == CG_BUDGET[method]          # 50 faces: no growth
-    lim.set_coupling("projection")
-    assert lim.cg_budget() == CG_BUDGET_PROJECTION
-    lim.max_cg = 7
-    assert lim.cg_budget() == 7
-    lim.set_coupling("implicit")
-    assert lim.cg_budget() == 7
-    big = _hanging("mapping", "implicit", res=46)              # 4050 faces
-    assert big.strain.cg_budget() == round(CG_BUDGET["mapping"] * np.sqrt(4050 / 1000))
-
-
-def test_inner_loop_stops_on_the_residual_under_implicit_coupling():
-    """A round's Newton loop stops once |grad L_A| fell to ``inner_rtol`` of its first value
-    (per coupling: the split projection runs full rounds); from saved states of hanging the
-    substeps then take fewer Newton steps, still converge, and land within a few tolerances
-    of the full-round answers. Whether a given substep's loop reaches the residual stop
-    depends on the state (measured on frames 6-10: 7-9 Newton steps instead of 10 in four of
-    five, none in one), so five consecutive states are tried."""
-    from cloth.strain.solver import INNER_RTOL
-    sim = _hanging("mapping", "implicit", res=9)
-    lim = sim.strain
-    # Block Jacobi: its Newton steps lower the residual fast on the stiff constraint
-    # directions, so the stop is seen within a round here (with the factor preconditioner a
-    # step lowers it by less and every round of this substep ran all its steps either way).
-    sim._change("strain", precondition="jacobi")
-    assert lim.inner_rtol == INNER_RTOL["implicit"] > 0
-    lim.set_coupling("projection")
-    assert lim.inner_rtol == INNER_RTOL["projection"] == 0
-    lim.set_coupling("implicit")
-    for _ in range(5):
-        sim.step_frame()
-    edge = sim.model.typical_edge()
-    saved = []
-    for _ in range(5):
-        sim.step_frame()
-        state = sim.substep_state()
-        out = {}
-        for rtol in (0.0, INNER_RTOL["implicit"]):
-            lim.inner_rtol = rtol
-            lim._upload_params()
-            _redo_dynamics(sim, state)
-            lim.project(sim.h)
-            assert lim.last_converged and lim.last_violation_max < lim.tol
-            out[rtol] = (sim.model.positions(), lim.last_newton, lim.last_iterations)
-        (x_full, newton_full, rounds_full), (x_cut, newton_cut, _) = out.values()
-        assert newton_full == lim.newton_budget(False) * rounds_full     # every round ran full
-        assert newton_cut <= newton_full
-        # Measured: up to 1.6 % of an edge; both lie ~4.5 % of an edge from the exactly
-        # solved projection (docs/speed/projection_error.md).
-        assert np.abs(x_cut - x_full).max() < 0.03 * edge
-        saved.append(newton_cut < newton_full)
-        sim.set_substep_state(state)               # back on the scene's own trajectory
-    assert any(saved)
-
-
-def test_stop_rule_settings_are_checked():
-    """A bad stop rule or stationarity tolerance is refused with a message that names the
-    choices."""
-    sim = _hanging("mapping", "implicit", res=4)
-    with pytest.raises(StrainLimitError, match="kkt, violation"):
-        StrainLimiter(sim.model, stop="stationary")
-    with pytest.raises(StrainLimitError, match="kkt_velocity"):
-        StrainLimiter(sim.model, kkt_velocity=0.0)
+        sim._change("strain", method=method)
+        assert sim.strain.pcg_budget(PC_JACOBI) == CG_BUDGET[method]   # 50 faces: no growth
+    big = _hanging("mapping", res=46)              # 4050 faces
+    assert big.strain.pcg_budget(PC_JACOBI) == round(CG_BUDGET["mapping"] * np.sqrt(4050 / 1000))
 
 
 @pytest.mark.parametrize("method", ["svd", "mapping"])
-def test_kkt_stop_reaches_its_stationarity_with_exact_steps(method):
-    """Under strain.stop = "kkt" a projection ends only once the Newton step at its answer,
-    with the final multipliers, moves no vertex by more than kkt_velocity x h; the limiter
-    reports that step as ``last_stationarity`` (m/s), and the metrics row carries it. Under
-    "violation" that step is not computed (NaN). Measured on hanging res 9 after 6 frames,
-    exact steps: svd 3 Newton steps, 2.9 mm/s; mapping 14 steps, 4.8 mm/s."""
-    sim = _hanging(method, "implicit", "cholesky", res=9)
+def test_exact_solve_reaches_its_stationarity(method):
+    """Under strain.solve = "exact" a projection ends only once the Newton step at its answer,
+    with the final multipliers, moves no vertex by more than KKT_VELOCITY x h; the limiter
+    reports that step as ``last_stationarity`` (m/s), and the metrics row carries it. The
+    fast solve does not compute that step (NaN)."""
+    sim = _hanging(method, res=9)
     for _ in range(6):
         sim.step_frame()
     state = sim.substep_state()
     lim = sim.strain
-    sim._change("strain", stop="violation")
     _redo_dynamics(sim, state)
     lim.project(sim.h)
     assert lim.last_converged and np.isnan(lim.last_stationarity)
-    sim._change("strain", stop="kkt")
+    sim._change("strain", solve="exact")
     _redo_dynamics(sim, state)
     lim.project(sim.h)
     assert lim.last_converged and lim.last_violation_max < lim.tol
-    assert 0.0 < lim.last_stationarity <= lim.kkt_velocity
+    assert 0.0 < lim.last_stationarity <= KKT_VELOCITY
     sim.step_frame()
     row = sim.metrics_row()
-    assert 0.0 <= row["sl_stationarity"] <= lim.kkt_velocity
+    assert 0.0 <= row["sl_stationarity"] <= KKT_VELOCITY

@@ -29,7 +29,7 @@ def _apply(pc_mode: int, nv: int, pc: PrecondPack, r: A, z: A) -> float:
 def test_kernel_applies_the_inverse_of_the_factored_matrix():
     """z = P^-1 r from the kernel's two triangular solves equals a direct solve with the
     factored (lumped, pinned-masked) matrix, for a random r; r.z is returned."""
-    sim = _hanging("mapping", "implicit", res=6)
+    sim = _hanging("mapping", res=6)
     sim.step_frame()
     sim.step_frame()
     lim = sim.strain
@@ -52,18 +52,18 @@ def test_kernel_applies_the_inverse_of_the_factored_matrix():
     assert pinned.any() and np.allclose(z[pinned], r[:nv].ravel()[pinned])
 
 
-def test_factor_and_block_jacobi_give_the_same_projection():
+def test_factor_and_block_jacobi_give_the_same_projection(monkeypatch):
     """From one saved state of hanging, the substep solved tightly with either preconditioner
     lands on the same constrained positions (within what the AL tolerance allows), and the
     factor is used only where it is meant to be."""
-    sim = _hanging("mapping", "implicit", res=9)
+    sim = _hanging("mapping", res=9)
     lim = sim.strain
     for _ in range(12):
         sim.step_frame()
     state = sim.substep_state()
     out = {}
     for precondition in ("factor", "jacobi"):
-        pc, _, out[precondition] = _tight_projection(sim, state, precondition)
+        pc, _, out[precondition] = _tight_projection(sim, state, precondition, monkeypatch)
         assert (pc is None) == (precondition == "jacobi")
     edge = sim.model.typical_edge()
     assert np.abs(out["factor"] - out["jacobi"]).max() < 20 * lim.tol * edge
@@ -72,10 +72,10 @@ def test_factor_and_block_jacobi_give_the_same_projection():
 def test_factor_is_refreshed_every_few_solves_and_only_for_small_meshes(monkeypatch):
     """The first FIRST_AFTER solves on a mesh run block Jacobi, and the factor is made after
     them; it is remade every REFRESH_SOLVES solves, after a pin changes and on a mesh
-    change; above FACTOR_MAX_FACES faces the multigrid is made instead, and on the split
-    projection neither."""
+    change; above FACTOR_MAX_FACES faces the multigrid is made instead, and for the masses'
+    metric (a projection without a time step) neither."""
     from cloth.strain import solver
-    sim = _hanging("mapping", "implicit", res=6)
+    sim = _hanging("mapping", res=6)
     lim = sim.strain
     made = []
     for _ in range(2 * factor_precond.REFRESH_SOLVES + factor_precond.FIRST_AFTER):
@@ -96,29 +96,23 @@ def test_factor_is_refreshed_every_few_solves_and_only_for_small_meshes(monkeypa
     monkeypatch.setattr(solver, "FACTOR_MAX_FACES", sim.model.n_faces)
     assert isinstance(lim._pcg_preconditioner(lim.system_metric()),
                       factor_precond.FactorPreconditioner)
-    lim.set_coupling("projection")
     assert lim._pcg_preconditioner(lim._newton_metric(False)) is None
 
 
-def test_rounds_take_fewer_newton_steps_with_the_factor():
-    """max_newton None: FACTOR_NEWTON steps per round with the factor, MULTIGRID_NEWTON
-    with the multigrid, MAX_NEWTON with block Jacobi; an explicit max_newton holds for all.
-    A solve with the factor stays within its budget (with inner_rtol 0 every round runs it
-    in full)."""
-    from cloth.strain.solver import FACTOR_NEWTON, MAX_NEWTON, MULTIGRID_NEWTON
-    sim = _hanging("mapping", "implicit", res=6)
+def test_rounds_take_fewer_newton_steps_with_the_factor(monkeypatch):
+    """FACTOR_NEWTON steps per round with the factor, MULTIGRID_NEWTON with the multigrid,
+    MAX_NEWTON with block Jacobi. A solve with the factor stays within its budget (with the
+    inner stop off every round runs it in full)."""
+    from cloth.strain.defaults import FACTOR_NEWTON, MAX_NEWTON, MULTIGRID_NEWTON
+    sim = _hanging("mapping", res=6)
     lim = sim.strain
-    assert lim.max_newton is None
     assert lim.newton_budget(PC_FACTOR) == FACTOR_NEWTON
     assert lim.newton_budget(PC_MULTIGRID) == MULTIGRID_NEWTON
     assert MULTIGRID_NEWTON < FACTOR_NEWTON < lim.newton_budget(PC_JACOBI) == MAX_NEWTON
-    lim.inner_rtol = 0.0
+    monkeypatch.setattr(lim, "inner_rtol", 0.0)
     lim._upload_params()
     for _ in range(4):
         sim.step_frame()
     assert lim._pc.usable(sim.model.pinned)
     sim.step_frame()
     assert lim.last_newton == FACTOR_NEWTON * lim.last_iterations
-    lim.max_newton = 7
-    assert lim.newton_budget(PC_FACTOR) == lim.newton_budget(PC_JACOBI) == \
-        lim.newton_budget(PC_MULTIGRID) == 7

@@ -11,7 +11,7 @@ from cloth import linalg
 from cloth.strain import multigrid
 from cloth.strain.buffers import PC_MULTIGRID, A
 from cloth.strain.factor_precond import pinned_values
-from tests.test_coupling import _hanging, _tight_projection
+from tests.test_coupling import _hanging, _tight_projection, force_preconditioner
 
 
 @ti.kernel
@@ -21,11 +21,11 @@ def _apply(nv: int, mg_int: A, mg_real: A, mg_block: A, r: A, z: A):
         multigrid.apply(nv, mg_int, mg_real, mg_block, r, z)
 
 
-def _built(res=13):
-    """A hanging sheet after two frames and a multigrid of its pinned implicit-step matrix:
-    (sim, the preconditioner, that matrix as scipy CSR)."""
-    sim = _hanging("mapping", "implicit", res=res, precondition="multigrid")
-    assert sim.strain.precondition == "multigrid"
+def _built(monkeypatch, res=13):
+    """A hanging sheet after two frames and a multigrid of its pinned implicit-step matrix
+    (forced at this size): (sim, the preconditioner, that matrix as scipy CSR)."""
+    force_preconditioner(monkeypatch, "multigrid")
+    sim = _hanging("mapping", res=res)
     sim.step_frame()
     sim.step_frame()
     pc = sim.strain._pc
@@ -46,13 +46,13 @@ def _kernel_apply(sim, pc, r):
     return ws.z.to_numpy()[:nv].ravel()
 
 
-def test_kernel_cycle_matches_the_documented_one_and_is_symmetric_positive():
+def test_kernel_cycle_matches_the_documented_one_and_is_symmetric_positive(monkeypatch):
     """For random vectors the kernel's z = M^-1 r equals the numpy statement of the cycle
     (``apply_reference``), x.M^-1 y = y.M^-1 x, r.M^-1 r > 0, and pinned vertices get no
     step. The hierarchy has more than two levels (the V-cycle's down and up loops run)."""
     # Resolution 21: with the boundary-consistent bending (issue #35) the hierarchy at 17 has
     # two levels only (867 and 60 unknowns; at 21: 1323, 63, 12).
-    sim, pc, _ = _built(res=21)
+    sim, pc, _ = _built(monkeypatch, res=21)
     assert len(pc.levels) >= 3 and pc.levels[0] == 3 * sim.model.n_verts
     nv = sim.model.n_verts
     rng = np.random.default_rng(5)
@@ -66,12 +66,12 @@ def test_kernel_cycle_matches_the_documented_one_and_is_symmetric_positive():
     assert pinned.any() and np.all(zx[pinned] == 0.0)
 
 
-def test_multigrid_preconditions_its_matrix_far_better_than_block_jacobi():
+def test_multigrid_preconditions_its_matrix_far_better_than_block_jacobi(monkeypatch):
     """CG on the implicit step's (pinned) matrix itself, to a relative residual of 1e-8:
     with the multigrid it takes under half the iterations block Jacobi does (at 3.2k faces;
     block Jacobi's count grows with the cloth's diameter: measured 311 against 113 here, 743
     against 166 at 16k faces, 139 against 90 at 1.2k)."""
-    sim, pc, matrix = _built(res=41)
+    sim, pc, matrix = _built(monkeypatch, res=41)
     nv = sim.model.n_verts
     free = np.repeat(~sim.model.pinned[:nv], 3)
     b = np.random.default_rng(7).standard_normal(3 * nv) * free
@@ -88,19 +88,19 @@ def test_multigrid_preconditions_its_matrix_far_better_than_block_jacobi():
     assert counts["multigrid"] < 0.5 * counts["jacobi"], counts
 
 
-def test_multigrid_and_block_jacobi_give_the_same_projection():
+def test_multigrid_and_block_jacobi_give_the_same_projection(monkeypatch):
     """From one saved state of hanging, the substep solved tightly with either preconditioner
     lands on the same constrained positions (within what the AL tolerance allows), and the
     solve with the multigrid really uses it."""
-    sim = _hanging("mapping", "implicit", res=9)
+    force_preconditioner(monkeypatch, "multigrid")
+    sim = _hanging("mapping", res=9)
     lim = sim.strain
-    sim._change("strain", precondition="multigrid")
     for _ in range(12):
         sim.step_frame()
     state = sim.substep_state()
     out = {}
     for precondition in ("multigrid", "jacobi"):
-        pc, usable, out[precondition] = _tight_projection(sim, state, precondition)
+        pc, usable, out[precondition] = _tight_projection(sim, state, precondition, monkeypatch)
         assert (usable and pc.mode == PC_MULTIGRID) == (precondition != "jacobi")
     edge = sim.model.typical_edge()
     assert np.abs(out["multigrid"] - out["jacobi"]).max() < 20 * lim.tol * edge
@@ -111,7 +111,7 @@ def test_without_pyamg_the_solve_falls_back_to_block_jacobi_and_says_so_once(mon
     """If pyamg cannot be imported, a mesh above FACTOR_MAX_FACES gets no preconditioner
     object (block Jacobi), and one line on stderr names the fix."""
     from cloth.strain import solver
-    sim = _hanging("mapping", "implicit", res=6)
+    sim = _hanging("mapping", res=6)
     lim = sim.strain
     monkeypatch.setattr(solver, "HAVE_PYAMG", False)
     monkeypatch.setattr(solver, "_no_pyamg_noted", False)

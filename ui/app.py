@@ -331,9 +331,9 @@ class App:
             iters = g.slider_int("SL iterations", int(st.settings.strain.iters), 1, 200)
             if iters != st.settings.strain.iters:
                 st.set_iterations(iters)
-            exact = g.checkbox("exact Newton steps (slow)", st.exact_steps)
-            if exact != st.exact_steps:
-                st.set_exact_steps(exact)
+            exact = g.checkbox("exact solve (slow)", st.exact_solve)
+            if exact != st.exact_solve:
+                st.set_exact_solve(exact)
 
             # Dynamics.
             g.text("")

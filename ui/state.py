@@ -369,14 +369,13 @@ class AppState:
         return self._each(lambda s: s.set_iterations(max(1, int(n))))
 
     @property
-    def exact_steps(self):
-        return self.settings.strain.linear_solver == "cholesky"
+    def exact_solve(self):
+        return self.settings.strain.solve == "exact"
 
-    def set_exact_steps(self, on):
-        """Exact Newton steps in the strain solve (strain.linear_solver "cholesky") or the
-        default PCG ones: several times slower, but a landing cloth keeps its motion."""
-        solver = "cholesky" if on else "pcg"
-        return self._each(lambda s: s.set_strain_linear_solver(solver))
+    def set_exact_solve(self, on):
+        """Each projection solved to its minimiser (strain.solve "exact") or stopped once the
+        limits hold ("fast", the default): 2x to several hundred times slower."""
+        return self._each(lambda s: s.set_strain_solve("exact" if on else "fast"))
 
     # -- time step and material ---------------------------------------------------------------
     def set_substeps(self, n):

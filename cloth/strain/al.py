@@ -7,17 +7,16 @@ algorithm, in the order the kernel runs them.
 """
 import taichi as ti
 
-from .buffers import (B_ADAPTIVE, B_FROM_PREV, B_MAX_CG, B_MAX_NEWTON, B_MAX_ROUNDS, B_MU0,
+from .buffers import (B_FROM_PREV, B_MAX_CG, B_MAX_NEWTON, B_MAX_ROUNDS, B_MU0,
                       B_MU_GROW, B_MU_MAX, B_PC_MODE, B_RTOL, B_STEP_TOL, B_TOL, CONTACT_SLOTS,
                       CONVERGED, FEASIBLE_AS_GIVEN, LAST_TRY, N_STATS, NO_CONTACT, NO_SKIP,
-                      P_C_STEP, P_CONTACT_SCALE, P_DELTA, P_INNER_RTOL, P_ISO, P_KKT_TOL,
+                      P_CONTACT_SCALE, P_DELTA, P_INNER_RTOL, P_ISO, P_KKT_TOL,
                       P_MARGIN, P_PDAS, P_SHEAR, P_SVD_DELTA, P_WARP, P_WEFT,
                       PC_FACTOR, PC_JACOBI, PC_MULTIGRID, RUNNING, ST_CG, ST_COMP, ST_CONVERGED,
                       ST_ITERS, ST_KKT, ST_NEWTON, ST_START_VIOL, ST_TRIALS, ST_VIOL, A, T,
                       ConstraintPack, ContactPack, MeshPack, MetricPack, PrecondPack, StepPack,
                       VectorPack)
 from . import multigrid
-from .c_curvature import c_curvature_block, face_c_curvature
 from .constraints import MAPPING_PAIRS_BY_ALIGNMENT, SVD, face_constraints
 
 
@@ -308,19 +307,7 @@ def near_weight(s, near):
 
 
 @ti.func
-def fill_c_curvature(method: ti.template(), K, nf, mu, x: T, mesh: T, cons: T):
-    """The exact constraint curvature of every face at x (c_curvature.py); the Newton matrix
-    then uses it instead of the model. Called where the curvature is exact: solve_al compiles
-    it in only with its template argument ``exact``, the direct path's kernels (compiled once
-    for both) call it where params[P_CURVATURE] says so."""
-    params_w = ti.Vector([mesh.params[k] for k in ti.static(range(6))])
-    for f in range(nf):
-        face_c_curvature(method, K, f, x, mesh, params_w, mesh.params[P_ISO],
-                         mesh.params[P_C_STEP], cons, mu)
-
-
-@ti.func
-def newton_matrix(K, nv, nf, ns, mu, margin, c_scale, use_twist, exact, x: T, mesh: T,
+def newton_matrix(K, nv, nf, ns, mu, margin, c_scale, use_twist, x: T, mesh: T,
                   metric: T, cons: T, contacts: T):
     """The projected-Newton matrix of L_A at x, written out in W's block pattern (which
     must hold every face and seam pair: ``system_matrix.build_pattern``):
@@ -333,8 +320,7 @@ def newton_matrix(K, nv, nf, ns, mu, margin, c_scale, use_twist, exact, x: T, me
     (measured on a 10x10 sheet: 112 of 486 constraints switched on within 1e-3 of a step)
     and the line search then accepts only tiny steps; with the margin the same projection
     needs 6 instead of > 40 rounds. The curvature is the model of constraints.py (the
-    curvature of ||F e|| with e frozen, plus svd's twist term) or, with ``exact``, the
-    exact curvature of c_curvature.py (``fill_c_curvature`` first). Pinned rows and columns
+    curvature of ||F e|| with e frozen, plus svd's twist term). Pinned rows and columns
     become the identity (their step is zero).
 
     Why written out rather than applied face by face: one PCG iteration is then a single
@@ -366,8 +352,6 @@ def newton_matrix(K, nv, nf, ns, mu, margin, c_scale, use_twist, exact, x: T, me
                 e = c - c % 2
                 gr, cmv, w = cons.grad[f, e], cons.cm[f, e], cons.what[f, e]
                 sc = ti.max(s, 0.0)
-                if exact:
-                    sc = 0.0       # the exact curvature is added per face below
                 wmu = near_weight(s, near) * mu
                 for a in ti.static(range(3)):
                     for b in ti.static(range(a, 3)):
@@ -398,11 +382,6 @@ def newton_matrix(K, nv, nf, ns, mu, margin, c_scale, use_twist, exact, x: T, me
                     metric.H[metric.face_slot[f, 3 * a + b]] += blk
                     if ti.static(a < b):
                         metric.H[metric.face_slot[f, 3 * b + a]] += blk.transpose()
-        if exact:
-            for a in ti.static(range(3)):
-                for b in ti.static(range(3)):
-                    slot = metric.face_slot[f, 3 * a + b]
-                    metric.H[slot] += c_curvature_block(cons.curv, f, a, b)
     while copied < nv:
         for k in range(metric.w_ptr[copied], metric.w_ptr[copied + 1]):
             metric.H[k] = metric.w_val[k]
@@ -474,16 +453,13 @@ def precondition(pc_mode, nv, pc: T, r: T, z: T):
 
 
 @ti.func
-def newton_direction(method: ti.template(), exact: ti.template(), pdas: ti.template(), K, nv,
-                     nf, ns, mu, max_cg, rtol, margin, use_twist, c_scale, pc_mode, mesh: T,
+def newton_direction(method: ti.template(), pdas: ti.template(), K, nv, nf, ns, mu, max_cg, rtol, margin, use_twist, c_scale, pc_mode, mesh: T,
                      metric: T, cons: T, contacts: T, vec: T, pc: T):
     """pcg_direction's matrix and PCG solve at vec.x, with r = -grad L_A already in vec.r
     (and, in a kernel compiled with ``pdas``, the active-set re-solves when params[P_PDAS] is
     set; vec.x_trial is their scratch)."""
-    if ti.static(exact):
-        fill_c_curvature(method, K, nf, mu, vec.x, mesh, cons)
-    newton_matrix(K, nv, nf, ns, mu, margin, c_scale, use_twist, exact, vec.x, mesh, metric,
-                  cons, contacts)
+    newton_matrix(K, nv, nf, ns, mu, margin, c_scale, use_twist, vec.x, mesh, metric, cons,
+                  contacts)
     rr = 0.0
     for n in range(nv):
         if pc_mode == PC_JACOBI:
@@ -704,7 +680,7 @@ def pcg_loop(flipped: ti.template(), K, nv, nf, mu, max_cg, rtol, rr, pc_mode, m
 
 
 @ti.func
-def pcg_direction(method: ti.template(), exact: ti.template(), pdas: ti.template(), K, nv, nf,
+def pcg_direction(method: ti.template(), pdas: ti.template(), K, nv, nf,
                   ns, mu, max_cg, rtol, margin, use_twist, c_scale, pc_mode, skip_rr, mesh: T,
                   metric: T, cons: T, contacts: T, vec: T, pc: T):
     """Projected-Newton direction at vec.x: solve H d = -grad L_A (H from ``newton_matrix``)
@@ -717,7 +693,7 @@ def pcg_direction(method: ti.template(), exact: ti.template(), pdas: ti.template
     rr0 = dot(vec.r, vec.r, nv)
     slope, it = 0.0, 0
     if rr0 > skip_rr:
-        slope, it = newton_direction(method, exact, pdas, K, nv, nf, ns, mu, max_cg, rtol,
+        slope, it = newton_direction(method, pdas, K, nv, nf, ns, mu, max_cg, rtol,
                                      margin, use_twist, c_scale, pc_mode, mesh, metric, cons,
                                      contacts, vec, pc)
     else:
@@ -832,7 +808,7 @@ def choose_start(method: ti.template(), from_prev, K, nv, nf, ns, mu, mesh: T, m
 
 
 @ti.kernel
-def solve_al(method: ti.template(), exact: ti.template(), with_pdas: ti.template(), budget: A,
+def solve_al(method: ti.template(), with_pdas: ti.template(), budget: A,
              mesh: MeshPack, metric: MetricPack, cons: ConstraintPack, contacts: ContactPack,
              vec: VectorPack, pc: PrecondPack, stats: A):
     """The whole AL projection (docs/method.md §4) in one launch (measured: with one launch per
@@ -853,7 +829,7 @@ def solve_al(method: ti.template(), exact: ti.template(), with_pdas: ti.template
     ti.loop_config(serialize=True)
     for _ in range(1):
         K, nv, nf, ns = cons.n_per_face, mesh.n_verts, mesh.n_faces, contacts.n_stitches
-        use_twist = mesh.params[P_SVD_DELTA] > 0.0 and ti.static(method == SVD and not exact)
+        use_twist = mesh.params[P_SVD_DELTA] > 0.0 and ti.static(method == SVD)
         margin = mesh.params[P_MARGIN]
         c_scale = mesh.params[P_CONTACT_SCALE]
         mu_grow, mu_max = budget[B_MU_GROW], budget[B_MU_MAX]
@@ -861,7 +837,6 @@ def solve_al(method: ti.template(), exact: ti.template(), with_pdas: ti.template
         max_newton = ti.cast(budget[B_MAX_NEWTON], ti.i32)
         max_cg = ti.cast(budget[B_MAX_CG], ti.i32)
         rtol, tol, step_tol = budget[B_RTOL], budget[B_TOL], budget[B_STEP_TOL]
-        adaptive = budget[B_ADAPTIVE] > 0.0
         from_prev = ti.cast(budget[B_FROM_PREV], ti.i32)
         pc_mode = ti.cast(budget[B_PC_MODE], ti.i32)
         mu = budget[B_MU0]
@@ -899,7 +874,7 @@ def solve_al(method: ti.template(), exact: ti.template(), with_pdas: ti.template
                     skip = NO_SKIP
                     if inner > 0:
                         skip = mesh.params[P_INNER_RTOL] ** 2 * rr_first
-                    slope, cg_it, rr = pcg_direction(method, exact, with_pdas, K, nv, nf, ns, mu,
+                    slope, cg_it, rr = pcg_direction(method, with_pdas, K, nv, nf, ns, mu,
                                                      max_cg, rtol, margin, use_twist, c_scale,
                                                      pc_mode, skip, mesh, metric, cons,
                                                      contacts, vec, pc)
@@ -975,13 +950,6 @@ def solve_al(method: ti.template(), exact: ti.template(), with_pdas: ti.template
                 # Gradients and curvature at x (the step's end, or x again after a failed
                 # search, whose trials overwrote the values).
                 assemble_all(method, nf, vec.x, mesh, cons)
-                if adaptive:
-                    # Trust the exact active set more after a full step, widen it after a
-                    # short one (``adaptive_margin``).
-                    if alpha >= 1.0 and tries == 0:
-                        margin *= 0.25
-                    elif alpha < 0.25 or tries == LAST_TRY:
-                        margin = ti.min(ti.max(4.0 * margin, 1e-4), 0.1)
                 if step < step_tol or (kkt_tol > 0.0 and d_max <= inner_kkt):
                     break
             if converged != RUNNING:

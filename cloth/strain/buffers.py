@@ -1,8 +1,8 @@
 """The Taichi side of strain limiting, part 1: the work arrays (``Workspace``), the named
 groups the kernels take them in (``MeshPack`` ... ``StepPack``), the indices into its
 ``params``, ``budget`` and ``stats`` arrays, and copies between the model's fields and the arrays.
-The solves are in ``al.py`` (augmented Lagrangian, one kernel) and ``pbd.py`` (the per-triangle
-baselines); ``direct.py`` is the Cholesky path.
+The solves are in ``al.py`` (augmented Lagrangian, one kernel) and ``direct.py`` (its loop on
+the host with Cholesky steps).
 
 Design notes (measured on this 2-core CPU, Taichi 1.7.4, f64):
 - Every array is a Taichi *ndarray* passed as a kernel argument, never a field captured by a
@@ -49,28 +49,23 @@ PC_JACOBI, PC_FACTOR, PC_MULTIGRID = 0, 1, 2
 # Indices into the ``params`` array.
 P_WARP, P_WEFT, P_SHEAR, P_MARGIN, P_DELTA, P_SVD_DELTA, P_CONTACT_SCALE = 0, 2, 4, 6, 7, 8, 9
 P_ISO = 10
-# The Newton matrix's constraint curvature: 0 the model of constraints.py, 1 exact through C
-# (c_curvature.py), with its difference step in C. Read by the direct path's kernels, which
-# compile once for both; ``al.solve_al`` takes the choice as its template argument ``exact``
-# instead (compiled in only where chosen) and does not read P_CURVATURE.
-P_CURVATURE, P_C_STEP = 11, 12
 # A round's inner loop stops once |grad L_A| fell below this fraction of its first value (0:
 # run max_newton steps).
-P_INNER_RTOL = 13
+P_INNER_RTOL = 11
 # The KKT stop's stationarity tolerance (metres: the largest vertex move of a Newton step at the
-# answer); 0 = the old stop on violation and multiplier change alone.
-P_KKT_TOL = 14
+# answer); 0 = the fast solve's stop on violation and multiplier change alone.
+P_KKT_TOL = 12
 # 1: the PCG path's Newton step is the primal-dual active-set step (``al.pdas_resolves``,
-# strain.newton_model = "active-set" with strain.linear_solver = "pcg"); 0: the margin model's.
-P_PDAS = 15
-N_PARAMS = 16
+# the exact solve in the kernels); 0: the fast (margin) model's.
+P_PDAS = 13
+N_PARAMS = 14
 # Indices into the ``budget`` array: one AL solve's controls (``al.solve_al``), written by the
 # host before each launch. Why an array and not kernel arguments: solve_al had 65 parameters
 # (issue #37), and Taichi counts every scalar, ndarray and argpack member against one limit
 # of 64 per launch; the integers are exact in a float.
 (B_MU0, B_MU_GROW, B_MU_MAX, B_MAX_ROUNDS, B_MAX_NEWTON, B_MAX_CG, B_RTOL, B_TOL, B_STEP_TOL,
- B_ADAPTIVE, B_FROM_PREV, B_PC_MODE) = range(12)
-N_BUDGET = 12
+ B_FROM_PREV, B_PC_MODE) = range(11)
+N_BUDGET = 11
 # A vertex without a contact half-space: n = 0 and d far below any position, so d - n.x never
 # comes near activating.
 NO_CONTACT = -1e30
@@ -108,7 +103,7 @@ MeshPack = ti.types.argpack(face_verts=A, Dm_inv=A, grain=A, rest_area=A, mass=A
                             params=A, n_verts=ti.i32, n_faces=ti.i32)
 MetricPack = ti.types.argpack(w_ptr=A, w_col=A, w_val=A, w_diag=A, face_slot=A,
                               stitch_slot=A, H=A)
-ConstraintPack = ti.types.argpack(lam=A, g=A, grad=A, cm=A, what=A, kappa=A, twist=A, curv=A,
+ConstraintPack = ti.types.argpack(lam=A, g=A, grad=A, cm=A, what=A, kappa=A, twist=A,
                                   n_per_face=ti.i32)
 ContactPack = ti.types.argpack(contact=A, contact_mu=A, lam_c=A, fric=A, lam_t=A, stitch=A,
                                lam_s=A, n_stitches=ti.i32)
@@ -151,7 +146,6 @@ class Workspace:
         self.what = ti.ndarray(vec3, (F, K))
         self.kappa = ti.ndarray(float, (F, K))
         self.twist = ti.ndarray(vec9, (F, K))     # extra rank-1 curvature (svd only)
-        self.curv = ti.ndarray(vec9, (F, 3))      # exact curvature per face (c_curvature.py)
         # Per-vertex vectors: positions (x), unconstrained x_hat, start of the call, line-search
         # trial, Newton direction and PCG vectors, W (x - x_hat) (before choose_start: the
         # start candidate); Jacobi accumulators; the last projection's velocities.
@@ -198,7 +192,7 @@ class Workspace:
         (constraints.N_CONSTRAINTS)."""
         return self.pack("cons", ConstraintPack, lam=self.lam, g=self.g, grad=self.grad,
                          cm=self.cm, what=self.what, kappa=self.kappa, twist=self.twist,
-                         curv=self.curv, n_per_face=int(K))
+                         n_per_face=int(K))
 
     def contact_pack(self):
         return self.pack("contacts", ContactPack, contact=self.contact,

@@ -1,37 +1,63 @@
-"""Strain-solver defaults the settings need without importing the solver (which creates Taichi
-types at import: ``cloth.backend.init`` must come before those, and the settings are read
-before it)."""
+"""The strain solve's tuned constants, in one place, each with the reason for its value.
 
-# The AL's outer-round budget per projection, the one default (settings strain.iters too): a
-# cap for solves that stall, since converged solves stop at tol (2-8 rounds on hanging). 50
-# was too tight: svd on hanging with remeshing ran out once in 300 frames (violation 1.3e-3);
-# that solve, continued, converged 84 rounds later, and with 100 all 300 frames pass
-# (docs/remesh/remesh_limits.md).
+Importable without Taichi (the settings read it before ``cloth.backend.init``). The
+measurements behind these values are in docs/history/ (the solver's change log) and the
+current pages of docs/speed/.
+"""
+
+# settings strain.solve: "fast" stops a projection once the limits hold; "exact" solves it to
+# the minimiser (active-set Newton model and a stationarity stop).
+SOLVES = ("fast", "exact")
+
+# AL rounds per projection (settings strain.iters): a cap for stalled solves; converged ones
+# take 2-8 rounds, and 50 ran out once in 300 remeshed svd frames where 100 never did.
 AL_ROUNDS = 100
 
-# How a projection decides it is done (settings strain.stop; cloth/strain/solver.py STOPS): "kkt"
-# also asks for stationarity, "violation" only for feasibility. "violation" stays the default
-# while the default Newton steps cannot reach stationarity reliably: under "kkt" the PCG path's
-# svd projection of a stretched 8 x 8 sheet ran its 100 rounds without reaching 1 cm/s
-# (tests/test_strain_solver.py), and its Newton step underestimates the distance to the
-# minimiser anyway (docs/speed/motion.md).
-STOP = "violation"
-# The KKT stop's stationarity tolerance as a velocity (m/s; settings strain.kkt_velocity): the
-# Newton step at the answer moves no vertex by more than this x h (1 cm/s: 0.33 mm a step at
-# 30 frames a second, against edges of 3-4 cm).
+# "exact": the stationarity tolerance as a velocity (m/s): the Newton step at the answer moves
+# no vertex by more than this x h (1 cm/s is 0.33 mm a step at 30 Hz, edges are 3-4 cm).
 KKT_VELOCITY = 1e-2
 
-# Closure of the mapping family's feasible set at isotropy (METHOD 3.3 "the feasible set is not
-# closed there"). The paper's c_ij = |e_i . v_j| depends on the principal frame V, which is
-# arbitrary at eta1 = eta2 and turns by ~45 degrees under tiny changes of F near it, while the
-# projection drives stretched regions exactly there: a near-isotropic stretch with V at 45
-# degrees is the largest stretch the constraints allow (sqrt 2 eps). Measured on the tshirt
-# scene (mapping +-5 %, the first projection that failed, t = 0.1 s): the worst faces ended at
-# eta = (1.072, 1.063), V at 45 degrees, and the solve did not converge in 50 or 200 rounds
-# (violation 6.5e-3); svd and warp-weft from the same state converged in 8-9 rounds. Loom
-# blends c_ij towards the isotropic value 1/sqrt 2 (the permissive end of the closure) with the
-# weight w = D^2 / (D^2 + iso^2), D = eta1^2 - eta2^2; w c^2 keeps c~ continuous at D = 0 and
-# w dc (dc ~ 1/D) bounded. With iso = 0.01 (triangles whose principal stretches differ by less
-# than ~0.5 % strain) the same solve converged in 13 rounds, with 0.03 in 7. iso = 0 restores
-# the paper's constraint exactly (``strain.isotropy = 0``).
+# mapping: width (in eta1^2 - eta2^2) of the closure of its feasible set at isotropy, where the
+# paper's constraint depends on an arbitrary principal frame (docs/method.md §3.3). 0.01 let the
+# tshirt's worst projection converge in 13 rounds, where 0 did not converge in 200.
 MAPPING_ISO = 0.01
+
+# Initial AL penalty x the implicit metric's mean diagonal: a stiff start lets the warm
+# multipliers end a resting solve in one round (1e3 rested hanging res 9 at 2e-9 J, 1e2 never).
+MU_SCALE = 1e3
+# "exact": its Newton matrix is the Hessian, so it needs no stiff penalty to keep steps short;
+# a soft one lets the line search cross a constraint's kink cheaply.
+ACTIVE_SET_MU = 1e-2
+MU_GROW, MU_MAX_SCALE = 4.0, 1e6          # penalty x MU_GROW per round, capped at MU_MAX_SCALE
+
+# Constraints within this strain of their band already enter the "fast" Newton matrix.
+ACTIVE_MARGIN = 1e-2
+# PCG relative residual per Newton step: 0.1 needs as many Newton steps as 1e-3 at half the work.
+CG_RTOL = 0.1
+# A round's inner loop stops once |grad L_A| fell below this fraction of its first value:
+# the rounds are set by the multiplier updates, and 0.3 ran res 46 in 72 instead of 119 ms.
+INNER_RTOL = 0.3
+
+# Block-Jacobi PCG iterations per Newton step at 1000 faces, x sqrt(faces / 1000) above
+# (corrections travel across the cloth): fewer leave the resting cloth shimmering.
+CG_BUDGET = {"mapping": 15, "svd": 25, "warp-weft": 25}
+# The factor preconditioner (factor_precond.py) up to this many faces, the multigrid above:
+# the factor's serial triangular solves and factorisation grow faster than the mesh.
+FACTOR_MAX_FACES = 2000
+# PCG iterations with the factor: FACTOR_CG_WORK / faces clipped to [FACTOR_CG, FACTOR_CG_MAX]
+# (an iteration costs ~ the faces, so small meshes afford more; 6 at 1152 faces rested best).
+FACTOR_CG, FACTOR_CG_MAX, FACTOR_CG_WORK = 6, 20, 6000
+# PCG iterations with the multigrid, per method: it finds a fixed share of the step per
+# iteration at every size; warp-weft needs more (4 took 6.5 rounds at 64.8k faces, 8 took 4.5).
+MULTIGRID_CG = {"mapping": 4, "svd": 4, "warp-weft": 8}
+# Newton steps per AL round: block Jacobi 5 (3 shimmered), the factor 4 (finds most of the
+# step per solve), the multigrid 2 (the rounds are set by the multipliers; 2 was fastest).
+MAX_NEWTON, FACTOR_NEWTON, MULTIGRID_NEWTON = 5, 4, 2
+# "exact" in the kernels: its step predicts the active set from the PCG's answer, so the PCG
+# runs tighter and a round takes more steps (with the fast settings 2 of 8 frames stalled).
+PDAS_CG_RTOL, PDAS_NEWTON = 1e-2, 10
+
+# The projection starts each vertex moved on at its last velocity, in full from 4 x this speed
+# (m/s), not at all below it: from where the vertices were, a landing sheet was held in the air;
+# moved on at every speed, the resting cloth jittered.
+SETTLE_SPEED = 0.1

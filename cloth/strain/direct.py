@@ -1,38 +1,25 @@
-"""The augmented-Lagrangian projection with exact Newton steps: each inner step assembles the
-projected-Newton matrix as a 3x3-block sparse matrix and solves it by a sparse Cholesky
-factorisation (``linalg.SparseCholesky``), whose symbolic analysis is reused until the mesh
-changes.
+"""The augmented-Lagrangian projection with its loop on the host and exact Newton steps: each
+inner step assembles the projected-Newton matrix as a 3x3-block sparse matrix and solves it by
+a sparse Cholesky factorisation (``linalg.SparseCholesky``, reused as a CG preconditioner until
+a step needs a fresh one), whose symbolic analysis is kept until the mesh changes.
 
-Why (measured on the hanging scene, issue #13): under coupling "implicit" the projection's
-metric is the implicit step's matrix A = M + h^2 K (+ damping), and on soft cloth h^2 K is ~100
-times M, so block-Jacobi PCG (``solve_al``) needs hundreds of iterations per Newton step and
-its inexact steps never let a round's inner loop converge (5 Newton steps every round, 5-7
-rounds every substep even at rest). An exact step converges the inner loop in 1-3 steps and a
-warm-started cloth at rest in one round.
-
-The AL itself is the one of ``al.solve_al`` (same merit function, residual, line search,
-multiplier step, stopping rule); only the loop runs on the host, so a library can do the
-factorisation. Per Newton step: one kernel assembles the residual and the matrix values, the
-host solves (``SparseCholesky.solve_reusing``: CG preconditioned by the last factorisation,
-a new factorisation when that does not reach 1e-3 in 2 iterations; the factorisation is of the
-face and seam blocks with the bending's two-ring entries lumped, so CG on the full matrix
-finishes each fresh solve to 1e-10), one kernel runs the line search. Measured before the
-lumping (hanging, svd, LOOM_FAST_COMPILE=1; factorising every step -> reusing):
-resolution 25 at rest 47 -> 35 ms per frame (2.9 of 5 Newton steps factorise), resolution 46
-from the start 68 -> 27 ms median, p90 3.1 s -> 0.49 s. mapping gains nothing (its matrix
-changes too much between steps: 9 of 15 refactorise; 140 vs 155 ms at resolution 25).
+Used where the one-kernel PCG solve (``al.solve_al``) is not: the exact solve of a cloth with
+seams (the active-set step, ``active_set.py``, needs exact linear solves at the seams'
+equalities) and the Vulkan and Metal back ends (the one long kernel crashed Debian's software
+Vulkan driver). The AL itself is ``solve_al``'s: the same merit function, residual, line
+search, multiplier step and stopping rule, from the kernels of ``al.py``.
 """
 import os
 
 import numpy as np
 import taichi as ti
 
-from .. import backend, ndarrays
-from . import active_set, exact_curvature
+from .. import backend
+from . import active_set
 from . import al
-from .al import (SVD, assemble_all, choose_start, fill_c_curvature, merit, metric_gradient,
+from .al import (SVD, assemble_all, choose_start, merit, metric_gradient,
                  newton_matrix, residual, update_multipliers, vertex_violation, violation_of)
-from .buffers import (LAST_TRY, P_CONTACT_SCALE, P_CURVATURE, P_MARGIN, P_SVD_DELTA,
+from .buffers import (LAST_TRY, P_CONTACT_SCALE, P_MARGIN, P_SVD_DELTA,
                       PC_JACOBI, ST_CG, ST_COMP, ST_CONVERGED, ST_ITERS, ST_KKT, ST_NEWTON,
                       ST_START_VIOL, ST_VIOL, A, ConstraintPack, ContactPack, MeshPack,
                       MetricPack, T, VectorPack)
@@ -78,14 +65,11 @@ def newton_system(method: ti.template(), mu: float, mesh: MeshPack, metric: Metr
     ti.loop_config(serialize=True)
     for _ in range(1):
         K, nv, nf, ns = cons.n_per_face, mesh.n_verts, mesh.n_faces, contacts.n_stitches
-        exact = mesh.params[P_CURVATURE] > 0.0
         metric_gradient(nv, vec.x, metric, vec)
         residual(K, nv, nf, ns, mu, vec.x, mesh, cons, contacts, vec)
-        if exact:
-            fill_c_curvature(method, K, nf, mu, vec.x, mesh, cons)
-        use_twist = mesh.params[P_SVD_DELTA] > 0.0 and ti.static(method == SVD) and not exact
+        use_twist = mesh.params[P_SVD_DELTA] > 0.0 and ti.static(method == SVD)
         newton_matrix(K, nv, nf, ns, mu, mesh.params[P_MARGIN], mesh.params[P_CONTACT_SCALE],
-                      use_twist, exact, vec.x, mesh, metric, cons, contacts)
+                      use_twist, vec.x, mesh, metric, cons, contacts)
 
 
 @ti.kernel
@@ -172,7 +156,7 @@ def solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, margin_mu=None):
     and seam pair; ``chol``: a ``linalg.SparseCholesky`` for that pattern. Returns (rounds,
     Newton steps, converged) and fills ``ws.stats`` like ``solve_al``.
 
-    With ``lim.newton_model == "active-set"`` a projection that has not converged in
+    Under the exact solve (the active-set model) a projection that has not converged in
     ``ACTIVE_SET_ROUNDS`` rounds is solved again from its start with the margin model (initial
     penalty ``margin_mu``; ``lim.last_fallback`` says so). Why: the mapping family's
     constraints are not smooth (near isotropy its principal frame turns; measured on hanging
@@ -180,18 +164,18 @@ def solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, margin_mu=None):
     model predicted -2.9e-8 J), Newton steps stall there, the penalty grows, and without the
     fallback the solve diverged (the sheet flew up)."""
     lim.last_fallback = False
-    if lim.newton_model != "active-set":
-        return _solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, False, lim.max_iters)
+    if not lim._exact():
+        return _solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, False, lim.max_rounds)
     multipliers_in = lim.multipliers()
     out = _solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, True,
-                 min(ACTIVE_SET_ROUNDS, lim.max_iters))
+                 min(ACTIVE_SET_ROUNDS, lim.max_rounds))
     if out[2] or margin_mu is None:
         return out
     lim.restart_from(multipliers_in)
     lim._upload_params(margin_fallback=True)
     try:
         rounds, newton, converged = _solve(lim, mid, K, metric, chol, margin_mu, mu_max,
-                                           step_tol, False, lim.max_iters)
+                                           step_tol, False, lim.max_rounds)
     finally:
         lim._upload_params()
     return out[0] + rounds, out[1] + newton, converged
@@ -202,7 +186,7 @@ def _solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, active_set_model, ma
     ws, m = lim._ws, lim.model
     nv, nf = m.n_verts, m.n_faces
     info = ws.info
-    from_prev = int(lim.coupling == "implicit" and metric is lim._system)
+    from_prev = int(metric is lim._system)
     split = split_kernels()
     if split:
         start_split(lim, mid, K, mu, from_prev, metric)
@@ -233,13 +217,7 @@ def _solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, active_set_model, ma
     inner_tol = kkt_tol * (INNER_FRACTION if active_set_model else 1.0)
     while rounds < max_rounds and not converged:
         for inner in range(lim.newton_budget(PC_JACOBI)):
-            if lim.exact_curvature:
-                ndarrays.zero(ws.kappa)      # the model's curvature off: the exact one is added
-                ndarrays.zero(ws.twist)
             fill_newton_system(lim, mid, K, mu, metric)
-            if lim.exact_curvature:
-                exact_curvature.add_to_newton_matrix(lim, lim.method, K, mu, metric,
-                                                     lim.exact_curvature)
             r0 = ws.r.to_numpy()[:nv]
             H0 = ws.H.to_numpy()[: metric.nnz]
 
@@ -465,12 +443,9 @@ def newton_lhs(method: ti.template(), mu: float, two: int, mesh: MeshPack, metri
     ti.loop_config(serialize=True)
     for _ in range(1):
         K, nv, nf, ns = cons.n_per_face, mesh.n_verts, mesh.n_faces, contacts.n_stitches
-        exact = mesh.params[P_CURVATURE] > 0.0
-        if exact:
-            fill_c_curvature(method, K, nf, mu, vec.x, mesh, cons)
-        use_twist = mesh.params[P_SVD_DELTA] > 0.0 and ti.static(method == SVD) and not exact
+        use_twist = mesh.params[P_SVD_DELTA] > 0.0 and ti.static(method == SVD)
         newton_matrix(K, nv, nf, ns, mu, mesh.params[P_MARGIN], mesh.params[P_CONTACT_SCALE],
-                      use_twist, exact, vec.x, mesh, metric, cons, contacts)
+                      use_twist, vec.x, mesh, metric, cons, contacts)
         loops_ran(two, info)
 
 
