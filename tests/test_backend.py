@@ -63,7 +63,7 @@ def test_types_made_on_import_are_all_checked_and_the_benchmarks_import_none():
     assert "refused:" in r.stdout and "Constraints" in r.stdout, r.stdout + r.stderr
     names = sorted(os.path.basename(f)[:-3] for f in glob.glob(os.path.join(root, "benchmarks",
                                                                             "*.py")))
-    # The settings and the scenes too (benchmarks.solver read a default from cloth.settings
+    # The settings and the scenes too (a benchmark once read a default from cloth.settings
     # before its children chose f64, and cloth.settings imported the constraints).
     r = run("".join(f"import benchmarks.{n}\n" for n in names if n != "__init__")
             + "import cloth.settings\nimport scenes\n" + init)
