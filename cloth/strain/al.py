@@ -485,7 +485,7 @@ PDAS_SOLVES = 6
 # update (with the kkt tolerance itself the rounds ended after one step), and the penalty
 # grows only in a round whose violation did not fall below PDAS_STALL times the last
 # round's (grown every round, it reached 1e4-1e5 x its start within one projection and the
-# line search cut steps to 1/256: docs/speed/motion.md section 5).
+# line search cut steps to 1/256: docs/history/motion.md section 5).
 PDAS_INNER_FRACTION = 0.1
 PDAS_STALL = 0.25
 
@@ -1082,7 +1082,7 @@ def finish_solve(nv: int, h: float, cap: float, extrapolate: int, settle: float,
     resting drape that left the sheet jittering (4e-5 J at resolution 25, where this rests
     at ~1e-6 J). Moving vertices keep v + dx / h: their velocity after the obstacle pass is
     the impact (the normal velocity removed), which (x - x_step) / h would undo, damping
-    the landing (measured: 0.019 against 0.038 J a frame after it, docs/speed/motion.md
+    the landing (measured: 0.019 against 0.038 J a frame after it, docs/history/motion.md
     section 10)."""
     ti.loop_config(serialize=True)
     for n in range(nv):
