@@ -310,8 +310,9 @@ def _solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, active_set_model, ma
 # ~500 iterations of its pass over pinned rows, on rows without pins: its r and H matched the
 # split launches' below bit for bit there; at a few more vertices it would not. Resolution 20
 # (400 vertices: newton_system 40.8k) held its limits. (Measured on lavapipe, Mesa 22.3.6,
-# with a probe since removed, `git log -- benchmarks/loop_cap.py`: each phase once more, followed by a counting loop of 2^20
-# iterations, which stops at 65535 minus what the phase used.)
+# with a probe since removed, `git log -- benchmarks/loop_cap.py`: each phase once more,
+# followed by a counting loop of 2^20 iterations, which stops at 65535 minus what the phase
+# used.)
 #
 # Here the same work runs in launches that each stay below the cap at that size: the Newton
 # system in two (the residual, the matrix), the line search's and the start choice's trials one
