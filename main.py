@@ -81,7 +81,9 @@ def parse_args(argv):
     p.add_argument("--warp", type=band, help="warp strain band MIN,MAX (paper: vertical)")
     p.add_argument("--weft", type=band, help="weft strain band MIN,MAX (paper: horizontal)")
     p.add_argument("--bias", type=band, help="bias strain band MIN,MAX (default: automatic)")
-    p.add_argument("--solver", help="strain-limiting solver: al or jacobi")
+    p.add_argument("--solve", choices=("fast", "exact"),
+                   help="how hard each strain projection is solved: fast (the default) or "
+                        "exact (to its minimiser; slower)")
     p.add_argument("--sl-iters", type=int, help="strain-limiting iteration budget per substep")
     p.add_argument("--remesh", dest="remesh", action="store_true", default=None,
                    help="remesh every frame (overrides the scene)")
@@ -110,7 +112,7 @@ def flag_overrides(args, cfg_keys):
     put("strain", "warp", args.warp)
     put("strain", "weft", args.weft)
     put("strain", "bias", args.bias)
-    put("strain", "solver", args.solver)
+    put("strain", "solve", args.solve)
     put("strain", "iters", args.sl_iters)
     if args.remesh is not None:
         if "remesh" not in cfg_keys:

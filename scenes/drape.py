@@ -42,11 +42,10 @@ def build(cfg):
 
 def drape_by(cfg):
     """When the sheet must hang draped (s): ``checks.drape_time``, 0.76 s by default.
-    Measured with exact Newton steps (strain.linear_solver = "cholesky", resolution 25): the
-    sheet hangs below the equator on every side from frame 9 (0.30 s) to the end (frame 45,
-    lowest point 0.31 m). A solve that damps the landing leaves it flat on the sphere's top
-    (the default PCG steps did, from the substep's start: lowest point 0.62 m at frame 45,
-    the equator at 0.55 m; issue #32), and this check fails there."""
+    Measured with exact Newton steps (resolution 25): the sheet hangs below the equator on
+    every side from frame 9 (0.30 s) to the end (frame 45, lowest point 0.31 m). A solve that
+    damps the landing leaves it flat on the sphere's top (lowest point 0.62 m at frame 45, the
+    equator at 0.55 m), and this check fails there."""
     s = cfg["sphere"]
     return checks.drape_time(cfg["cloth"]["drop"], s["center"], s["radius"],
                              cfg["sim"]["gravity"])

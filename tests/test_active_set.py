@@ -1,46 +1,38 @@
-"""The active-set Newton model of the strain projection (strain.newton_model = "active-set",
-cloth/strain/active_set.py): its Gauss-Newton blocks against a dense assembly, projections that
-land on the tight solve where the margin model does not, and the fallback on the margin model
-when it does not converge."""
-import dataclasses
-
+"""The exact solve (strain.solve = "exact"): its active-set Newton model
+(cloth/strain/active_set.py in the host loop, al.pdas_resolves in the kernels), its
+Gauss-Newton blocks against a dense assembly, projections that land on a tightly solved
+projection where the fast solve stops short, and its fallback on the fast model when it does
+not converge."""
 import numpy as np
 import pytest
 
 from benchmarks.projection_error import objective
-from cloth.strain import active_set, direct
+from cloth.strain import active_set, direct, solver
 from cloth.strain.constraints import N_CONSTRAINTS
-from cloth.strain.solver import StrainLimitError, StrainLimiter
-from tests.test_coupling import _hanging, _redo_dynamics
+from tests.test_coupling import _hanging
 
 
-def _settle(sim, model, **values):
-    """Switch the limiter to ``model`` with the kkt stop and these values: the strain
-    settings among them through the simulator's settings (their one owner), the limiter's own
-    knobs (``max_newton``) on the limiter."""
+def _tighten(monkeypatch, tol=1e-8):
+    """The exact solve in the host loop (Cholesky steps) with its stationarity stop at 1e-6
+    m/s and more Newton steps per round: the reference a projection is measured against.
+    Returns the strain changes to make through the settings."""
+    monkeypatch.setattr(solver.StrainLimiter, "uses_host_loop", lambda self: True)
+    monkeypatch.setattr(solver, "KKT_VELOCITY", 1e-6)
+    monkeypatch.setattr(solver.StrainLimiter, "newton_budget", lambda self, pc_mode: 30)
+    return {"solve": "exact", "tol": tol}
+
+
+def test_exact_solve_sets_the_penalty_and_the_hessian():
+    """The exact solve starts from a softer penalty (ACTIVE_SET_MU) and its Newton matrix is
+    the Hessian (no constraint enters it early); the fast one has the margin."""
+    sim = _hanging("svd", res=4)
     lim = sim.strain
-    keys = {f.name for f in dataclasses.fields(sim.settings.strain)}
-    settings = {"newton_model": model, "stop": "kkt"}
-    settings.update({k: v for k, v in values.items() if k in keys})
-    sim._change("strain", **settings)
-    for k, v in values.items():
-        if k not in keys:
-            setattr(lim, k, v)
-    lim._upload_params()
-    return lim
-
-
-def test_newton_model_setting_is_checked_and_sets_the_penalty():
-    sim = _hanging("svd", "implicit", res=4)
-    with pytest.raises(StrainLimitError, match="margin, active-set"):
-        StrainLimiter(sim.model, newton_model="pdas")
-    lim = sim.strain
-    margin_mu = lim.mu_scale
-    lim.set_newton_model("active-set")
-    assert lim.mu_scale == pytest.approx(margin_mu * 1e-2)
-    assert lim._ws.params.to_numpy()[direct.P_MARGIN] == 0.0     # the matrix is the Hessian
-    lim.set_newton_model("margin")
-    assert lim.mu_scale == margin_mu
+    fast_mu = lim.mu_scale
+    sim._change("strain", solve="exact")
+    assert lim.mu_scale == pytest.approx(fast_mu * solver.ACTIVE_SET_MU)
+    assert lim._ws.params.to_numpy()[direct.P_MARGIN] == 0.0
+    sim._change("strain", solve="fast")
+    assert lim.mu_scale == fast_mu
     assert lim._ws.params.to_numpy()[direct.P_MARGIN] == lim.active_margin
 
 
@@ -48,7 +40,7 @@ def test_gauss_newton_blocks_equal_a_dense_assembly():
     """mu J_A^T J_A and mu J_A^T t_A written into the block pattern (face_slot, w_diag) equal
     the same products formed densely from the constraint gradients, for a random active set,
     with contacts, and with pinned vertices' rows and columns left out."""
-    sim = _hanging("warp-weft", "implicit", "cholesky", res=5)
+    sim = _hanging("warp-weft", res=5)
     sim.step_frame()
     lim = sim.strain
     m = sim.model
@@ -103,51 +95,16 @@ class _Values:
         return self.blocks
 
 
-@pytest.mark.parametrize("method", ["svd", "warp-weft", "mapping"])
-def test_active_set_projection_lands_on_the_tight_solve(method):
-    """From one saved substep of hanging (resolution 9, after 6 frames), the active-set
-    projection (kkt stop at 1 cm/s, tol 1e-5) lands within 0.2 mm of the same projection
-    solved tightly (tol 1e-8, 1e-6 m/s), while the margin model's (the default) lands 1-4 mm
-    from it. Measured: warp-weft 0.105 mm here (frame 6); from frame 10
-    (benchmarks.projection_error) svd 0.0003 mm, warp-weft 0.0006 mm, and at tol 1e-4 0.01-0.25
-    mm, where the violation left decides the distance; mapping 0.006 mm since its principal
-    pairs are ordered by magnitude (0.34 mm before, whatever the tolerance: ordered by
-    alignment, its constraint values jumped where the principal axes crossed 45 degrees,
-    strain/families.py)."""
-    sim = _hanging(method, "implicit", res=9)
-    for _ in range(6):
-        sim.step_frame()
-    state = sim.substep_state()
-    lim = _settle(sim, "active-set", tol=1e-8, kkt_velocity=1e-6, max_newton=30,
-                  curvature="exact", linear_solver="cholesky")
-    _redo_dynamics(sim, state)
-    lim.project(sim.h)
-    assert lim.last_converged and not lim.last_fallback
-    tight = sim.model.positions()
-    # As a user switches it on: the kernels' active-set step (PCG).
-    _settle(sim, "active-set", tol=1e-5, kkt_velocity=1e-2, max_newton=None,
-            linear_solver="pcg")
-    _redo_dynamics(sim, state)
-    lim.project(sim.h)
-    assert lim.last_converged and lim.last_violation_max < 1e-5
-    assert lim.last_stationarity <= 1e-2
-    assert lim.last_solves == 0 and not lim.last_fallback    # in the kernels, no host solve
-    assert np.abs(sim.model.positions() - tight).max() < 2e-4
-    _settle(sim, "margin", stop="violation", curvature="model", tol=1e-4)
-    _redo_dynamics(sim, state)
-    lim.project(sim.h)
-    assert lim.last_converged
-    assert np.abs(sim.model.positions() - tight).max() > 5e-4     # the default stops short
-
-
-@pytest.mark.parametrize("linear_solver", ["pcg", "cholesky"])
-def test_active_set_falls_back_on_the_margin_model(monkeypatch, linear_solver):
+@pytest.mark.parametrize("host", [False, True])
+def test_exact_solve_falls_back_on_the_fast_model(monkeypatch, host):
     """A projection the active-set model does not finish within ACTIVE_SET_ROUNDS is solved
-    again from its start with the margin model, in the kernels (pcg) as in the host loop
-    (cholesky): it converges, holds the limits, and says so (``last_fallback``)."""
-    sim = _hanging("svd", "implicit", res=9)
+    again from its start with the fast (margin) model, in the kernels as in the host loop:
+    it converges, holds the limits, and says so (``last_fallback``)."""
+    if host:
+        monkeypatch.setattr(solver.StrainLimiter, "uses_host_loop", lambda self: True)
+    sim = _hanging("svd", res=9, solve="exact")
     sim.step_frame()
-    lim = _settle(sim, "active-set", linear_solver=linear_solver)
+    lim = sim.strain
     monkeypatch.setattr(direct, "ACTIVE_SET_ROUNDS", 1)
     sim.step_frame()
     assert lim.last_fallback
@@ -181,57 +138,27 @@ def _substep_through_projection(sim, state):
 
 
 @pytest.mark.parametrize("method", ["svd", "warp-weft", "mapping"])
-def test_active_set_projection_with_contacts_lands_on_the_tight_solve(method):
+def test_exact_solve_with_contacts_lands_on_the_tight_solve(monkeypatch, method):
     """drape at resolution 13 in its landing (frame 6, the sheet pressed onto the sphere): the
-    kernels' active-set projection (PCG, block Jacobi with the contacts, kkt stop, tol 1e-5)
-    lands within 0.1 mm of the projection solved tightly in the host loop, with the contacts
-    as constraints of both (measured 0.01-0.07 mm); the default stops several mm short
-    (mapping: 5.2 mm) at a higher objective. Each in the same substep from the same state."""
+    exact solve as a user gets it (the kernels' active-set step, tol 1e-4) lands within
+    0.2 mm of the projection solved tightly in the host loop, with the contacts as
+    constraints of both; the fast solve stops mm short at a higher objective. Each in the same
+    substep from the same state."""
     sim, state = _scene_at("drape", 6, resolution=13)
     sim._change("strain", method=method)
-    lim = _settle(sim, "active-set", tol=1e-8, kkt_velocity=1e-6, max_newton=30,
-                  curvature="exact", linear_solver="cholesky")
-    tight, x_hat, W = _substep_through_projection(sim, state)
-    assert lim.last_converged and not lim.last_fallback
+    with monkeypatch.context() as mp:
+        sim._change("strain", **_tighten(mp))
+        tight, x_hat, W = _substep_through_projection(sim, state)
+        assert sim.strain.last_converged and not sim.strain.last_fallback
     assert (sim.strain.contact_planes.to_numpy()[:, 0, 3] > -1e29).sum() > 10  # contacts there
-    _settle(sim, "active-set", tol=1e-5, kkt_velocity=1e-2, max_newton=None,
-            curvature="exact", linear_solver="pcg")
+    sim._change("strain", solve="exact", tol=1e-4)
     x, _, _ = _substep_through_projection(sim, state)
-    assert lim.last_converged and not lim.last_fallback and lim.last_solves == 0
-    assert np.abs(x - tight).max() < 1e-4, np.abs(x - tight).max()
-    _settle(sim, "margin", stop="violation", curvature="model", tol=1e-4,
-            linear_solver="pcg")
+    lim = sim.strain
+    assert lim.last_converged and lim.last_solves == 0         # in the kernels
+    exact_gap = np.abs(x - tight).max()
+    assert exact_gap < 2e-4, exact_gap
+    sim._change("strain", solve="fast")
     x, _, _ = _substep_through_projection(sim, state)
     assert lim.last_converged
-    assert np.abs(x - tight).max() > 1e-3                          # the default stops short
+    assert np.abs(x - tight).max() > 5 * exact_gap                 # the fast solve stops short
     assert objective(x, x_hat, W) > objective(tight, x_hat, W)
-
-
-@pytest.mark.slow
-def test_active_set_projection_with_seams_lands_on_the_tight_solve():
-    """tshirt at frame 8, its seams closing (74 stitches, equality constraints of the
-    projection) on the mannequin: the active-set projection at the default tolerances lands
-    within 0.2 mm of the tight one (measured 0.07-0.08 mm), while the margin model, even run
-    to 100 rounds at tol 1e-8, stops on a feasible point 14 mm from it at a seam vertex whose
-    objective is 3.6 % higher: its Newton matrix, stiff along every constraint near its band,
-    makes its steps vanish short of the minimiser (docs/history/motion.md section 14). The
-    default lands 15 mm away."""
-    sim, state = _scene_at("tshirt", 8)
-    assert len(sim.dynamics.stitches_np) > 0
-    lim = _settle(sim, "active-set", tol=1e-8, kkt_velocity=1e-6, max_newton=30,
-                  curvature="exact", linear_solver="cholesky")
-    tight, x_hat, W = _substep_through_projection(sim, state)
-    assert lim.last_converged and not lim.last_fallback
-    f_min = objective(tight, x_hat, W)
-    _settle(sim, "active-set", tol=1e-4, kkt_velocity=1e-2, max_newton=None,
-            curvature="exact", linear_solver="cholesky")
-    x, _, _ = _substep_through_projection(sim, state)
-    assert lim.last_converged and not lim.last_fallback
-    assert np.abs(x - tight).max() < 2e-4, np.abs(x - tight).max()
-    assert objective(x, x_hat, W) < 1.001 * f_min
-    _settle(sim, "margin", stop="violation", curvature="model", tol=1e-4,
-            linear_solver="pcg")
-    x, _, _ = _substep_through_projection(sim, state)
-    assert lim.last_converged
-    assert np.abs(x - tight).max() > 5e-3                          # the default stops short
-    assert objective(x, x_hat, W) > 1.02 * f_min

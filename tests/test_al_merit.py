@@ -59,7 +59,7 @@ def _line_merits(method: ti.template(), mu: float, a: float, pos: A, moved: A, m
 @pytest.mark.parametrize("method", ["mapping", "svd", "warp-weft"])
 def test_residual_is_minus_the_merit_gradient(method):
     from tests.test_coupling import _hanging
-    sim = _hanging(method, "implicit", res=6)
+    sim = _hanging(method, res=6)
     for _ in range(3):
         sim.step_frame()                 # multipliers, x_hat, metric of a real substep
     lim, m = sim.strain, sim.model
@@ -147,7 +147,7 @@ def test_newton_matrix_is_the_merit_hessian_without_the_margin(method):
     direction tried (the near constraints enter; docs/history/inner_solver.md).
     It is symmetric, and the identity on pinned rows."""
     from tests.test_coupling import _hanging
-    sim = _hanging(method, "implicit", res=6)
+    sim = _hanging(method, res=6)
     for _ in range(3):
         sim.step_frame()
     lim, m = sim.strain, sim.model

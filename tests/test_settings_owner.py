@@ -15,12 +15,8 @@ from cloth.strain import buffers
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 # Every strain setting the limiter keeps a copy of, as (setting, limiter attribute).
-LIMITER_COPIES = (("method", "method"), ("solver", "solver"), ("tol", "tol"),
-                  ("iters", "max_iters"), ("isotropy", "mapping_iso"),
-                  ("coupling", "coupling"), ("linear_solver", "linear_solver"),
-                  ("curvature", "curvature"), ("stop", "stop"),
-                  ("kkt_velocity", "kkt_velocity"), ("newton_model", "newton_model"),
-                  ("precondition", "precondition"))
+LIMITER_COPIES = (("method", "method"), ("solve", "solve"), ("tol", "tol"),
+                  ("iters", "max_rounds"), ("isotropy", "isotropy"))
 
 
 def check_copies(st):
@@ -52,18 +48,16 @@ def check_copies(st):
         assert np.allclose(p[buffers.P_SHEAR:buffers.P_SHEAR + 2],
                            np.sqrt(2.0) * (1.0 + np.asarray(bias)))
         assert p[buffers.P_ISO] == s.strain.isotropy
-        kernel_pdas = s.strain.newton_model == "active-set" and s.strain.linear_solver == "pcg"
+        exact = s.strain.solve == "exact"
+        kernel_pdas = exact and not lim.uses_host_loop()
         assert p[buffers.P_PDAS] == float(kernel_pdas)
-        assert p[buffers.P_MARGIN] == (0.0 if s.strain.newton_model == "active-set"
-                                       else lim.active_margin)
+        assert p[buffers.P_MARGIN] == (0.0 if exact else lim.active_margin)
         assert p[buffers.P_INNER_RTOL] == (0.0 if kernel_pdas else lim.inner_rtol)
-        exact = s.strain.curvature == "exact" and s.strain.method == "mapping"
-        assert p[buffers.P_CURVATURE] == float(exact)
     # The window keeps no copy: it reads the simulator's settings.
     assert not hasattr(st, "cfg")
     assert st.bands() == st.sim.bands()
     assert st.auto_bias == (not st.sim.settings.strain.bias)
-    assert st.exact_steps == (st.sim.settings.strain.linear_solver == "cholesky")
+    assert st.exact_solve == (st.sim.settings.strain.solve == "exact")
     assert st.remesh_on == st.sim.settings.remesh.enabled
 
 
@@ -90,11 +84,11 @@ def test_every_live_control_of_the_window_reaches_every_copy():
     frozen = st.bands()["bias"]
     assert st.set_band("warp", hi=0.02) and st.bands()["bias"] == frozen
     check_copies(st)
-    assert st.set_iterations(7) and st.sim.strain.max_iters == 7
+    assert st.set_iterations(7) and st.sim.strain.max_rounds == 7
     check_copies(st)
-    assert st.set_exact_steps(True) and st.sim.strain.linear_solver == "cholesky"
+    assert st.set_exact_solve(True) and st.sim.strain.solve == "exact"
     check_copies(st)
-    assert st.set_exact_steps(False)
+    assert st.set_exact_solve(False)
     assert st.set_substeps(3)
     check_copies(st)
     for i, key in enumerate(MATERIAL_KEYS):
@@ -147,21 +141,29 @@ def test_the_self_collision_box_is_a_setting_the_collider_follows(tmp_path):
     check_copies(st)
 
 
-def test_each_strain_default_is_written_once():
-    """The strain limiter's keyword defaults are the settings' (cloth/settings.py), not its own
-    numbers: a grep of solver.py finds none of the settings' default values as literals in its
-    signature, and a limiter built with no settings has the settings' defaults."""
+def test_the_strain_limiter_is_built_from_the_settings_alone():
+    """The limiter takes the model, the strain settings and the seams, nothing else: built
+    without settings it has the settings' defaults (cloth/settings.py), not numbers of its
+    own; and no code outside cloth/strain/ sets an attribute on it."""
     import inspect
+    import re
 
     from cloth.settings import COMMON_DEFAULTS
     from cloth.strain.solver import StrainLimiter
-    sig = inspect.signature(StrainLimiter.__init__).parameters
+    from tests.helpers import sheet_model
+    assert list(inspect.signature(StrainLimiter.__init__).parameters) == \
+        ["self", "model", "strain", "stitches"]
+    lim = StrainLimiter(sheet_model(n=3))
     d = COMMON_DEFAULTS["strain"]
     for key, attr in LIMITER_COPIES:
-        name = {"iters": "max_iters", "isotropy": "mapping_iso"}.get(key, attr)
-        if key == "iters":
-            assert sig[name].default is None     # per solver: the AL's is strain.iters
-            continue
-        assert sig[name].default == d[key], key
-    src = inspect.getsource(StrainLimiter.__init__).split("):", 1)[0]
-    assert '"projection"' not in src and '"margin"' not in src and "1e-4" not in src
+        assert getattr(lim, attr) == d[key], key
+    setter = re.compile(r"\.strain\.[a-z_]+\s*=[^=]|\blim(iter)?\.[a-z_]+\s*=[^=]")
+    for folder in ("cloth", "scenes", "ui"):
+        for dirpath, _, files in os.walk(os.path.join(ROOT, folder)):
+            if dirpath.endswith(os.path.join("cloth", "strain")):
+                continue
+            for name in files:
+                if name.endswith(".py"):
+                    with open(os.path.join(dirpath, name)) as fh:
+                        hits = setter.findall(fh.read())
+                    assert not hits, (name, hits)
