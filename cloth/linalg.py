@@ -108,8 +108,7 @@ class SparseCholesky:
                 _warn_once()
         if backend == "cholmod" and not HAVE_CHOLMOD:
             raise ImportError("CHOLMOD is not installed: run `make test` (it installs "
-                              "libsuitesparse-dev and scikit-sparse) or use strain.linear_solver"
-                              " = \"pcg\"")
+                              "libsuitesparse-dev and scikit-sparse)")
         self.backend = backend
         ptr, col = np.asarray(ptr, np.int64), np.asarray(col, np.int64)
         order, self._indices, self._indptr, r_idx, c_idx = scalar_csr(ptr, col, self.n)

@@ -738,7 +738,7 @@ class Simulator:
         on = self.strain is not None and self.stage("strain_limit").enabled
         row["sl_iterations"] = self.strain.last_iterations if on else 0
         # The stationarity the frame's last strain-limiting step reached (m/s: its Newton step
-        # at the answer over h; below strain.kkt_velocity when it converged).
+        # at the answer over h; under the exact solve, below 1 cm/s when it converged).
         row["sl_stationarity"] = self._sl_stationarity if on else 0.0
         own_v = self.own_violation()
         row["own_violation_max"], row["own_violation_rms"] = metrics.summarize(

@@ -68,19 +68,16 @@ def test_energy_drift_counts_only_rises_above_the_running_minimum():
 def test_energy_drift_of_the_hanging_cloth():
     """No energy enters the hanging scene (still pins, no wind). Backward Euler with damping
     only removes it: no rise at all, and the same with the limits as constraints of the
-    implicit step (coupling "implicit"). The paper's split projection's velocity update dx / h
-    can add a little (measured at 60 frames: 4.5e-3 of m g L at one substep, 6.7e-5 at four);
-    it must shrink with the time step."""
+    implicit step. (The paper's split projection, whose velocity update dx / h added a
+    little, 4.5e-3 of m g L at 60 frames, is not Loom's step.)"""
     import scenes
     from cloth.metrics import energy_drift
     from cloth.simulator import Simulator
     from scenes.common import resolve
     drift = {}
-    for method, sub, coupling in (("none", 1, "implicit"), ("mapping", 1, "implicit"),
-                                  ("mapping", 1, "projection"), ("mapping", 4, "projection")):
+    for method in ("none", "mapping"):
         cfg = resolve(scenes.get("hanging").DEFAULTS, [{
-            "cloth": {"resolution": 9}, "sim": {"substeps": sub},
-            "strain": {"method": method, "coupling": coupling}}])
+            "cloth": {"resolution": 9}, "strain": {"method": method}}])
         setup = scenes.get("hanging").build(cfg)
         sim = Simulator(setup, cfg)
         energy = [sim.metrics_row()["total_energy"]]
@@ -88,8 +85,6 @@ def test_energy_drift_of_the_hanging_cloth():
             sim.step_frame()
             energy.append(sim.metrics_row()["total_energy"])
         assert energy[-1] < energy[0]
-        drift[method, sub, coupling] = energy_drift(energy, sim.model.mass.sum() * 9.81 * 1.0)
-    assert drift["none", 1, "implicit"] < 1e-9
-    assert drift["mapping", 1, "implicit"] < 1e-6
-    assert drift["mapping", 4, "projection"] < 0.2 * drift["mapping", 1, "projection"]
-    assert 1e-6 < drift["mapping", 1, "projection"] < 2e-2
+        drift[method] = energy_drift(energy, sim.model.mass.sum() * 9.81 * 1.0)
+    assert drift["none"] < 1e-9
+    assert drift["mapping"] < 1e-6

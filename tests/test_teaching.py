@@ -34,7 +34,7 @@ def host_values(sim):
     m = sim.model
     return metrics.own_constraint_values(sim.method, m.positions(), m.faces,
                                          metrics.material_Dm_inv(m.uv, m.faces), m.grain,
-                                         sim.bands(), sim.strain.mapping_iso)
+                                         sim.bands(), sim.strain.isotropy)
 
 
 @pytest.mark.parametrize("method", METHODS)
@@ -57,7 +57,7 @@ def test_every_point_of_a_converged_frame_lies_in_the_drawn_region(sims, method)
     tol = sim.settings.strain.tol
     panels, sp = strain_plot(method, m.positions(), m.faces,
                              metrics.material_Dm_inv(m.uv, m.faces), m.grain, sim.bands(),
-                             sim.strain.mapping_iso, binding(sim))
+                             sim.strain.isotropy, binding(sim))
     drawn = panels_inside(panels, tol)
     assert len(drawn) == 1                  # each method has its region in one plane
     title, outside = drawn[0]
@@ -177,7 +177,7 @@ def test_drawing_the_teaching_view_leaves_the_simulation_untouched():
             if read:
                 Dm = metrics.material_Dm_inv(m.uv, m.faces)
                 strain_plot(sim.method, m.positions(), m.faces, Dm, m.grain, sim.bands(),
-                            sim.strain.mapping_iso, binding(sim))
+                            sim.strain.isotropy, binding(sim))
                 sites, size = glyph_sites(m.uv, m.faces)
                 axis_glyphs(m.positions(), m.faces, Dm, m.grain, sites, size, sim.bands())
                 sim.strain.constraint_values()

@@ -372,7 +372,7 @@ class TeachingLayer:
         px = tuple(1.0 / np.asarray(renderer.window.get_window_shape(), float))
         per_sim = []
         for s in sims:
-            iso = s.strain.mapping_iso if s.strain is not None else 0.0
+            iso = s.strain.isotropy if s.strain is not None else 0.0
             on = s.strain is not None and s.stage("strain_limit").enabled
             per_sim.append((id(s), id(s.model), s.model.n_faces, s.method,
                             repr(sorted(s.bands().items())), iso, on))
@@ -393,7 +393,7 @@ class TeachingLayer:
             for i, sim in enumerate(sims):
                 m = sim.model
                 _, _, Dm_inv = self._mesh_cache(i, sim)
-                iso = sim.strain.mapping_iso if sim.strain is not None else 0.0
+                iso = sim.strain.isotropy if sim.strain is not None else 0.0
                 panels, _ = teaching.strain_plot(sim.method, m.positions(), m.faces, Dm_inv,
                                                  m.grain, sim.bands(), iso, binds[i])
                 x0, y0, x1, y1 = boxes[i]

@@ -1,7 +1,6 @@
-"""The primal-dual active-set (PDAS) Newton step of the strain projection (settings
-``strain.newton_model = "active-set"``): here for the host loop of ``direct.py`` with exact
-linear solves (``strain.linear_solver = "cholesky"``); ``al.pdas_resolves`` is the same step in
-the kernels with PCG (``"pcg"``).
+"""The primal-dual active-set (PDAS) Newton step of the exact strain solve (settings
+``strain.solve = "exact"``): here for the host loop of ``direct.py`` with exact linear solves
+(cloth with seams, Vulkan); ``al.pdas_resolves`` is the same step in the kernels with PCG.
 
 Why: the default Newton model puts every constraint within ``active_margin`` (1e-2 strain) of
 its band into the Newton matrix. That keeps the line search from running into constraints the

@@ -477,7 +477,7 @@ def newton_direction(method: ti.template(), pdas: ti.template(), K, nv, nf, ns, 
     return slope, it
 
 
-# ---- the primal-dual active-set step (strain.newton_model = "active-set", PCG) -------------
+# ---- the primal-dual active-set step (strain.solve = "exact", PCG) -----------------------
 # At most this many solves per Newton step while the predicted active set keeps changing
 # (active_set.MAX_RESOLVES, the host version's).
 PDAS_SOLVES = 6
@@ -822,7 +822,7 @@ def solve_al(method: ti.template(), with_pdas: ti.template(), budget: A,
     Newton steps, complementarity, line-search trials). The solve's controls (penalty,
     budgets, tolerances, preconditioner) are read from ``budget`` (buffers.B_*).
 
-    ``with_pdas`` compiles the active-set re-solves in (strain.newton_model = "active-set"
+    ``with_pdas`` compiles the active-set re-solves in (strain.solve = "exact"
     under PCG). They are a template, not only a runtime switch, because inlined into every
     solve they tripled the optimised compile of the default solve (svd: 261 s with them,
     91 s before they were added, on the 2-core CPU); a kernel without them is the default's."""
