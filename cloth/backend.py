@@ -147,10 +147,8 @@ def _use_plain_debug_info():
 
 
 # Taichi's offline cache keeps at most 100 MB by default and then drops its least recently used
-# quarter. One full-optimisation AL solve is ~4-5 MB per method and cost 2-5 min to compile on
-# this 2-core VM (hanging, mapping, 2026-12-02), while a test run writes its fast-compiled
-# kernels to the same cache: measured here, test runs pushed the demo's solver out (the oldest
-# entries left were younger than it) and the next run compiled it again. 1 GiB keeps both.
+# quarter: a test run's fast-compiled kernels pushed the demo's optimised solver (4-5 MB a
+# method, minutes to compile) out of it. 1 GiB keeps both.
 CACHE_BYTES = 1 << 30
 
 

@@ -20,10 +20,8 @@ emptying the cache empties it too. It maps each key to the fingerprint of what w
 seconds the last cold compile took. Later uses of a key in the same process cost one set
 lookup.
 
-Measured cold (empty cache, full optimisation, hanging with mapping, 2-core machine shared
-with another job; 2026-12-03): the strain solve's kernel 118 s, the dynamics step 7.8 s, the
-obstacle pass 5.9 s (tshirt), everything else under 2.5 s a kernel; warm, the strain solve
-loads in 2.3 s.
+Every other kernel compiles in under 2.5 s; a warm strain solve loads in about 2 s
+(docs/speed/first_run.md).
 """
 import contextlib
 import hashlib
@@ -37,9 +35,12 @@ RECORD_NAME = "loom_compile_times.json"
 # estimate for the next cold compile.
 COMPILED_ABOVE_S = 5.0
 
-# The strain solve's one-kernel compile (al.solve_al), cold on 2 cores, in s: (optimised,
-# LOOM_FAST_COMPILE). The exact solve compiles the active-set re-solves in as well.
+# A first compile's estimate per kernel group, cold on 2 cores, in s: (optimised,
+# LOOM_FAST_COMPILE; None: not measured). The exact strain solve compiles the active-set
+# re-solves in as well; the strain solve's host loop (direct.py) has small kernels.
 STRAIN_COMPILE_S = {"fast": (120, 5), "exact": (260, 12)}
+DYNAMICS_COMPILE_S = (8, None)
+COLLISION_COMPILE_S = (6, None)
 
 _used = set()            # keys whose first use in this process is over
 _fingerprint = None

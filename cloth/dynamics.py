@@ -35,8 +35,6 @@ curvature under compression, the indefinite shear curvature, the bending angle's
 the one Newton step robust instead of exact; ``force_jacobian_product(exact=True)`` gives the
 exact membrane Jacobian for testing.
 
-Why one long module: forces, their Jacobian product, its diagonal and its assembled
-blocks must stay the same K; they share the element kinematics and ``face_block``.
 
 Every kernel is a module-level ``@ti.kernel`` taking all its arrays (the model's and the
 solver's work arrays, Taichi ndarrays) as arguments, and the ``@ti.func``s take the arrays they

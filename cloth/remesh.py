@@ -21,9 +21,6 @@ Host-side numpy/Python: ``remesh(mesh, params)`` returns a new ``MeshArrays``. O
 The mutable mesh during the operations is plain Python lists (faces and a vertex -> faces
 index); numpy does everything that touches the whole mesh at once (sizing, candidate lists).
 
-Why one long module: sizing, split, flip and collapse are one algorithm working on one
-private structure (``_Work``), and each operation relies on invariants the others keep; split
-up, those invariants would have to become a public interface.
 """
 import heapq
 import math

@@ -20,10 +20,9 @@ from typing import Optional
 from .config import ConfigError, NUMBER_OR_WORD, merge
 from .materials import MATERIAL_PRESETS  # noqa: F401 (re-exported)
 from .remesh_params import RemeshParams
-from .strain.families import METHODS
+from .strain.families import STRAIN_METHODS
 from .strain.defaults import AL_ROUNDS, MAPPING_ISO, SOLVES
 
-STRAIN_METHODS = METHODS + ("none",)
 
 # Fabric presets (cloth/materials.py, where their numbers and sources live).
 

@@ -23,9 +23,6 @@ elsewhere (the strain limiter's attributes and kernel parameters, the model's ma
 stages switched on) from the new settings, in one place. A change takes effect at the next
 substep, and a window, a script and a test change a run the same way.
 
-Why one long module: it is the one owner of a run's live state (issue #15); the stages
-and the controls read and write the same objects, and every stage's module is imported here,
-one hop from the frame loop.
 """
 import dataclasses
 import sys
@@ -43,7 +40,7 @@ from . import remesh                                   # stage "remesh"
 from .collision import THICKNESS, Collider  # stages "self_collision", "collision", "collision_final"
 from .dynamics import DynamicsSettings, ImplicitEuler  # stage "dynamics"
 from .model import CapacityExceeded, ClothModel, Material, MeshArrays
-from .settings import STRAIN_METHODS, Settings
+from .settings import Settings
 from .strain.solver import StrainLimiter              # stage "strain_limit" (cloth/strain/)
 
 
@@ -641,8 +638,7 @@ class Simulator:
     def compile_work(self, stage, method=None):
         """(what, key, estimate in s) of the kernels a stage compiles at its first call: the
         key names the template variant, so a method switch announces its own compile
-        (cloth/compile_notice.py; estimates measured cold on 2 cores, full optimisation and
-        LOOM_FAST_COMPILE)."""
+        (cloth/compile_notice.py, which keeps the estimates)."""
         if stage == "strain_limit":
             method = self.strain.method if method is None else method
             return (f"the strain solver for {method}", self.strain_solver_key(method),
@@ -650,9 +646,9 @@ class Simulator:
                                                    self.strain.uses_host_loop()))
         if stage == "dynamics":
             return ("the dynamics step", f"dynamics:{self.settings.sim.linear_solver}",
-                    (8, None))
+                    compile_notice.DYNAMICS_COMPILE_S)
         if stage in ("collision", "self_collision"):
-            return ("the collision pass", "collision", (6, None))
+            return ("the collision pass", "collision", compile_notice.COLLISION_COMPILE_S)
         return None
 
     def strain_solver_key(self, method):

@@ -35,8 +35,6 @@ Motions (``motion`` of a moving pin group or an obstacle), all optional and adde
                                     rotation about axis through pivot (default: the obstacle's
                                     centre, or the centroid of the pin group)
 
-Why one long module: each key is read, checked (with the one-line error that names
-the fix) and turned into the scene in one place, so a new key is one edit.
 """
 import copy
 import json

@@ -17,8 +17,6 @@ Keys:
 Environment: LOOM_APP_FRAMES=N quits after N window frames and prints frame-time statistics
 (used for measurements and smoke tests); LOOM_APP_NO_VSYNC=1 disables vsync.
 
-Why one long module: the panel is one immediate-mode function per frame; what the
-controls do is in ``state.py``, drawing in ``render.py``, colours in ``colormap.py``.
 """
 import os
 import sys
@@ -28,7 +26,7 @@ import time
 import numpy as np
 import taichi as ti
 
-from cloth.simulator import STRAIN_METHODS
+from cloth.strain.families import STRAIN_METHODS
 
 from .colormap import COLOR_MODES
 from .overlays import Layout, TeachingLayer, pick_face

@@ -21,10 +21,11 @@ import traceback
 import numpy as np
 
 from cloth import compile_notice, metrics
-from cloth.simulator import STRAIN_METHODS, SimulationDiverged, Simulator
+from cloth.simulator import SimulationDiverged, Simulator
+from cloth.strain.families import METHODS
 from cloth.backend import LoopCapError
 
-COMPARE_METHODS = STRAIN_METHODS[:-1]      # the three families, without "none"
+COMPARE_METHODS = METHODS                  # the three families, without "none"
 BANDS = ("warp", "weft", "bias")
 # What each method bounds, one line for the panel: the read-outs then show the violation of
 # these constraints (the number the solver drives below strain.tol) and the warp, weft and

@@ -18,13 +18,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from cloth import metrics
+from cloth.strain.families import METHODS
 
 from .overlays import Canvas2D, Layout
 
 SETTLE_FRAMES = 150        # 5 s at 30 fps: the hanging scene's rest check applies from 5 s
 SETTLE_EVERY = 3           # settling frames kept in the headless sequence
 HOLD_S = 4.0               # a pause's length in the video
-METHODS = ("svd", "warp-weft", "mapping")
 SIZE = (1280, 720)
 TOUR_LAYOUT = Layout(plot=[(0.515, 0.01, 0.995, 0.60)], key=(0.60, 0.625, 0.93, 0.845),
                      bar=(0.04, 0.06, 0.40, 0.022), view_x=(0.04, 0.48), view_y=(0.05, 0.82))

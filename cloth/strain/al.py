@@ -1,9 +1,8 @@
 """The augmented-Lagrangian solve of the strain limits in one kernel (docs/method.md §4, paper eqs.
 25-27): constraint assembly, merit, residual, the PCG Newton direction with its
 block-Jacobi preconditioner, multiplier updates, and the small bookkeeping kernels around it.
-Why one kernel and ndarray arguments: ``buffers.py``. Why one long module: every func
-here is inlined into ``solve_al`` (and reused by ``direct.py``); they are the steps of one
-algorithm, in the order the kernel runs them.
+The funcs are in the order the kernel runs them; ``direct.py`` reuses them for its host loop.
+Why one kernel and ndarray arguments: ``buffers.py``.
 """
 import taichi as ti
 

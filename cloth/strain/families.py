@@ -3,6 +3,8 @@ no Taichi types: importable before ``backend.init`` (the benchmarks list the met
 they choose the precision; ``constraints.py`` builds its structs at import, in whatever float
 type Taichi has then)."""
 METHODS = ("svd", "warp-weft", "mapping")
+# The strain settings' choices: the three families, or no strain limiting.
+STRAIN_METHODS = METHODS + ("none",)
 N_CONSTRAINTS = {"svd": 4, "warp-weft": 6, "mapping": 8}
 METHOD_IDS = {"svd": 0, "warp-weft": 1, "mapping": 2}
 # The ids by name, for the kernels' compile-time dispatch (``ti.static(method == SVD)``).

@@ -23,7 +23,8 @@ import numpy as np
 
 from .. import backend, linalg, metrics, ndarrays
 from .. import system_matrix
-from .constraints import MAPPING_DELTA, METHOD_IDS, METHODS, N_CONSTRAINTS, SVD_DELTA
+from .constraints import MAPPING_DELTA, METHOD_IDS, N_CONSTRAINTS, SVD_DELTA
+from .families import STRAIN_METHODS
 from . import al, buffers
 from .defaults import (ACTIVE_MARGIN, ACTIVE_SET_MU, CG_BUDGET, CG_RTOL, FACTOR_CG,
                        FACTOR_CG_MAX, FACTOR_CG_WORK, FACTOR_MAX_FACES, FACTOR_NEWTON,
@@ -35,8 +36,6 @@ from .multigrid import HAVE_PYAMG, MAX_COARSE, MultigridPreconditioner, Multigri
 from .buffers import (PC_FACTOR, PC_JACOBI, PC_MULTIGRID, ST_CG, ST_CONVERGED, ST_ITERS,
                       ST_KKT, ST_NEWTON, ST_START_VIOL, ST_TRIALS, ST_VIOL,
                       Workspace)
-
-METHOD_NAMES = METHODS + ("none",)
 
 _host_loop_noted = False
 _no_pyamg_noted = False
@@ -91,9 +90,9 @@ def _check_band(name, band, lower_limit=-1.0):
 
 
 def _check_method(name):
-    if name not in METHOD_NAMES:
+    if name not in STRAIN_METHODS:
         raise StrainLimitError(f"unknown strain-limiting method '{name}': use one of "
-                               f"{', '.join(METHOD_NAMES)}")
+                               f"{', '.join(STRAIN_METHODS)}")
 
 
 def _check_settings(st):
@@ -124,7 +123,8 @@ class StrainLimiter:
 
     After each ``project`` call: ``last_iterations`` (AL rounds), ``last_violation_max``
     (strain units), ``last_converged``, ``last_ms``, ``last_newton`` / ``last_cg`` /
-    ``last_trials`` (line-search trials) totals, ``last_factorizations`` (numeric
+    ``last_trials`` (line-search trials) totals, ``rounds_total`` (AL rounds of every
+    projection so far), ``last_factorizations`` (numeric
     factorisations or preconditioner refreshes) and, under ``solve = "exact"``,
     ``last_stationarity`` (m/s).
     """
@@ -164,6 +164,7 @@ class StrainLimiter:
         self.last_fallback = False    # exact: solved again with the fast model
         self.last_stationarity, self._kkt_h = 0.0, 1.0 / 30.0
         self.last_reverted, self.reverted_count = False, 0
+        self.rounds_total = 0         # AL rounds over every projection so far
 
     # ---- settings ------------------------------------------------------------------------
     def configure(self, st):
@@ -482,6 +483,7 @@ class StrainLimiter:
                         ws.contact_pack())
         self._v_last_valid = h > 0
         self.last_iterations = int(rounds)
+        self.rounds_total += int(rounds)
         self.last_violation_max = float(max(stats[ST_VIOL], 0.0))
         self.last_converged = bool(converged)
         self.last_newton, self.last_cg = int(newton), int(stats[ST_CG])
