@@ -84,7 +84,7 @@ def parse_args(argv):
     p.add_argument("--solve", choices=("fast", "exact"),
                    help="how hard each strain projection is solved: fast (the default) or "
                         "exact (to its minimiser; slower)")
-    p.add_argument("--sl-iters", type=int, help="strain-limiting iteration budget per substep")
+    p.add_argument("--rounds", type=int, help="strain limiting's AL round budget per projection")
     p.add_argument("--remesh", dest="remesh", action="store_true", default=None,
                    help="remesh every frame (overrides the scene)")
     p.add_argument("--no-remesh", dest="remesh", action="store_false",
@@ -113,7 +113,7 @@ def flag_overrides(args, cfg_keys):
     put("strain", "weft", args.weft)
     put("strain", "bias", args.bias)
     put("strain", "solve", args.solve)
-    put("strain", "iters", args.sl_iters)
+    put("strain", "rounds", args.rounds)
     if args.remesh is not None:
         if "remesh" not in cfg_keys:
             raise ValueError("this scene has no remeshing settings")

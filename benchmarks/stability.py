@@ -145,7 +145,7 @@ def cases():
     # (21 % strain against a 1 % band) at 0.5 s and is then held for 0.5 s.
     out.append(Case("infeasible pins: corner dragged 21 % beyond rest", "pull",
                     {"cloth": {"resolution": 13},
-                     "strain": {"method": "mapping", "iters": 50},
+                     "strain": {"method": "mapping", "rounds": 50},
                      "pull": {"displacement": [-0.1, -0.2, 0.1], "duration": 0.5}},
                     frames=30, fast=True, ke_end_max=0.01,
                     note="no feasible state: bounded violation, and once the corner is "

@@ -4,7 +4,7 @@ Simulator and its solvers read.
 
     settings = Settings(cfg)             # cfg: the merged nested dict (scenes.common.resolve)
     settings.strain.method               # 'mapping'; each section is a frozen dataclass
-    settings = settings.replace("strain", iters=20)   # a checked copy with one change
+    settings = settings.replace("strain", rounds=20)   # a checked copy with one change
 
 Unknown keys and wrong types are refused when layers are merged (``cloth.config.merge``);
 ranges and choices are checked here (``validate``). Each failure is one ``ConfigError`` line
@@ -51,7 +51,7 @@ COMMON_DEFAULTS = {
         # limits hold; "exact" solves to the projection's minimiser (about 2x the time on small
         # meshes, 20-500x on large ones and garments: docs/speed/projection_error.md).
         "solve": "fast",
-        "iters": AL_ROUNDS,       # outer-round budget per projection (why 100: strain/defaults.py)
+        "rounds": AL_ROUNDS,      # AL round budget per projection (why 100: strain/defaults.py)
         "tol": 1e-4,              # largest violation accepted, in strain
         # mapping only: width (in eta1^2 - eta2^2) of the closure of its feasible set at
         # isotropy; 0 = the paper's constraint exactly (why 0.01: cloth/strain/defaults.py).
@@ -122,7 +122,7 @@ SCHEMA = {
         "solve": Key("", "how hard each projection is solved: fast (stops once the limits "
                      "hold, a few mm short of the exact projection) or exact (to the "
                      "projection's minimiser; slower)", choices=SOLVES),
-        "iters": Key("", "outer-iteration budget per projection", lo=1),
+        "rounds": Key("", "augmented-Lagrangian round budget per projection", lo=1),
         "tol": Key("strain", "largest constraint violation accepted", lo=0, lo_open=True),
         "isotropy": Key("", "mapping only: width of the closure of its feasible set at "
                         "isotropy; 0 = the paper's constraint exactly", lo=0),

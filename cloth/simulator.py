@@ -16,7 +16,7 @@ applied remesh ``remesh_reproject`` projects where the new mesh broke the limits
 (stitch pairs) are equality constraints of the same projection.
 
 The Simulator reads its settings from one ``cloth.settings.Settings`` (``self.settings``) and owns
-every live control: ``set_method``, ``set_bands``, ``set_iterations``, ``set_substeps``,
+every live control: ``set_method``, ``set_bands``, ``set_rounds``, ``set_substeps``,
 ``set_material``, ``set_remesh``, ``set_self_collision``, ``hold_vertex`` / ``release_vertex`` and
 ``reset``. Each changes ``settings`` and nothing else; ``_follow`` then derives every copy kept
 elsewhere (the strain limiter's attributes and kernel parameters, the model's material, the
@@ -480,9 +480,9 @@ class Simulator:
         bias = tuple(st.bias) if st.bias else metrics.default_bias_band(warp, weft)
         return {"warp": warp, "weft": weft, "bias": bias}
 
-    def set_iterations(self, n):
+    def set_rounds(self, n):
         """The AL round budget per projection."""
-        self._change("strain", iters=int(n))
+        self._change("strain", rounds=int(n))
 
     def set_strain_solve(self, solve):
         """How hard each projection is solved, live: "fast" (stops once the limits hold) or

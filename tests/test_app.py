@@ -172,8 +172,8 @@ def test_sliders_change_the_time_step_and_the_material_live(st):
     run(st, 8)
     assert st.sim.time == pytest.approx(soft_time)
     assert st.readouts()["strain_max"]["warp"] < 0.5 * soft_warp
-    st.set_iterations(7)
-    assert st.settings.strain.iters == 7
+    st.set_rounds(7)
+    assert st.settings.strain.rounds == 7
 
 
 def test_exact_solve_switches_the_strain_solve_live(st):
@@ -248,8 +248,8 @@ def test_live_controls_refuse_bad_values_and_keep_the_settings(st):
     before = sim.settings.to_dict()
     with pytest.raises(ConfigError, match="sim.substeps"):
         sim.set_substeps(0)
-    with pytest.raises(ConfigError, match="strain.iters"):
-        sim.set_iterations(0)
+    with pytest.raises(ConfigError, match="strain.rounds"):
+        sim.set_rounds(0)
     with pytest.raises(ValueError, match="k_warp"):
         sim.set_material(k_warp=0.0)
     assert sim.settings.to_dict() == before and sim.substeps == before["sim"]["substeps"]

@@ -98,11 +98,11 @@ def test_settings_are_the_typed_checked_view_the_simulator_reads():
     assert s.strain.method == "mapping" and s.sim.substeps == 1 and "cloth" in s
     assert s.to_dict() == cfg                       # nothing lost or added on the way
     assert Settings.of(s) is s
-    t = s.replace("strain", iters=7, warp=[-0.02, 0.02])
-    assert (t.strain.iters, t.strain.warp) == (7, [-0.02, 0.02])
-    assert s.strain.iters == 100                    # the original is unchanged
-    with pytest.raises(ConfigError, match="strain.iters = 0 must be >= 1"):
-        s.replace("strain", iters=0)
+    t = s.replace("strain", rounds=7, warp=[-0.02, 0.02])
+    assert (t.strain.rounds, t.strain.warp) == (7, [-0.02, 0.02])
+    assert s.strain.rounds == 100                    # the original is unchanged
+    with pytest.raises(ConfigError, match="strain.rounds = 0 must be >= 1"):
+        s.replace("strain", rounds=0)
     # An explicit bias band and back to automatic ([]), which other list keys do not allow.
     explicit = s.replace("strain", bias=[-0.04, 0.04])
     assert explicit.strain.bias == [-0.04, 0.04]

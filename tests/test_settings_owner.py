@@ -16,7 +16,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 # Every strain setting the limiter keeps a copy of, as (setting, limiter attribute).
 LIMITER_COPIES = (("method", "method"), ("solve", "solve"), ("tol", "tol"),
-                  ("iters", "max_rounds"), ("isotropy", "isotropy"))
+                  ("rounds", "max_rounds"), ("isotropy", "isotropy"))
 
 
 def check_copies(st):
@@ -84,7 +84,7 @@ def test_every_live_control_of_the_window_reaches_every_copy():
     frozen = st.bands()["bias"]
     assert st.set_band("warp", hi=0.02) and st.bands()["bias"] == frozen
     check_copies(st)
-    assert st.set_iterations(7) and st.sim.strain.max_rounds == 7
+    assert st.set_rounds(7) and st.sim.strain.max_rounds == 7
     check_copies(st)
     assert st.set_exact_solve(True) and st.sim.strain.solve == "exact"
     check_copies(st)
@@ -110,7 +110,7 @@ def test_every_live_control_of_the_window_reaches_every_copy():
     assert st.set_compare(True)
     check_copies(st)
     assert [s.method for s in st.sims] == ["svd", "warp-weft", "mapping"]
-    assert all(s.settings.strain.iters == 7 and s.settings.sim.substeps == 3 for s in st.sims)
+    assert all(s.settings.strain.rounds == 7 and s.settings.sim.substeps == 3 for s in st.sims)
     assert st.set_compare(False) and st.sim.method == "mapping"
     assert st.sim.settings.strain.warp == [-0.02, 0.02]
     check_copies(st)

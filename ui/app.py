@@ -326,9 +326,9 @@ class App:
             auto = g.checkbox("automatic bias band", st.auto_bias)
             if auto != st.auto_bias:
                 st.set_auto_bias(auto)
-            iters = g.slider_int("SL iterations", int(st.settings.strain.iters), 1, 200)
-            if iters != st.settings.strain.iters:
-                st.set_iterations(iters)
+            rounds = g.slider_int("SL rounds", int(st.settings.strain.rounds), 1, 200)
+            if rounds != st.settings.strain.rounds:
+                st.set_rounds(rounds)
             exact = g.checkbox("exact solve (slow)", st.exact_solve)
             if exact != st.exact_solve:
                 st.set_exact_solve(exact)

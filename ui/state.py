@@ -366,8 +366,8 @@ class AppState:
         bias = "auto" if on else self.bands()["bias"]
         return self._each(lambda s: s.set_bands(bias=bias))
 
-    def set_iterations(self, n):
-        return self._each(lambda s: s.set_iterations(max(1, int(n))))
+    def set_rounds(self, n):
+        return self._each(lambda s: s.set_rounds(max(1, int(n))))
 
     @property
     def exact_solve(self):

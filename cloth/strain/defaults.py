@@ -9,7 +9,7 @@ current pages of docs/speed/.
 # the minimiser (active-set Newton model and a stationarity stop).
 SOLVES = ("fast", "exact")
 
-# AL rounds per projection (settings strain.iters): a cap for stalled solves; converged ones
+# AL rounds per projection (settings strain.rounds): a cap for stalled solves; converged ones
 # take 2-8 rounds, and 50 ran out once in 300 remeshed svd frames where 100 never did.
 AL_ROUNDS = 100
 

@@ -105,8 +105,8 @@ def _check_settings(st):
                                f"{', '.join(SOLVES)}")
     if not st.tol > 0:
         raise StrainLimitError(f"tol must be > 0 (got {st.tol}); 1e-4 is 0.01 % strain")
-    if int(st.iters) < 1:
-        raise StrainLimitError(f"iters must be >= 1 (got {st.iters})")
+    if int(st.rounds) < 1:
+        raise StrainLimitError(f"rounds must be >= 1 (got {st.rounds})")
     if not st.isotropy >= 0:
         raise StrainLimitError(f"isotropy must be >= 0 (got {st.isotropy}); 0 is the "
                                "paper's constraint")
@@ -178,7 +178,7 @@ class StrainLimiter:
         if st.method != self.method:
             ndarrays.zero(self._ws.lam)   # multipliers belong to the constraints of one method
         self.method, self.solve, self.tol = st.method, st.solve, float(st.tol)
-        self.max_rounds = int(st.iters)
+        self.max_rounds = int(st.rounds)
         self.isotropy = float(st.isotropy)
         self.mu_scale = MU_SCALE * (ACTIVE_SET_MU if self._exact() else 1.0)
         self.warp, self.weft = warp, weft
