@@ -7,12 +7,15 @@
     python main.py hanging --show-config
 """
 import argparse
+import contextlib
 import os
 import sys
 
-EXIT_BAD_INPUT = 2
-EXIT_DIVERGED = 3
-EXIT_NO_RENDER = 4
+# Exit codes (README): 0 the run finished and its final check held.
+EXIT_BAD_INPUT = 2        # bad input, stopped before anything was computed or written
+EXIT_DIVERGED = 3         # the state became non-finite; the output up to then is kept
+EXIT_NO_RENDER = 4        # no Vulkan device for the window or the frames
+EXIT_CHECK_FAILED = 5     # the run finished, but the scene's final check did not hold
 
 
 def band(text):
@@ -140,6 +143,11 @@ def has_display():
     return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
 
+def _same_scene(a, b):
+    """Two names of one scene (a built-in's name, or a scene file's path)."""
+    return a == b or (os.path.exists(a) and os.path.exists(b) and os.path.samefile(a, b))
+
+
 def fail(message, code=EXIT_BAD_INPUT):
     print(f"loom: error: {message}", file=sys.stderr)
     return code
@@ -147,6 +155,10 @@ def fail(message, code=EXIT_BAD_INPUT):
 
 def main(argv=None):
     args = parse_args(sys.argv[1:] if argv is None else argv)
+    # Taichi prints its version banner on import: to stderr, so that stdout carries only what
+    # was asked for (--show-config's TOML, --list).
+    with contextlib.redirect_stdout(sys.stderr):
+        import taichi  # noqa: F401,F811
     try:
         overlays = overlay_names(args)
     except ValueError as err:
@@ -188,16 +200,24 @@ def main(argv=None):
                 if f.endswith(".toml"):
                     print(f"  {os.path.relpath(os.path.join(examples, f))}")
         return 0
-    name = args.scene or scenes.DEFAULT_SCENE
     if args.tour and not (args.list or args.show_config):
         from ui.tour import run_tour
         return run_tour(args, headless=args.headless or not has_display())
     try:
+        overrides = []
+        config_scene = None
+        if args.config:
+            # A run's config.toml names its scene: with no scene given, it is the one run.
+            config = load_toml(args.config)
+            config_scene = config.pop("scene", None)
+            if args.scene and config_scene and not _same_scene(args.scene, config_scene):
+                raise ConfigError(f"{args.config} is the configuration of scene "
+                                  f"'{config_scene}', not '{args.scene}': give no scene "
+                                  "(python main.py --config FILE) or remove its scene line")
+            overrides.append(config)
+        name = args.scene or config_scene or scenes.DEFAULT_SCENE
         module = scenes.get(name)
         name = getattr(module, "NAME", name)      # a scene file: its file name without .toml
-        overrides = []
-        if args.config:
-            overrides.append(load_toml(args.config))
         overrides += [parse_assignment(s) for s in args.set]
         overrides.append(flag_overrides(args, module.DEFAULTS))
         from scenes.common import resolve
@@ -281,12 +301,15 @@ def run_headless(sim, cfg, args, name, overlays=()):
     ok_final, message = (True, "")
     if sim.setup.check_final is not None:
         ok_final, message = sim.setup.check_final(sim)
+    misses = run.limit_summary()
+    if misses:
+        print(f"loom: {misses}", file=sys.stderr)
     print(f"loom: wrote {sim.frame} frames of '{name}' to {out}/ "
           f"(config.toml, metrics.csv, meshes/"
           + (", frames/" if o["images"] else "") + (", video.mp4" if o["video"] else "")
           + f"); final check: {'ok' if ok_final else 'FAILED'}"
           + (f" ({message})" if message else ""))
-    return 0
+    return 0 if ok_final else EXIT_CHECK_FAILED
 
 
 if __name__ == "__main__":

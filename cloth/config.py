@@ -112,7 +112,7 @@ def load_toml(path):
                           "(strings need quotes, sections look like [material])") from None
 
 
-def _toml_value(v):
+def toml_value(v):
     if isinstance(v, bool):
         return "true" if v else "false"
     if isinstance(v, (int, float)):
@@ -120,9 +120,9 @@ def _toml_value(v):
     if isinstance(v, str):
         return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
     if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+        return "[" + ", ".join(toml_value(x) for x in v) + "]"
     if isinstance(v, dict):
-        return "{" + ", ".join(f"{k} = {_toml_value(x)}" for k, x in v.items()
+        return "{" + ", ".join(f"{k} = {toml_value(x)}" for k, x in v.items()
                                if x is not None) + "}"
     raise ConfigError(f"cannot write {v!r} to TOML")
 
@@ -136,14 +136,14 @@ def to_toml(cfg, prefix=""):
         elif isinstance(v, list) and v and all(isinstance(x, dict) for x in v):
             arrays.append((k, v))            # an array of tables: [[obstacles]]
         elif v is not None:
-            lines.append(f"{k} = {_toml_value(v)}")
+            lines.append(f"{k} = {toml_value(v)}")
     for k, v in tables:
         name = f"{prefix}{k}"
         body = to_toml(v, name + ".")
         lines.append(f"\n[{name}]\n{body}" if body.strip() else f"\n[{name}]")
     for k, v in arrays:
         for item in v:
-            body = "\n".join(f"{ik} = {_toml_value(iv)}" for ik, iv in item.items()
+            body = "\n".join(f"{ik} = {toml_value(iv)}" for ik, iv in item.items()
                              if iv is not None)
             lines.append(f"\n[[{prefix}{k}]]\n{body}")
     return "\n".join(lines).strip("\n") + "\n" if not prefix else "\n".join(lines)

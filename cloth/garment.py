@@ -201,6 +201,42 @@ def _edge_use(faces):
     return uniq, inverse.reshape(-1), counts
 
 
+def _fan_split_vertex(faces, n_verts):
+    """A vertex whose triangles form more than one fan (they meet only at the vertex, sharing
+    no edge around it): (vertex, a face of its second fan, the number of fans), or None. The
+    faces around a vertex are joined where two of them share an edge through it."""
+    corner = np.arange(3 * len(faces))                 # corner 3 f + k: faces[f, k]
+    parent = corner.copy()
+
+    def root(i):
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    where = {}
+    for f, tri in enumerate(faces):
+        for k in range(3):
+            a, b = int(tri[k]), int(tri[(k + 1) % 3])
+            key = (min(a, b), max(a, b))
+            ends = {a: 3 * f + k, b: 3 * f + (k + 1) % 3}
+            other = where.setdefault(key, ends)
+            if other is not ends:                        # the edge's second face: join
+                for v in key:
+                    parent[root(ends[v])] = root(other[v])
+    roots = np.array([root(i) for i in corner])
+    verts = faces.reshape(-1)
+    order = np.lexsort((roots, verts))
+    v_s, r_s = verts[order], roots[order]
+    new_fan = np.r_[True, (v_s[1:] != v_s[:-1]) | (r_s[1:] != r_s[:-1])]
+    fans = np.bincount(v_s[new_fan], minlength=n_verts)
+    if fans.max(initial=0) <= 1:
+        return None
+    vert = int(np.argmax(fans))
+    second = order[new_fan & (v_s == vert)][1]
+    return vert, int(second // 3), int(fans[vert])
+
+
 def build_garment(v, vt, tris, tri_lines, path, uv_scale=1.0, warp="u"):
     """Split along UV seams, scale, orient and check. See the module docstring."""
     # One vertex per (file vertex, texture coordinate) pair used by a corner.
@@ -219,6 +255,13 @@ def build_garment(v, vt, tris, tri_lines, path, uv_scale=1.0, warp="u"):
         raise ConfigError(f"{path}:{tri_lines[f]}: non-manifold edge: {counts[e]} faces share "
                           f"one edge ({int((counts > 2).sum())} such edges): the cloth must be "
                           "a surface; remove the extra faces or split the panels")
+    bowtie = _fan_split_vertex(faces, len(uv))
+    if bowtie is not None:
+        vert, f, fans = bowtie
+        raise ConfigError(f"{path}:{tri_lines[f]}: vertex {int(src_v[vert]) + 1} joins {fans} "
+                          "separate fans of triangles that share no edge there (a bowtie): "
+                          "the cloth must be a surface; give each fan its own vertex, or join "
+                          "the fans with triangles")
     islands = _islands(faces, len(uv))
     n_isl = int(islands.max()) + 1
 

@@ -27,13 +27,14 @@ def _comment(path, value):
 
 
 def show_config(cfg):
-    """The --show-config listing: every key, its value, unit and meaning."""
-    from cloth.config import flatten
+    """The --show-config listing: every key, its value, unit and meaning, as TOML (dotted
+    keys) that --config reads back."""
+    from cloth.config import toml_value, flatten
     lines = []
     for key, value in flatten(cfg):
-        if key == "scene":
+        if key == "scene" or value is None:
             continue
-        lines.append(f"{key} = {value!r}" + _comment(key, value))
+        lines.append(f"{key} = {toml_value(value)}" + _comment(key, value))
     return lines
 
 
@@ -56,8 +57,8 @@ def commented_toml(cfg):
 
 # -- the reference page ----------------------------------------------------------------------------
 def _fmt(v):
-    from cloth.config import _toml_value
-    return "`" + _toml_value(v).replace("|", "\\|") + "`"
+    from cloth.config import toml_value
+    return "`" + toml_value(v).replace("|", "\\|") + "`"
 
 
 def _table(name, defaults):

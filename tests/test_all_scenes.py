@@ -54,7 +54,7 @@ def test_scenes_enable_only_what_they_need():
         if sim.setup.self_collision:
             self_coll.add(name)
     # hanging runs the paper's experiment (mapping) by default.
-    assert stages["hanging"] == {"dynamics", "strain_limit", "snapshot"}
+    assert stages["hanging"] == {"dynamics", "strain_limit", "limits_watch", "snapshot"}
     assert "collision" in stages["drape"] and "collision" in stages["tshirt"]
     assert {"collision_final", "contact_reproject"} <= stages["drape"]
     assert "collision" not in stages["pull"] and "pins" in stages["pull"]

@@ -10,6 +10,7 @@
 Files are written as frames finish, so a crash or a divergence keeps everything before it.
 """
 import os
+import sys
 
 import numpy as np
 
@@ -117,6 +118,28 @@ class HeadlessRun:
         io.write_plain_obj(path, np.concatenate(verts), np.concatenate(faces))
 
     # -- the run ------------------------------------------------------------------------------
+    def _report_limit_miss(self, progress):
+        """One line, the first time a frame ends above strain.tol (the count is in the final
+        line: ``limit_summary``)."""
+        sim = self.sim
+        if sim.limit_misses == 1 and not getattr(self, "_miss_said", False):
+            self._miss_said = True
+            frame, value, rounds, budget = sim.first_limit_miss
+            if progress:
+                progress.end_line()
+            print(f"loom: frame {frame} ended above the limits: own violation {value:.2g} > "
+                  f"strain.tol {sim.settings.strain.tol:g} ({rounds} of {budget} AL rounds in "
+                  "its last projection); later frames like it are counted, not printed",
+                  file=sys.stderr, flush=True)
+
+    def limit_summary(self):
+        """'' or the run's count of frames that ended above strain.tol."""
+        sim = self.sim
+        if not sim.limit_misses:
+            return ""
+        return (f"{sim.limit_misses} frame(s) ended above strain.tol (largest own violation "
+                f"{sim.own_violation_peak:.2g} at frame {sim.own_violation_peak_frame})")
+
     def run(self, frames):
         """Simulate ``frames`` frames. Returns True if all ran; on divergence the folder keeps
         every frame before it and ``self.diverged`` holds the error."""
@@ -133,6 +156,7 @@ class HeadlessRun:
                     self.diverged = err
                     return False
                 self._write_frame()
+                self._report_limit_miss(progress)
                 if progress:
                     progress.update(k + 1, f"{self.sim.frame_ms:.0f} ms/frame simulated")
             return True

@@ -1,0 +1,104 @@
+"""What a run tells a script: exit codes, the limits watched in every frame, settings that
+round-trip through --show-config and config.toml, and meshes that are not surfaces refused."""
+import csv
+
+import pytest
+
+import main as loom_main
+from scenes import checks
+from tests.test_scene_files import GRID_V, GRID_VT, assert_one_line, obj_text, scene
+
+SMALL = ["--headless", "--quiet", "--no-images", "--resolution", "6"]
+
+
+def run_main(capsys, *args):
+    rc = loom_main.main([str(a) for a in args])
+    out = capsys.readouterr()
+    return rc, out.out, out.err
+
+
+def test_a_failed_final_check_exits_with_its_own_code(capsys, tmp_path):
+    """After 2 frames the falling sheet does not touch the sphere yet: the final check fails,
+    says so, and the exit code says so too (5)."""
+    rc, out, err = run_main(capsys, "scenes/examples/drape.toml", "--set",
+                            'check.touching=["sphere"]', "--headless", "--quiet", "--no-images",
+                            "--frames", 2, "--out", tmp_path / "o")
+    assert "final check: FAILED" in out, out
+    assert rc == loom_main.EXIT_CHECK_FAILED == 5, err
+
+
+def test_a_frame_above_the_tolerance_is_reported_and_fails_the_check(capsys, tmp_path):
+    """With a round budget of 1 and a tolerance of 1e-7 the frames end above the limits: the
+    first is printed (frame, violation, rounds used of the budget), the rest counted, and the
+    final check fails naming the worst frame."""
+    rc, out, err = run_main(capsys, "hanging", *SMALL, "--frames", 4, "--rounds", 1,
+                            "--set", "strain.tol=1e-7", "--out", tmp_path / "o")
+    assert rc == 5, err
+    lines = [ln for ln in err.splitlines() if "ended above the limits" in ln]
+    assert len(lines) == 1 and "1 of 1 AL rounds" in lines[0], err
+    assert "frame(s) ended above strain.tol" in err
+    assert "limits are not held" in out and "at frame" in out
+
+
+def test_the_final_check_judges_the_largest_violation_of_the_run():
+    """A frame in the middle of a run that ended beyond 2 tol fails the check even when the
+    last frame holds the limits."""
+    from benchmarks.harness import configure
+    from cloth.simulator import Simulator
+    _, cfg, setup = configure("hanging", {"cloth": {"resolution": 6}})
+    sim = Simulator(setup, cfg)
+    for _ in range(3):
+        sim.step_frame()
+    ok, text = checks.limits_held(sim)
+    assert ok and sim.limit_misses == 0 and sim.own_violation_peak <= sim.settings.strain.tol
+    sim.own_violation_peak, sim.own_violation_peak_frame = 1e-3, 2      # as if frame 2 had
+    ok, text = checks.limits_held(sim)
+    assert not ok and "at frame 2" in text
+
+
+@pytest.mark.parametrize("scene_name", ["hanging", "tshirt", "scenes/examples/garment.toml"])
+def test_show_config_is_toml_that_config_reads_back(capsys, tmp_path, scene_name):
+    """--show-config prints only TOML (no banner); fed back with --config it prints the same."""
+    import tomllib
+    rc, out, _ = run_main(capsys, scene_name, "--show-config")
+    assert rc == 0
+    tomllib.loads(out)                                  # valid TOML, nothing else on stdout
+    path = tmp_path / "shown.toml"
+    path.write_text(out)
+    rc, again, err = run_main(capsys, scene_name, "--config", path, "--show-config")
+    assert rc == 0, err
+    assert again == out
+
+
+def _metrics(path):
+    with open(path) as fh:
+        rows = list(csv.DictReader(fh))
+    return [{k: v for k, v in r.items() if not k.startswith("ms_")} for r in rows]
+
+
+def test_a_runs_config_toml_reproduces_it(capsys, tmp_path):
+    """``python main.py --config DIR/config.toml`` (no scene given: the file names it) runs
+    the same scene with the same settings: the same metrics bit for bit (times aside). Given
+    another scene, the file is refused with the fix."""
+    rc, _, err = run_main(capsys, "hanging", *SMALL, "--frames", 3, "--out", tmp_path / "a")
+    assert rc == 0, err
+    config = tmp_path / "a" / "config.toml"
+    rc, _, err = run_main(capsys, "--config", config, "--headless", "--quiet",
+                          "--out", tmp_path / "b")
+    assert rc == 0, err
+    first, second = _metrics(tmp_path / "a" / "metrics.csv"), _metrics(tmp_path / "b" /
+                                                                       "metrics.csv")
+    assert len(first) == 4 and first == second
+    rc, _, err = run_main(capsys, "drape", "--config", config, "--headless")
+    assert rc == 2 and "configuration of scene 'hanging'" in err and "give no scene" in err
+
+
+def test_a_bowtie_vertex_is_refused_with_its_line(capsys, tmp_path):
+    """Two triangles that share only a vertex (no edge) are not a surface: one line naming the
+    face's line in the OBJ and the fix, exit code 2."""
+    v = GRID_V + [(2, 1, 0), (2, 2, 0)]
+    vt = GRID_VT + [(2, 1), (2, 2)]
+    path = scene(tmp_path, obj_text(v=v, vt=vt, faces=("1/1 2/2 3/3", "3/3 5/5 6/6")))
+    rc = loom_main.main([path, "--headless", "--quiet", "--no-images"])
+    err = capsys.readouterr().err
+    assert_one_line(rc, err, "cloth.obj:14", "bowtie", "give each fan its own vertex")
