@@ -32,6 +32,49 @@ def test_offscreen_frame_shows_the_cloth(renderer):
     assert img[5:20, 5:20].std() < 0.02          # plain background in the corner
 
 
+def test_the_cloth_shows_whatever_the_drivers_transform_buffer_held(renderer):
+    """GGUI's mesh shader multiplies an instance transform by 0 when a mesh has none, and a
+    plain mesh call never writes that buffer: NaN left in it (lavapipe's memory comes from
+    the process's heap) hid the cloth, depending on what ran before (ui/ggui_buffers.py).
+    Here NaN is written into it on purpose; the next frame still shows the cloth, because
+    every mesh draw now writes its identity transform into that same buffer. (The plain call
+    lost the cloth here only when the driver's next allocation reused the NaN memory.)"""
+    from taichi.ui.utils import get_field_info
+    from tests.test_scenes import make_sim
+    from ui.render import draw_simulation
+    sim, _ = make_sim(cloth={"resolution": 7}, strain={"method": "none"})
+    sim.step_frame()
+
+    def orange_share():
+        img = renderer.image().astype(float) / 255
+        return (img[..., 0] > img[..., 2] + 0.15).mean()
+    draw_simulation(renderer, sim, "shading")
+    shown = orange_share()
+    assert shown > 0.05
+    renderer.begin()                    # the same mesh renderable, with NaN transforms
+    vbo = np.zeros((3, 12), np.float32)
+    nan = np.full((1, 4, 4), np.nan, np.float32)
+    renderer.scene.scene.mesh_instance(get_field_info(vbo), True, get_field_info(None),
+                                       (0.5, 0.5, 0.5), True, get_field_info(nan), 1, 0, 3, 0,
+                                       3, 0, False)
+    renderer.finish()
+    renderer.image()
+    draw_simulation(renderer, sim, "shading")
+    assert orange_share() == shown
+    calls = []                          # each mesh: one instance, the identity
+
+    class Scene:
+        def mesh_instance(self, *args):
+            calls.append(args)
+    from ui.ggui_buffers import VertexBuffers, draw_mesh
+    draw_mesh(type("S", (), {"scene": Scene()})(), VertexBuffers(), "m", np.zeros((3, 3)),
+              np.zeros((3, 3)), np.ones((3, 3)))
+    transforms = calls[0][5]
+    assert transforms.valid and tuple(transforms.shape) == (1, 4, 4) and calls[0][6] == 1
+    from ui.ggui_buffers import IDENTITY
+    assert np.array_equal(IDENTITY[0], np.eye(4))
+
+
 def test_strain_colour_modes_come_from_metrics():
     from cloth.sheet import make_sheet
     uv, faces = make_sheet(1, 1, 4, 4)

@@ -12,6 +12,16 @@ gone from the second).
 Here the buffers are numpy arrays owned by a ``VertexBuffers`` object, reused frame to frame
 and alive until the next frame is built; they are filled in numpy (no Taichi kernel per
 draw) and passed to GGUI's core calls with the same arguments the Python wrappers pass.
+
+Meshes are drawn as one instance with an identity transform (``draw_mesh``). GGUI's mesh
+vertex shader (Taichi 1.7.4, shaders/Mesh_vk.vert) always reads an instance transform and
+blends it with the identity, ``I * (1 - has) + T * has``; a plain ``scene.mesh`` call has no
+transforms (has = 0) and never writes their buffer, so T is whatever the driver's new
+allocation held, and NaN * 0 is NaN: every vertex NaN, the mesh gone while lines draw. With
+lavapipe that memory comes from the process's heap, so whether the cloth showed depended on
+what the process had run before (the window tests failed in a full suite run after other
+tests, never alone; reproduced by writing NaN transforms once: every later plain mesh draw
+of that renderable vanished).
 """
 import numpy as np
 from taichi.ui.utils import get_field_info
@@ -64,13 +74,17 @@ def _color(c):
     return tuple(float(v) for v in c)
 
 
+# One instance transform, the identity (4x4 f32; GGUI transposes it, which keeps it).
+IDENTITY = np.eye(4, dtype=np.float32)[None]
+
+
 def draw_mesh(scene, buffers, key, corners, normals, colors, two_sided=True):
     """Triangles listed corner by corner (3 rows per face), with per-vertex normals and
-    colours."""
+    colours; one instance with the identity transform, written every draw (see above)."""
     vbo = buffers.vertices(key, corners, normals, colors)
     n = len(vbo)
-    scene.scene.mesh(get_field_info(vbo), True, get_field_info(None), (0.5, 0.5, 0.5),
-                     two_sided, n, 0, n, 0, False)
+    scene.scene.mesh_instance(get_field_info(vbo), True, get_field_info(None), (0.5, 0.5, 0.5),
+                              two_sided, get_field_info(IDENTITY), 1, 0, n, 0, n, 0, False)
 
 
 def draw_lines(scene, buffers, key, points, color, width=1.0, indices=None, colors=None):
