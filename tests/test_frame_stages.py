@@ -37,7 +37,7 @@ def test_the_stages_add_up_to_the_frame_time_and_the_csv_has_one_column_each():
     sim = _sim("hanging", {"cloth": {"resolution": 7}, "strain": {"method": "mapping"},
                            "sim": {"substeps": 2}})
     assert {s.name for s in sim.stages if s.enabled} == {"dynamics", "strain_limit",
-                                                          "metrics", "snapshot"}
+                                                          "limits_watch", "metrics", "snapshot"}
     gaps = []
     for _ in range(7):
         sim.step_frame()
