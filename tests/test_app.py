@@ -19,6 +19,13 @@ REFERENCE_MODES = ("shading", "warp-strain")
 # Tolerances for another Vulkan driver or GPU: mean absolute difference (0..1) and the share
 # of pixels that differ by more than a quarter of full scale.
 MEAN_TOL, OUTLIER_TOL = 0.02, 0.02
+# The strain-space plot's dots are the faces' strains of a strain-limited run, and the fast
+# projection makes that run chaotic: starts 1 nm apart (LOOM_JITTER_SEED) put its faces up to
+# 1.5 % strain apart by frame 20 (hanging, resolution 11, mapping; 7 mm apart by frame 2), so
+# the dots move. Measured over five such starts: 2.0-3.0 % of the plot's pixels far off
+# (mean 0.010-0.015), the other images at most 1.0 %. The plot's frame, panels, box and labels
+# are checked here; that the dots are drawn, in test_teaching_overlays_draw_what_they_say.
+PLOT_OUTLIER_TOL = 0.05
 
 
 RESOLUTION = 11
@@ -362,14 +369,14 @@ def teaching_rendered(rendered):
     return teaching_images(rendered[2])
 
 
-def compare_with_reference(img, name, tmp_path_factory):
-    """``img`` against reference_images/``name`` within MEAN_TOL and OUTLIER_TOL; a failing
-    image is kept (a picture is read faster than a number)."""
+def compare_with_reference(img, name, tmp_path_factory, outlier_tol=OUTLIER_TOL):
+    """``img`` against reference_images/``name`` within MEAN_TOL and ``outlier_tol``; a
+    failing image is kept (a picture is read faster than a number)."""
     import imageio.v2 as imageio
     ref = imageio.imread(os.path.join(REFERENCE_DIR, name))[:, :, :3].astype(float) / 255
     assert img.shape == ref.shape
     diff = np.abs(img.astype(float) / 255 - ref).max(axis=2)
-    ok = diff.mean() < MEAN_TOL and (diff > 0.25).mean() < OUTLIER_TOL
+    ok = diff.mean() < MEAN_TOL and (diff > 0.25).mean() < outlier_tol
     if not ok:
         out = os.path.join(tmp_path_factory.getbasetemp(), name.replace(".png", "_rendered.png"))
         imageio.imwrite(out, img)
@@ -381,13 +388,14 @@ def compare_with_reference(img, name, tmp_path_factory):
 
 @pytest.mark.parametrize("view", TEACH_VIEWS)
 def test_teaching_overlay_matches_the_reference_image(teaching_rendered, view, tmp_path_factory):
-    compare_with_reference(teaching_rendered[view], f"hanging_teach_{view}.png", tmp_path_factory)
+    compare_with_reference(teaching_rendered[view], f"hanging_teach_{view}.png", tmp_path_factory,
+                           PLOT_OUTLIER_TOL if view == "plot" else OUTLIER_TOL)
 
 
 def test_teaching_overlays_draw_what_they_say(teaching_rendered, rendered):
     """Not only stable but present: the axes add orange-red strokes to the plain cloth, the
     binding map paints triangles in the key's colours, the plot fills the window with white
-    panels and a green feasible box."""
+    panels, a green feasible box and the faces' dots."""
     axes = teaching_rendered["axes"].astype(int)
     stroke = (axes[..., 0] > 180) & (axes[..., 2] < 120)            # yellow-orange-red
     assert stroke.mean() > 0.002
@@ -400,6 +408,12 @@ def test_teaching_overlays_draw_what_they_say(teaching_rendered, rendered):
         (plot[..., 1] - plot[..., 0] > 10)
     white = (plot.min(axis=2) > 250)
     assert green.mean() > 0.05 and white.mean() > 0.2
+    # The faces' dots: grey ones (3.1-4.0 % of the window over five starts 1 nm apart) and red
+    # ones where a constraint binds (0.3-0.4 %).
+    grey = (np.abs(plot[..., 0] - plot[..., 1]) < 12) & (np.abs(plot[..., 1] - plot[..., 2]) < 12) \
+        & (plot[..., 0] > 120) & (plot[..., 0] < 215)
+    red_dots = (plot[..., 0] > 150) & (plot[..., 1] < 90) & (plot[..., 2] < 90)
+    assert grey.mean() > 0.015 and red_dots.mean() > 0.001
 
 
 def test_picking_matches_what_ggui_draws(rendered):
