@@ -18,6 +18,17 @@ EXIT_NO_RENDER = 4        # no Vulkan device for the window or the frames
 EXIT_CHECK_FAILED = 5     # the run finished, but the scene's final check did not hold
 
 
+def window_size(text):
+    try:
+        w, h = (int(t) for t in text.lower().replace("x", ",").split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a window size: give W,H in pixels, "
+                                         "e.g. 1280,720") from None
+    if w < 320 or h < 240:
+        raise argparse.ArgumentTypeError(f"window size {w}x{h} is too small: at least 320,240")
+    return (w, h)
+
+
 def band(text):
     try:
         lo, hi = (float(t) for t in text.split(","))
@@ -71,6 +82,9 @@ def parse_args(argv):
     p.add_argument("--video", action="store_true", help="headless: also write video.mp4")
     p.add_argument("--color", help="colour mode: shading, warp-strain, weft-strain, "
                    "bias-strain, principal-strain, violation, size, binding")
+    p.add_argument("--window-size", type=window_size, metavar="W,H",
+                   help="the window's size in pixels (default: 1280,800, shrunk to fit the "
+                        "screen)")
     p.add_argument("--overlay", action="append", default=[], metavar="NAME[,NAME]",
                    help="teaching view, in the window and headless frames: 'axes' (principal "
                    "stretch directions over the warp/weft threads), 'plot' (every triangle in "
@@ -266,14 +280,14 @@ def main(argv=None):
         from ui.render import RenderUnavailable
         try:
             from ui.app import run_compare
-            return run_compare(cfg, module, overlays)
+            return run_compare(cfg, module, overlays, size=args.window_size)
         except RenderUnavailable as err:
             return fail(f"{err}", EXIT_NO_RENDER)
     if not headless:
         from ui.render import RenderUnavailable
         try:
             from ui.app import run_app
-            return run_app(sim, cfg, module, overlays)
+            return run_app(sim, cfg, module, overlays, size=args.window_size)
         except RenderUnavailable as err:
             return fail(f"{err}; or use --headless", EXIT_NO_RENDER)
     return run_headless(sim, cfg, args, name, overlays)

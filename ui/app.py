@@ -30,7 +30,7 @@ from cloth.strain.families import STRAIN_METHODS
 
 from .colormap import COLOR_MODES
 from .overlays import Layout, TeachingLayer, pick_face
-from .render import ClothRenderer, draw_cloth, open_window
+from .render import ClothRenderer, draw_cloth, fit_window, open_window
 from .state import AppState, readout_lines
 
 PANEL = (0.0, 0.0, 0.26, 1.0)            # controls: x, y (top-down), width, height
@@ -86,12 +86,12 @@ class Recorder:
 
 
 class App:
-    def __init__(self, state: AppState, size=(1280, 800), out_dir="out"):
+    def __init__(self, state: AppState, size=None, out_dir="out"):
         # Always a shown window: GGUI's panel crashes in an offscreen window (tests drive the
         # app under Xvfb, see tests/test_app.py).
         self.state = state
         vsync = not os.environ.get("LOOM_APP_NO_VSYNC")
-        self.window = open_window("Loom", size, show_window=True, vsync=vsync)
+        self.window = open_window("Loom", fit_window(size), show_window=True, vsync=vsync)
         self.renderer = ClothRenderer(self.window, state.sim.setup.camera)
         self.gui = self.window.get_gui()
         self.out_dir = out_dir
@@ -531,9 +531,9 @@ class App:
                 "fps": 1000.0 / float(ft.mean()) if ft.size else 0.0}
 
 
-def _run(state, make=None):
+def _run(state, make=None, size=None):
     max_frames = os.environ.get("LOOM_APP_FRAMES")
-    app = App(state) if make is None else make(state)
+    app = App(state, size) if make is None else make(state)
     code = app.run(int(max_frames) if max_frames else None)
     if max_frames:
         s = app.stats()
@@ -552,17 +552,19 @@ def _with_overlays(state, overlays):
     return state
 
 
-def run_app(sim, cfg, module, overlays=()):
+def run_app(sim, cfg, module, overlays=(), size=None):
     """The interactive window for one simulator (``overlays``: the teaching view's "axes",
-    "plot" on from the start). Raises ``RenderUnavailable`` (with a message that names the
-    fix) when no window can be opened. Returns the exit code."""
-    return _run(_with_overlays(AppState(sim, cfg, module), overlays))
+    "plot" on from the start; ``size``: the window's (width, height), else it fits the
+    screen). Raises ``RenderUnavailable`` (with a message that names the fix) when no window
+    can be opened. Returns the exit code."""
+    return _run(_with_overlays(AppState(sim, cfg, module), overlays), size=size)
 
 
-def run_compare(cfg, module, overlays=()):
+def run_compare(cfg, module, overlays=(), size=None):
     """The comparison view: the same scene with svd, warp-weft and mapping side by side in
     one window, labelled, sharing every control."""
-    return _run(_with_overlays(AppState(None, cfg, module, compare=True), overlays))
+    return _run(_with_overlays(AppState(None, cfg, module, compare=True), overlays),
+                size=size)
 
 
 class TourApp(App):

@@ -47,13 +47,59 @@ def check_display():
     x11.XCloseDisplay(dpy)
 
 
+def screen_size():
+    """(width, height) in pixels of the X display's default screen, or None (no X display,
+    Wayland, no libX11)."""
+    import ctypes
+    import ctypes.util
+    import os
+    name = os.environ.get("DISPLAY")
+    path = ctypes.util.find_library("X11")
+    if not name or os.environ.get("WAYLAND_DISPLAY") or path is None:
+        return None
+    try:
+        x11 = ctypes.CDLL(path)
+    except OSError:
+        return None
+    x11.XOpenDisplay.restype = ctypes.c_void_p
+    x11.XOpenDisplay.argtypes = [ctypes.c_char_p]
+    for fn in (x11.XDefaultScreen, x11.XCloseDisplay):
+        fn.argtypes = [ctypes.c_void_p]
+    x11.XDisplayWidth.argtypes = x11.XDisplayHeight.argtypes = [ctypes.c_void_p, ctypes.c_int]
+    dpy = x11.XOpenDisplay(name.encode())
+    if not dpy:
+        return None
+    screen = x11.XDefaultScreen(dpy)
+    size = int(x11.XDisplayWidth(dpy, screen)), int(x11.XDisplayHeight(dpy, screen))
+    x11.XCloseDisplay(dpy)
+    return size
+
+
+# The window's largest size, and the room left on the screen for a desktop's title bar and
+# task bar: 1280 x 800 opens at 1280 x 740 on a 1280 x 800 screen, 1280 x 708 on 1366 x 768.
+WINDOW_SIZE, SCREEN_MARGIN = (1280, 800), (0, 60)
+
+
+def fit_window(requested=None):
+    """The window's size: ``requested`` (--window-size) as given, else WINDOW_SIZE shrunk to
+    fit the screen it opens on (with SCREEN_MARGIN to spare)."""
+    if requested is not None:
+        return tuple(int(v) for v in requested)
+    screen = screen_size()
+    if screen is None:
+        return WINDOW_SIZE
+    return tuple(max(480, min(w, s - m)) for w, s, m in zip(WINDOW_SIZE, screen, SCREEN_MARGIN))
+
+
 def open_window(title, size, show_window, vsync=None):
     if show_window:
         check_display()
     try:
+        # At the screen's corner: GGUI's default (100, 100) pushed a screen-sized window's
+        # right and bottom edges off the screen.
         return ti.ui.Window(title, tuple(int(s) for s in size),
                             vsync=show_window if vsync is None else vsync,
-                            show_window=show_window)
+                            show_window=show_window, pos=(0, 0))
     except Exception as err:  # GGUI raises plain RuntimeError with a Vulkan or GLFW message
         reason = str(err).splitlines()[0][:120] if str(err) else type(err).__name__
         if show_window:
