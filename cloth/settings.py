@@ -191,6 +191,9 @@ SCHEMA = {
     "check": {
         "rest_after": Key("s", "scene files: from then on the final check wants the cloth at "
                           "rest (RMS speed under 4 mm/s); 0 = not checked", lo=0),
+        "limits_after": Key("s", "scene files: from then on every frame must end within "
+                            "the limits (2 x strain.tol; before it a landing may pass them)",
+                            lo=0),
         "drape_over": Key("", "scene files: name of a sphere obstacle the cloth must hang "
                           "draped over (below its equator on every side it overhangs)"),
         "touching": Key("", "scene files: names of obstacles the cloth must touch at the end"),

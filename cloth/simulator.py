@@ -600,17 +600,20 @@ class Simulator:
         self._update_pins(self.time + self.h)
 
     def _reset_limit_watch(self):
-        # Frames that ended with the method's own constraints above strain.tol: how many, the
-        # first (frame, violation, AL rounds used, round budget) and the largest violation.
+        # Each frame's largest own violation at its end, as (time, value); the frames that
+        # ended above strain.tol: how many, the first (frame, violation, AL rounds used, round
+        # budget) and the largest violation.
+        self.own_violation_log = []
         self.limit_misses, self.first_limit_miss = 0, None
         self.own_violation_peak, self.own_violation_peak_frame = 0.0, 0
 
     def _watch_limits(self):
         """Stage "limits_watch": the largest own violation at the end of the frame, against
-        strain.tol; the final checks judge the run's largest (``own_violation_peak``), not
+        strain.tol; the final checks judge the run's largest (``own_violation_log``), not
         only the last frame's."""
         value = self.strain.own_violation_max()
         frame = self.frame + 1
+        self.own_violation_log.append((self.time, value))
         if value > self.own_violation_peak:
             self.own_violation_peak, self.own_violation_peak_frame = value, frame
         if value > self.settings.strain.tol:

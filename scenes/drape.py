@@ -72,4 +72,4 @@ def check_final(sim, cfg):
                                "the sphere"),
         lambda: checks.outside(x[:, 1], tol, "the ground"),
         draped,
-        lambda: checks.limits_held(sim))
+        lambda: checks.limits_held(sim, after=drape_by(cfg)))

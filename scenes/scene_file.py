@@ -66,6 +66,7 @@ FILE_SECTIONS = {
     # gets (finite, pins on their targets, outside the obstacles, seams closed, limits held).
     "check": {
         "rest_after": 0.0,        # s: from then on the cloth must be at rest (0: not checked)
+        "limits_after": 0.0,      # s: from then on every frame must end within the limits
         "drape_over": "",         # name of a sphere obstacle the cloth must hang draped over
         "touching": [],           # names of obstacles the cloth must touch at the end
     },
@@ -461,8 +462,9 @@ def _check_targets(check, specs):
 
 def check_final(sim, cfg):
     """Every scene file: finite, pins on their targets, no vertex inside an obstacle beyond
-    the thickness, every seam closed to 1 mm after 2 s, the limits held. Then what the file's
-    ``[check]`` asks: at rest from ``rest_after`` on, draped over the sphere ``drape_over``
+    the thickness, every seam closed to 1 mm after 2 s, the limits held (now, and at the end
+    of every frame from ``limits_after`` on). Then what the file's ``[check]`` asks: at rest
+    from ``rest_after`` on, draped over the sphere ``drape_over``
     (``checks.draped_over_sphere``, from ``checks.drape_time`` on), touching the obstacles
     named in ``touching``."""
     from . import checks
@@ -514,7 +516,8 @@ def check_final(sim, cfg):
 
     return checks.combine(lambda: checks.finite(sim), pins, obstacles,
                           lambda: checks.seams_closed(sim, 1e-3, after=2.0),
-                          lambda: checks.limits_held(sim), draped, touching, rest)
+                          lambda: checks.limits_held(sim, after=want["limits_after"]),
+                          draped, touching, rest)
 
 
 def is_scene_file(name):

@@ -23,7 +23,7 @@ def fake(x, time, stitches=None, own=None, v=None, method="mapping"):
         model=SimpleNamespace(positions=lambda: x, mass=np.ones(len(x)),
                               velocities=lambda: np.zeros_like(x) if v is None else v),
         time=time, frame=int(round(30 * time)), method=method, own_violation=lambda: own,
-        own_violation_peak=0.0, own_violation_peak_frame=0,
+        own_violation_log=[],
         settings=SimpleNamespace(strain=SimpleNamespace(tol=1e-4)),
         dynamics=SimpleNamespace(stitches_np=np.zeros((0, 2), int) if stitches is None
                                  else stitches))
