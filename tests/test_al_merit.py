@@ -90,7 +90,10 @@ def test_residual_is_minus_the_merit_gradient(method):
         eps = 1e-7
         fd = (merit_at(x0 + eps * d) - merit_at(x0 - eps * d)) / (2 * eps)
         analytic = -np.sum(r * d[:nv])
-        assert abs(fd - analytic) <= 1e-5 * max(abs(analytic), 1e-12), (trial, fd, analytic)
+        # 1e-4: a wrong gradient is off by O(1). (Over starts 1 nm apart one svd state read
+        # 6e-5: a face near eta1 = eta2, where the regularised frame term bends sharply
+        # within the difference's 1e-7 step.)
+        assert abs(fd - analytic) <= 1e-4 * max(abs(analytic), 1e-12), (trial, fd, analytic)
     # The line search's merit (quadratic term from W d once, solve_al) is the merit. Its
     # pieces do not depend on the method (assemble_all feeds both sides alike), so one
     # method checks it: each method compiles its own kernel, ~10 s cold.
