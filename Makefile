@@ -22,12 +22,14 @@ vulkan:
 demo: $(STAMP) vulkan
 	$(PY) main.py $(ARGS)
 
+# --dist loadgroup: the exact strain solve's tests share one worker (xdist_group "exact_solve"),
+# which compiles its kernels once instead of once per worker.
 test: $(STAMP) vulkan
-	$(PY) -m pytest -n auto $(ARGS)
+	$(PY) -m pytest -n auto --dist loadgroup $(ARGS)
 
 # The fast subset (no sweeps, windows or long scenes), for a check before each commit.
 test-quick: $(STAMP) vulkan
-	$(PY) -m pytest -n auto -m "not slow" $(ARGS)
+	$(PY) -m pytest -n auto --dist loadgroup -m "not slow" $(ARGS)
 
 clean:
 	rm -rf $(VENV) out

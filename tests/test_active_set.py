@@ -10,6 +10,10 @@ from cloth.strain import active_set, direct, solver
 from cloth.strain.constraints import N_CONSTRAINTS
 from tests.test_coupling import _hanging
 
+# The exact solve compiles its own kernel per method (about 35 s cold each, fast compile): its
+# tests run in one xdist worker (make test: --dist loadgroup), which compiles them once.
+pytestmark = pytest.mark.xdist_group("exact_solve")
+
 
 def _tighten(monkeypatch, tol=1e-8):
     """The exact solve in the host loop (Cholesky steps) with its stationarity stop at 1e-6

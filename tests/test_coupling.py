@@ -232,6 +232,7 @@ def test_pcg_budget_is_per_method_and_grows_with_the_mesh():
     assert big.strain.pcg_budget(PC_JACOBI) == round(CG_BUDGET["mapping"] * np.sqrt(4050 / 1000))
 
 
+@pytest.mark.xdist_group("exact_solve")
 @pytest.mark.parametrize("method", ["svd", "mapping"])
 def test_exact_solve_reaches_its_stationarity(method):
     """Under strain.solve = "exact" a projection ends only once the Newton step at its answer,

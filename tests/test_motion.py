@@ -30,6 +30,7 @@ def _drop(seed, frames=12, **strain):
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group("exact_solve")
 @pytest.mark.parametrize("seed", ENSEMBLE)
 def test_a_landing_keeps_its_motion_as_the_exact_solve_does(seed):
     """Through the landing (frame 4 to 9) the fast solve keeps a like share of the kinetic

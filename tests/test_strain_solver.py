@@ -84,6 +84,7 @@ def kkt_residuals(model, limiter, x_hat):
             np.abs(lam * g / sqa).max() / max(lam.max(), 1e-300), (g / sqa).max())
 
 
+@pytest.mark.xdist_group("exact_solve")
 @pytest.mark.parametrize("method", METHODS)
 def test_kkt_conditions_on_a_small_mesh(method):
     """On a 3x3-vertex sheet (8 triangles) solved exactly and tightly, the result is a KKT
@@ -296,6 +297,7 @@ def test_contact_half_spaces_hold_with_the_limits():
     assert model.positions()[:, 2].min() < -0.01
 
 
+@pytest.mark.xdist_group("exact_solve")
 @pytest.mark.parametrize("mu", [1.0, 0.25])
 def test_friction_in_the_projection_follows_coulomb(mu):
     """A sheet on the plane z = 0 whose dynamics pushed every vertex 2 mm into the plane and
