@@ -57,6 +57,8 @@ def limits_held(sim, factor=LIMIT_FACTOR, after=0.0):
     own = sim.own_violation()
     if own is None:
         return True, ""
+    if before(sim, after):
+        return True, f"limits not checked before {after:g} s"
     worst, at = (float(own.max()) if own.size else 0.0), sim.time
     for t, value in sim.own_violation_log:
         if t >= after - 1e-6 and value > worst:
