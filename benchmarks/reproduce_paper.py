@@ -70,7 +70,7 @@ def write_table1_md(rows, path, res, frames, remeshed=False, cmd=None, seconds=N
             ("weft_rms", "weft RMS"), ("weft_p95", "weft p95"), ("bias_max", "|bias| max"),
             ("own_violation_max", "own viol. max"), ("mean_abs_dihedral", "mean |dihedral| (rad)"),
             ("curvature_energy", "curv. energy"), ("height", "height (m)"), ("width", "width (m)"),
-            ("ms_per_frame", "ms/frame"), ("sl_iterations", "SL iters")]
+            ("ms_per_frame", "ms/frame"), ("sl_iterations", "SL rounds")]
     if remeshed:
         cols.insert(2, ("faces", "triangles"))
     size = ("remeshed every frame at the default sizes from a grid of "

@@ -51,7 +51,7 @@ def readout_lines(r, width=40):
         mx = r["own_violation"][0]
         lines.append(f"own limits {'held' if mx <= r['tol'] else 'NOT HELD'}: max {mx:.1e} "
                      f"(tol {r['tol']:.0e})")
-    lines.append(f"SL iters {r['sl_iterations']}  CG iters {r['cg_iterations']}")
+    lines.append(f"SL rounds {r['sl_iterations']}  CG iters {r['cg_iterations']}")
     lines.append(f"{'strain %':8s}{'min':>6s}{'max':>7s}{'rms':>6s}  band")
     for name in BANDS:
         lo, hi = r["bands"][name]
