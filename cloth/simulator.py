@@ -601,11 +601,10 @@ class Simulator:
 
     def _reset_limit_watch(self):
         # Each frame's largest own violation at its end, as (time, value); the frames that
-        # ended above strain.tol: how many, the first (frame, violation, AL rounds used, round
-        # budget) and the largest violation.
+        # ended above strain.tol: how many, and the first (frame, violation, AL rounds used,
+        # round budget).
         self.own_violation_log = []
         self.limit_misses, self.first_limit_miss = 0, None
-        self.own_violation_peak, self.own_violation_peak_frame = 0.0, 0
 
     def _watch_limits(self):
         """Stage "limits_watch": the largest own violation at the end of the frame, against
@@ -614,8 +613,6 @@ class Simulator:
         value = self.strain.own_violation_max()
         frame = self.frame + 1
         self.own_violation_log.append((self.time, value))
-        if value > self.own_violation_peak:
-            self.own_violation_peak, self.own_violation_peak_frame = value, frame
         if value > self.settings.strain.tol:
             self.limit_misses += 1
             if self.first_limit_miss is None:

@@ -137,8 +137,9 @@ class HeadlessRun:
         sim = self.sim
         if not sim.limit_misses:
             return ""
+        worst, t = max((v, t) for t, v in sim.own_violation_log)
         return (f"{sim.limit_misses} frame(s) ended above strain.tol (largest own violation "
-                f"{sim.own_violation_peak:.2g} at frame {sim.own_violation_peak_frame})")
+                f"{worst:.2g} at t = {t:.2f} s)")
 
     def run(self, frames):
         """Simulate ``frames`` frames. Returns True if all ran; on divergence the folder keeps

@@ -20,36 +20,10 @@ class RenderUnavailable(RuntimeError):
     """GGUI could not open a (possibly offscreen) window: no Vulkan device or no display."""
 
 
-def check_display():
-    """Raise ``RenderUnavailable`` if $DISPLAY names an X server that does not answer. GLFW
-    would print "cannot initialize GLFW" and end the process without a Python error."""
-    import ctypes
-    import ctypes.util
-    import os
-    name = os.environ.get("DISPLAY")
-    if not name or os.environ.get("WAYLAND_DISPLAY"):
-        return
-    path = ctypes.util.find_library("X11")
-    if path is None:
-        return
-    try:
-        x11 = ctypes.CDLL(path)
-    except OSError:
-        return
-    x11.XOpenDisplay.restype = ctypes.c_void_p
-    x11.XOpenDisplay.argtypes = [ctypes.c_char_p]
-    x11.XCloseDisplay.argtypes = [ctypes.c_void_p]
-    dpy = x11.XOpenDisplay(name.encode())
-    if not dpy:
-        raise RenderUnavailable(f"cannot connect to the X display '{name}' (is the X server "
-                                "running and may this user connect? check DISPLAY and xhost); "
-                                "without a screen use xvfb-run")
-    x11.XCloseDisplay(dpy)
-
-
-def screen_size():
-    """(width, height) in pixels of the X display's default screen, or None (no X display,
-    Wayland, no libX11)."""
+def _x_display():
+    """(libX11, display pointer, name) for $DISPLAY; None when there is no X display to ask
+    (no DISPLAY, Wayland, no libX11); the pointer is None when the server does not answer.
+    The caller closes an open display (``x11.XCloseDisplay``)."""
     import ctypes
     import ctypes.util
     import os
@@ -66,9 +40,30 @@ def screen_size():
     for fn in (x11.XDefaultScreen, x11.XCloseDisplay):
         fn.argtypes = [ctypes.c_void_p]
     x11.XDisplayWidth.argtypes = x11.XDisplayHeight.argtypes = [ctypes.c_void_p, ctypes.c_int]
-    dpy = x11.XOpenDisplay(name.encode())
-    if not dpy:
+    return x11, x11.XOpenDisplay(name.encode()) or None, name
+
+
+def check_display():
+    """Raise ``RenderUnavailable`` if $DISPLAY names an X server that does not answer. GLFW
+    would print "cannot initialize GLFW" and end the process without a Python error."""
+    found = _x_display()
+    if found is None:
+        return
+    x11, dpy, name = found
+    if dpy is None:
+        raise RenderUnavailable(f"cannot connect to the X display '{name}' (is the X server "
+                                "running and may this user connect? check DISPLAY and xhost); "
+                                "without a screen use xvfb-run")
+    x11.XCloseDisplay(dpy)
+
+
+def screen_size():
+    """(width, height) in pixels of the X display's default screen, or None (no X display,
+    Wayland, no libX11)."""
+    found = _x_display()
+    if found is None or found[1] is None:
         return None
+    x11, dpy, _ = found
     screen = x11.XDefaultScreen(dpy)
     size = int(x11.XDisplayWidth(dpy, screen)), int(x11.XDisplayHeight(dpy, screen))
     x11.XCloseDisplay(dpy)
