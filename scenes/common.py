@@ -13,18 +13,29 @@ def material_from(cfg):
     return Material(**{k: float(v) for k, v in m.items() if k != "preset"})
 
 
+def preset_values(preset, material):
+    """The material keys of preset ``preset``: a built-in one (MATERIAL_PRESETS) or a fabric
+    record (fabrics/*.toml, cloth/fabrics.py: its material only; ``--fabric`` also sets its
+    bands), restricted to the keys ``material`` has."""
+    if preset in MATERIAL_PRESETS:
+        return MATERIAL_PRESETS[preset]
+    from cloth import fabrics
+    if preset in fabrics.names():
+        return {k: v for k, v in fabrics.material_preset(preset).items() if k in material}
+    raise ConfigError(f"unknown material preset '{preset}': use one of "
+                      f"{', '.join(MATERIAL_PRESETS)} or a fabric ({', '.join(fabrics.names())})")
+
+
 def resolve(defaults, overrides_list):
     """Apply each override dict in order. A ``material.preset`` override first loads that
-    preset's values, then the remaining material keys of the same override apply on top."""
+    preset's values (``preset_values``), then the remaining material keys of the same override
+    apply on top."""
     cfg = copy.deepcopy(defaults)
     for ov in overrides_list:
         ov = copy.deepcopy(ov)
         preset = ov.get("material", {}).get("preset")
         if preset is not None:
-            if preset not in MATERIAL_PRESETS:
-                raise ConfigError(f"unknown material preset '{preset}': use one of "
-                                  f"{', '.join(MATERIAL_PRESETS)}")
-            cfg["material"].update(MATERIAL_PRESETS[preset], preset=preset)
+            cfg["material"].update(preset_values(preset, cfg["material"]), preset=preset)
             del ov["material"]["preset"]
         cfg = merge(cfg, ov)
     return cfg

@@ -1,0 +1,388 @@
+"""Fabrics from the lab (issue #52): measured fabric records (``fabrics/*.toml``) and the rule
+that turns them into Loom's material and strain bands.
+
+    from cloth import fabrics
+    fabrics.names()                          # ['cotton-jersey', 'cotton-shirting', 'denim', ...]
+    cfg = fabrics.apply_fabric(cfg, "denim") # material and bands of a config (dict or Settings)
+    fabrics.provenance("denim")              # {"material.k_warp": "where it came from", ...}
+    python -m cloth.fabrics                  # the table of docs/fabrics.md
+
+A record holds what a KES-FB lab reports (Kawabata 1980), per direction where the test is
+directional: tensile EMT (strain at Fm = 500 gf/cm, %), LT (linearity) or WT (tensile energy,
+gf cm/cm^2; KES defines LT = WT / (Fm EMT / 2), so either gives the other), bending B
+(gf cm^2/cm) along warp and weft; shear G (gf/(cm deg)) and 2HG (gf/cm); weight W (mg/cm^2).
+``load`` checks a record: a missing direction or value, or one out of range, is one
+``FabricError`` line naming the file and the field.
+
+**The rule** (``derive``), every step a stated formula:
+
+1. *The tensile curve.* KES gives two numbers per direction, EMT and LT. The curve through
+   them is taken as ``F(e) = A (exp(e / e0) - 1)``: its tangent stiffness ``F'(e) = (A / e0)
+   exp(e / e0)`` starts at the crimp modulus ``A / e0`` and rises as the crimp is pulled out,
+   the convex shape of a woven's curve (LT < 1). ``F(EMT) = Fm`` and the area ``WT = LT Fm EMT
+   / 2`` fix A and e0 (LT = 2 (1/x - 1/(e^x - 1)) with x = EMT / e0, solved for x). LT >= 1
+   (a straight or concave curve) is taken as straight, ``F = Fm e / EMT``.
+2. *What the limit means.* A band's upper end is the strain this curve reaches at the limit
+   load ``LIMIT_LOAD`` = 20 gf/cm (19.6 N/m): about ten times the largest tension gravity puts
+   in a hanging garment (rho g H: 2.0 N/m for 200 g/m^2 hanging 1 m), i.e. the most a fabric
+   stretches under the loads of wear, and 4 % of KES's 500 gf/cm, inside the low-stress
+   range KES characterises. Strain limiting then holds the cloth where the real fabric, under
+   any load it meets in use, would be. The lower end is the mirror image (``-e_max``): in-plane
+   compression is not measured by KES, and a fabric buckles before it shortens; a symmetric
+   band is the paper's convention.
+3. *The membrane moduli* (N/m): along warp and weft the secant of the measured curve at the
+   limit load, ``k = LIMIT_LOAD / e_max``, so the linear membrane reaches the band exactly at
+   the limit load (below it the convex curve is softer: the crimp modulus, 0.6-0.95 k on the
+   records here, ``derive(...)['crimp_modulus']``). Shear: ``k_shear`` = G per radian,
+   ``G * 0.980665 * 180 / pi`` N/m (Loom's membrane: the shear force per width per radian of
+   shear angle). The shear hysteresis is not modelled (Loom's membrane is elastic).
+4. *The bias band* (warp-weft's third band): a bias strip under the limit load T =
+   ``LIMIT_LOAD`` along it. In thread axes that load is a tension T/2 in each thread and a
+   shear force T/2 per width; the shear angle is the KES loading branch solved for it,
+   ``gamma = (T/2 - 2HG/2) / G`` degrees (0 if the load does not overcome the hysteresis),
+   capped at ``JAMMING_DEG`` = 30 deg (an estimate of a plain weave's jamming angle: KES shears
+   only to 8 deg and does not measure where yarns jam). With the threads stretched to
+   ``a = 1 + e_warp(T/2)`` and ``b = 1 + e_weft(T/2)``, the bias strain is
+   ``sqrt(a^2 + b^2 + 2 a b sin(gamma)) / sqrt(2) - 1`` (and the other diagonal's, with
+   ``-sin``, for the lower end). The band is widened where needed to contain the automatic band
+   of docs/method.md §3.2, so every unsheared state the warp and weft bands accept stays
+   feasible.
+5. *Each method's bands:* warp-weft uses all three; mapping maps the warp and weft bands onto
+   the principal directions; svd gives the warp band to the larger principal stretch and the
+   weft band to the smaller (the paper's convention, docs/method.md §3.1): the same two
+   bands serve all three methods.
+6. *Density and bending:* ``density = W * 0.01`` kg/m^2; ``k_bend_warp``, ``k_bend_weft`` =
+   B * 9.80665e-5 N m (1 gf cm^2/cm = 1 gf cm); ``k_bend`` = sqrt(B_warp B_weft), the twisting
+   rigidity of the orthotropic plate (cloth/bending.py) and the value isotropic bending uses.
+
+Damping is not measured by KES: ``apply_fabric`` keeps the configuration's damping.
+"""
+import copy
+import math
+import os
+import sys
+import tomllib
+from dataclasses import dataclass, field
+
+from .config import ConfigError
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+FABRIC_DIR = os.path.join(ROOT, "fabrics")
+
+# Units (KES-FB reports in gram-force and centimetres).
+GF = 9.80665e-3                  # N per gram-force
+GF_PER_CM = GF * 100.0           # 0.980665 N/m per gf/cm (tension per width)
+GF_CM2_PER_CM = GF * 0.01        # 9.80665e-5 N m per gf cm^2/cm (flexural rigidity)
+MG_PER_CM2 = 0.01                # kg/m^2 per mg/cm^2
+PER_DEG = 180.0 / math.pi        # a stiffness per degree -> per radian
+
+KES_FM = 500.0                   # gf/cm: the KES-FB1 tensile test's maximum load
+LIMIT_LOAD = 20.0                # gf/cm: the load that defines a band (the module's rule, 2)
+JAMMING_DEG = 30.0               # deg: the largest shear angle a bias band allows (rule, 4)
+
+DIRECTIONS = ("warp", "weft")
+# field -> (unit, what it is); every direction needs EMT, B and one of LT or WT.
+TENSILE = {"EMT": ("%", "strain at 500 gf/cm (KES-FB1)"),
+           "LT": ("", "linearity of the load-extension curve (KES-FB1)"),
+           "WT": ("gf cm/cm^2", "tensile energy (KES-FB1)"),
+           "B": ("gf cm^2/cm", "bending rigidity (KES-FB2)")}
+SHEAR = {"G": ("gf/(cm deg)", "shear stiffness (KES-FB1)"),
+         "2HG": ("gf/cm", "shear hysteresis at 0.5 deg (KES-FB1)")}
+
+
+class FabricError(ConfigError):
+    """A fabric record that cannot be used; the message is one line naming file and field."""
+
+
+@dataclass(frozen=True)
+class Fabric:
+    """One checked record: ``warp`` / ``weft`` {EMT, LT, WT?, B}, ``shear`` {G, 2HG}."""
+    name: str
+    path: str
+    kind: str
+    weight: float                               # mg/cm^2
+    warp: dict
+    weft: dict
+    shear: dict
+    source: dict = field(default_factory=dict)
+
+
+def _where(path):
+    return os.path.relpath(path, ROOT) if path.startswith(ROOT) else path
+
+
+def _number(value, path, key, unit, what, lo=0.0, hi=None):
+    """A positive finite number, or one FabricError line."""
+    u = f" {unit}" if unit else ""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise FabricError(f"{_where(path)}: {key} = {value!r} must be a number ({what}{u})")
+    if not math.isfinite(value) or value <= lo:
+        raise FabricError(f"{_where(path)}: {key} = {value!r} must be > {lo:g}{u} ({what})")
+    if hi is not None and value > hi:
+        raise FabricError(f"{_where(path)}: {key} = {value!r} must be <= {hi:g}{u} ({what})")
+    return float(value)
+
+
+def parse(data, path="<record>"):
+    """A ``Fabric`` from a record's parsed TOML (``load`` reads the file)."""
+    def need(table, key, where):
+        if key not in table:
+            unit, what = TENSILE.get(key) or SHEAR.get(key) or ("", "")
+            raise FabricError(f"{_where(path)}: {where}{key} is missing ({what}"
+                              + (f", {unit})" if unit else ")"))
+        return table[key]
+
+    name = data.get("name", os.path.splitext(os.path.basename(path))[0])
+    if not isinstance(name, str) or not name:
+        raise FabricError(f"{_where(path)}: name must be a word")
+    weight = _number(need(data, "weight", ""), path, "weight", "mg/cm^2", "areal density W")
+    dirs = {}
+    for d in DIRECTIONS:
+        if not isinstance(data.get(d), dict):
+            raise FabricError(f"{_where(path)}: [{d}] is missing (the {d} direction's EMT, "
+                              "LT or WT, and B)")
+        t = data[d]
+        unknown = sorted(set(t) - set(TENSILE))
+        if unknown:
+            raise FabricError(f"{_where(path)}: {d}.{unknown[0]} is not a fabric field (use "
+                              + ", ".join(TENSILE) + ")")
+        emt = _number(need(t, "EMT", d + "."), path, d + ".EMT", *TENSILE["EMT"], hi=500.0)
+        b = _number(need(t, "B", d + "."), path, d + ".B", *TENSILE["B"])
+        if "LT" not in t and "WT" not in t:
+            raise FabricError(f"{_where(path)}: {d}.LT is missing (linearity of the "
+                              "load-extension curve; or give WT, the tensile energy)")
+        rec = dict(EMT=emt, B=b)
+        if "WT" in t:
+            rec["WT"] = _number(t["WT"], path, d + ".WT", *TENSILE["WT"])
+        if "LT" in t:
+            rec["LT"] = _number(t["LT"], path, d + ".LT", *TENSILE["LT"], hi=2.0)
+        else:
+            rec["LT"] = rec["WT"] / (KES_FM * emt / 100.0 / 2.0)
+        if "WT" in rec:
+            wt = rec["LT"] * KES_FM * emt / 100.0 / 2.0
+            if abs(wt - rec["WT"]) > 0.05 * rec["WT"]:
+                raise FabricError(f"{_where(path)}: {d}.WT = {rec['WT']:g} disagrees with LT "
+                                  f"and EMT (LT * 500 * EMT / 200 = {wt:.3g} gf cm/cm^2): fix "
+                                  "one of them or leave WT out")
+        dirs[d] = rec
+    if not isinstance(data.get("shear"), dict):
+        raise FabricError(f"{_where(path)}: [shear] is missing (G and 2HG, KES-FB1)")
+    shear = {k: _number(need(data["shear"], k, "shear."), path, "shear." + k, *SHEAR[k])
+             for k in SHEAR}
+    return Fabric(name=name, path=path, kind=str(data.get("kind", "")), weight=weight,
+                  warp=dirs["warp"], weft=dirs["weft"], shear=shear,
+                  source=dict(data.get("source", {})))
+
+
+def load(path):
+    """Read and check one record (``FabricError`` on any problem, one line)."""
+    try:
+        with open(path, "rb") as fh:
+            data = tomllib.load(fh)
+    except tomllib.TOMLDecodeError as e:
+        raise FabricError(f"{_where(path)}: not valid TOML ({e})") from None
+    except OSError as e:
+        raise FabricError(f"{_where(path)}: cannot read it ({e.strerror})") from None
+    return parse(data, path)
+
+
+def paths(directory=None):
+    d = directory or FABRIC_DIR
+    return sorted(os.path.join(d, f) for f in os.listdir(d) if f.endswith(".toml")) \
+        if os.path.isdir(d) else []
+
+
+def names(directory=None):
+    """The fabrics' names (their files' stems), sorted: for ``--list`` and a picker."""
+    return [os.path.splitext(os.path.basename(p))[0] for p in paths(directory)]
+
+
+def get(name, directory=None):
+    """The record ``name`` (a name from ``names()`` or a path to a .toml file)."""
+    if name.endswith(".toml") or os.sep in name:
+        return load(name)
+    p = os.path.join(directory or FABRIC_DIR, name + ".toml")
+    if not os.path.exists(p):
+        raise FabricError(f"unknown fabric '{name}': use one of {', '.join(names(directory))} "
+                          f"(files in {_where(directory or FABRIC_DIR)}/), or a path to a .toml")
+    return load(p)
+
+
+# ---- the rule ----------------------------------------------------------------------------------
+def curve(emt, lt):
+    """(A gf/cm, e0): the tensile curve F(e) = A (exp(e / e0) - 1) through F(EMT) = 500 gf/cm
+    with linearity LT (``emt`` in %); e0 = inf (a straight line, A / e0 = Fm / EMT) for
+    LT >= 1."""
+    E = emt / 100.0
+    if lt >= 1.0 - 1e-9:
+        return KES_FM / E, math.inf
+    # LT(x) = 2 (1/x - 1/(e^x - 1)), x = E / e0, falls from 1 (x -> 0) to 0: bisection on x.
+    def lin(x):
+        return 2.0 * (1.0 / x - 1.0 / math.expm1(x))
+    lo, hi = 1e-6, 1.0
+    while lin(hi) > lt:
+        hi *= 2.0
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if lin(mid) > lt else (lo, mid)
+    x = 0.5 * (lo + hi)
+    return KES_FM / math.expm1(x), E / x
+
+
+def strain_at(load, emt, lt):
+    """The strain (fraction) of the fitted curve at ``load`` gf/cm."""
+    A, e0 = curve(emt, lt)
+    return load / A if math.isinf(e0) else e0 * math.log1p(load / A)
+
+
+def crimp_modulus(emt, lt):
+    """The curve's initial tangent stiffness A / e0, N/m."""
+    A, e0 = curve(emt, lt)
+    return (A if math.isinf(e0) else A / e0) * GF_PER_CM
+
+
+def bias_stretch(eps_warp, eps_weft, gamma):
+    """(lower, upper) bias strain of threads stretched by eps_warp, eps_weft and sheared by
+    gamma (rad): the two diagonals of the sheared cell, ||w_u +- ...|| / sqrt(2) - 1."""
+    a, b = 1.0 + eps_warp, 1.0 + eps_weft
+    s = math.sin(gamma)
+    return (math.sqrt(a * a + b * b - 2 * a * b * s) / math.sqrt(2.0) - 1.0,
+            math.sqrt(a * a + b * b + 2 * a * b * s) / math.sqrt(2.0) - 1.0)
+
+
+def automatic_bias(warp, weft):
+    """docs/method.md §3.2's automatic bias band of the warp and weft bands."""
+    lo = math.sqrt((1 + warp[0]) ** 2 + (1 + weft[0]) ** 2) / math.sqrt(2.0) - 1.0
+    hi = math.sqrt((1 + warp[1]) ** 2 + (1 + weft[1]) ** 2) / math.sqrt(2.0) - 1.0
+    return lo, hi
+
+
+def derive(fabric, limit_load=LIMIT_LOAD):
+    """The rule of the module docstring applied to a ``Fabric`` (or a name): a dict with
+    ``material`` (Loom's material keys, SI), ``strain`` (warp, weft, bias bands), ``shear_deg``
+    (the bias band's shear angle), ``crimp_modulus`` (per direction, N/m) and ``provenance``
+    (setting key -> one line saying where its number came from)."""
+    f = get(fabric) if isinstance(fabric, str) else fabric
+    src = _where(f.path)
+    mat, bands, prov, crimp = {}, {}, {}, {}
+    for d in DIRECTIONS:
+        r = getattr(f, d)
+        e = strain_at(limit_load, r["EMT"], r["LT"])
+        bands[d] = [-e, e]
+        mat["k_" + d] = limit_load * GF_PER_CM / e
+        crimp[d] = crimp_modulus(r["EMT"], r["LT"])
+        mat["k_bend_" + d] = r["B"] * GF_CM2_PER_CM
+        prov[f"strain.{d}"] = (f"{src}: strain at {limit_load:g} gf/cm of the curve through "
+                               f"{d} EMT {r['EMT']:g} % and LT {r['LT']:.3g} (cloth/fabrics.py)")
+        prov[f"material.k_{d}"] = (f"{src}: secant of the {d} curve at {limit_load:g} gf/cm "
+                                   f"({limit_load:g} x 0.980665 N/m / {e:.4g})")
+        prov[f"material.k_bend_{d}"] = f"{src}: {d} B {r['B']:g} gf cm^2/cm x 9.80665e-5"
+    G, HG = f.shear["G"], f.shear["2HG"] / 2.0
+    gamma_deg = min(max(0.0, (limit_load / 2.0 - HG) / G), JAMMING_DEG)
+    lo, hi = bias_stretch(strain_at(limit_load / 2, f.warp["EMT"], f.warp["LT"]),
+                          strain_at(limit_load / 2, f.weft["EMT"], f.weft["LT"]),
+                          math.radians(gamma_deg))
+    alo, ahi = automatic_bias(bands["warp"], bands["weft"])
+    bands["bias"] = [min(lo, alo), max(hi, ahi)]
+    prov["strain.bias"] = (f"{src}: a bias strip under {limit_load:g} gf/cm: shear "
+                           f"{gamma_deg:.3g} deg from G {G:g} and 2HG {f.shear['2HG']:g}"
+                           + (f" (capped at {JAMMING_DEG:g})" if gamma_deg >= JAMMING_DEG
+                              else "") + ", threads at half the load (cloth/fabrics.py)")
+    mat["k_shear"] = G * GF_PER_CM * PER_DEG
+    prov["material.k_shear"] = f"{src}: G {G:g} gf/(cm deg) x 0.980665 x 180/pi"
+    mat["density"] = f.weight * MG_PER_CM2
+    prov["material.density"] = f"{src}: W {f.weight:g} mg/cm^2 x 0.01"
+    mat["k_bend"] = math.sqrt(mat["k_bend_warp"] * mat["k_bend_weft"])
+    prov["material.k_bend"] = f"{src}: sqrt(B_warp B_weft), the plate's twisting rigidity"
+    status = f.source.get("status", "")
+    if status:
+        for k in prov:
+            prov[k] += f" [{status}]"
+    return dict(name=f.name, material=mat, strain=bands, shear_deg=gamma_deg,
+                crimp_modulus=crimp, provenance=prov)
+
+
+# ---- applying a fabric to a configuration --------------------------------------------------------
+def _material_keys(cfg):
+    """The material keys a configuration has (a fabric sets only these)."""
+    return set(cfg.get("material", {}))
+
+
+def fabric_changes(name, cfg=None):
+    """{section: {key: value}}: what ``apply_fabric`` sets. Keys the configuration does not
+    have (k_bend_warp / k_bend_weft before anisotropic bending) are left out, their geometric
+    mean being k_bend."""
+    d = derive(name)
+    mat = dict(d["material"], preset=d["name"])
+    if cfg is not None:
+        have = _material_keys(cfg)
+        mat = {k: v for k, v in mat.items() if k in have}
+    return {"material": mat, "strain": {k: list(v) for k, v in d["strain"].items()}}
+
+
+def apply_fabric(config, name):
+    """``config`` with fabric ``name``'s material and bands (rule: the module docstring):
+    a nested dict gives a new nested dict, a ``Settings`` a new checked ``Settings``. The
+    damping, the method and every other key are kept; ``material.preset`` becomes the
+    fabric's name."""
+    from .settings import Settings
+    if isinstance(config, Settings):
+        changes = fabric_changes(name, config.to_dict())
+        out = config
+        for section, values in changes.items():
+            out = out.replace(section, **values)
+        return out
+    out = copy.deepcopy(config)
+    for section, values in fabric_changes(name, config).items():
+        out.setdefault(section, {}).update(copy.deepcopy(values))
+    return out
+
+
+def provenance(name):
+    """{setting key: where its number came from} for ``--show-config`` to print as comments."""
+    return dict(derive(name)["provenance"])
+
+
+def material_preset(name):
+    """The material keys of fabric ``name`` (for ``material.preset = "denim"``)."""
+    return dict(derive(name)["material"])
+
+
+# ---- the table of docs/fabrics.md ----------------------------------------------------------------
+def table_lines(directory=None):
+    L = ["| fabric | kind | W (g/m^2) | EMT warp / weft (%) | LT warp / weft | B warp / weft "
+         "(gf cm^2/cm) | G (gf/(cm deg)) | 2HG (gf/cm) | source |",
+         "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for p in paths(directory):
+        f = load(p)
+        L.append(f"| {f.name} | {f.kind} | {10 * f.weight:.0f} | {f.warp['EMT']:g} / "
+                 f"{f.weft['EMT']:g} | {f.warp['LT']:.3g} / {f.weft['LT']:.3g} | "
+                 f"{f.warp['B']:g} / {f.weft['B']:g} | {f.shear['G']:g} | {f.shear['2HG']:g} | "
+                 f"{f.source.get('cite', '')} ({f.source.get('status', '')}) |")
+    L += ["", "Derived by the rule (cloth/fabrics.py; limit load "
+          f"{LIMIT_LOAD:g} gf/cm, jamming cap {JAMMING_DEG:g} deg):", "",
+          "| fabric | warp band (%) | weft band (%) | bias band (%) | shear at the limit (deg) "
+          "| k_warp / k_weft (N/m) | crimp modulus warp / weft (N/m) | k_shear (N/m) | "
+          "density (kg/m^2) | k_bend_warp / k_bend_weft (uN m) |",
+          "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for p in paths(directory):
+        d = derive(load(p))
+        m, s = d["material"], d["strain"]
+        L.append(f"| {d['name']} | ±{100 * s['warp'][1]:.3g} | ±{100 * s['weft'][1]:.3g} | "
+                 f"{100 * s['bias'][0]:.3g} ... {100 * s['bias'][1]:.3g} | {d['shear_deg']:.3g} | "
+                 f"{m['k_warp']:.4g} / {m['k_weft']:.4g} | {d['crimp_modulus']['warp']:.4g} / "
+                 f"{d['crimp_modulus']['weft']:.4g} | {m['k_shear']:.4g} | {m['density']:.3g} | "
+                 f"{1e6 * m['k_bend_warp']:.3g} / {1e6 * m['k_bend_weft']:.3g} |")
+    return L
+
+
+def main(argv=None):
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ["--names"]:
+        print("\n".join(names()))
+        return
+    print("\n".join(table_lines()))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,218 @@
+"""Fabric records and the rule that derives Loom's material and bands from them (issue #52,
+cloth/fabrics.py). Pure Python: no Taichi."""
+import math
+import os
+
+import numpy as np
+import pytest
+
+from cloth import fabrics
+from cloth.config import ConfigError
+
+DOC = os.path.join(fabrics.ROOT, "docs", "fabrics.md")
+
+GOOD = """
+name = "test-cloth"
+weight = 15.0
+[warp]
+EMT = 4.0
+LT = 0.65
+B = 0.12
+[weft]
+EMT = 8.0
+LT = 0.6
+B = 0.03
+[shear]
+G = 1.0
+2HG = 1.0
+"""
+
+
+def write(tmp_path, text, name="test-cloth.toml"):
+    p = tmp_path / name
+    p.write_text(text)
+    return str(p)
+
+
+# ---- the records ---------------------------------------------------------------------------
+def test_at_least_five_fabrics_of_different_kinds_each_with_a_source():
+    names = fabrics.names()
+    assert len(names) >= 5
+    kinds = set()
+    for n in names:
+        f = fabrics.get(n)
+        assert f.source.get("cite") and f.source.get("status"), n
+        kinds.add(f.kind.split(",")[0])
+    assert {"woven", "weft knit"} <= kinds
+    for want in ("denim", "wool-suiting", "cotton-shirting", "polyester-lining", "cotton-jersey"):
+        assert want in names
+
+
+def test_every_record_passes_validation_and_its_wt_agrees_with_lt_and_emt():
+    for p in fabrics.paths():
+        f = fabrics.load(p)
+        for d in (f.warp, f.weft):
+            assert d["EMT"] > 0 and d["B"] > 0 and 0 < d["LT"] <= 2
+            if "WT" in d:
+                assert d["WT"] == pytest.approx(d["LT"] * 500 * d["EMT"] / 200, rel=0.05)
+
+
+@pytest.mark.parametrize("text, field", [
+    (GOOD.replace("[weft]\nEMT = 8.0\nLT = 0.6\nB = 0.03\n", ""), "[weft] is missing"),
+    (GOOD.replace("EMT = 8.0\n", ""), "weft.EMT is missing"),
+    (GOOD.replace("B = 0.12", "B = -0.12"), "warp.B = -0.12 must be > 0"),
+    (GOOD.replace("G = 1.0", "G = -2.0"), "shear.G = -2.0 must be > 0"),
+    (GOOD.replace("EMT = 4.0", "EMT = 0"), "warp.EMT = 0 must be > 0"),
+    (GOOD.replace("LT = 0.65\n", ""), "warp.LT is missing"),
+    (GOOD.replace("2HG = 1.0\n", ""), "shear.2HG is missing"),
+    (GOOD.replace("weight = 15.0", "weight = \"heavy\""), "weight = 'heavy' must be a number"),
+    (GOOD.replace("LT = 0.65", "LT = 0.65\nWT = 20.0"), "warp.WT = 20 disagrees with LT"),
+    (GOOD.replace("LT = 0.65", "LT = 0.65\nEMTT = 2"), "warp.EMTT is not a fabric field"),
+])
+def test_a_bad_record_is_one_line_naming_the_file_and_the_field(tmp_path, text, field):
+    p = write(tmp_path, text)
+    with pytest.raises(fabrics.FabricError) as e:
+        fabrics.load(p)
+    msg = str(e.value)
+    assert "\n" not in msg
+    assert msg.startswith(p + ":") and field in msg, msg
+    assert isinstance(e.value, ConfigError)
+
+
+def test_wt_alone_gives_lt(tmp_path):
+    p = write(tmp_path, GOOD.replace("LT = 0.65", "WT = 6.5"))
+    assert fabrics.load(p).warp["LT"] == pytest.approx(6.5 / (500 * 0.04 / 2))
+
+
+def test_unknown_fabric_names_the_known_ones():
+    with pytest.raises(fabrics.FabricError, match="unknown fabric 'tweed': use one of .*denim"):
+        fabrics.get("tweed")
+
+
+# ---- the rule ------------------------------------------------------------------------------
+@pytest.mark.parametrize("emt, lt", [(4.0, 0.65), (60.0, 0.35), (2.0, 0.95), (5.0, 0.999)])
+def test_the_curve_goes_through_emt_at_500_gf_cm_with_the_kes_energy(emt, lt):
+    A, e0 = fabrics.curve(emt, lt)
+    e = np.linspace(0, emt / 100, 20001)
+    F = A * np.expm1(e / e0)
+    assert F[-1] == pytest.approx(500.0, rel=1e-9)
+    wt = np.trapezoid(F, e) if hasattr(np, "trapezoid") else np.trapz(F, e)
+    assert wt / (500 * emt / 100 / 2) == pytest.approx(lt, rel=1e-6)     # KES: LT = WT / (Fm EMT / 2)
+    assert fabrics.strain_at(500.0, emt, lt) == pytest.approx(emt / 100, rel=1e-9)
+
+
+def test_a_straight_or_concave_curve_is_taken_as_straight():
+    assert fabrics.strain_at(20.0, 5.0, 1.05) == pytest.approx(0.05 * 20 / 500)
+
+
+def test_units_gf_per_cm_and_gf_cm2_per_cm_in_si():
+    assert fabrics.GF_PER_CM == pytest.approx(0.980665)            # N/m per gf/cm
+    assert fabrics.GF_CM2_PER_CM == pytest.approx(9.80665e-5)      # N m per gf cm^2/cm
+    assert fabrics.MG_PER_CM2 == pytest.approx(1e-6 / 1e-4)        # kg/m^2 per mg/cm^2
+
+
+def test_the_rule_on_a_record_by_hand(tmp_path):
+    """Every derived number of one record, recomputed here from the formulas of the rule."""
+    f = fabrics.load(write(tmp_path, GOOD))
+    d = fabrics.derive(f)
+    m, s = d["material"], d["strain"]
+    for name, emt, lt, B in (("warp", 4.0, 0.65, 0.12), ("weft", 8.0, 0.6, 0.03)):
+        # x from LT = 2 (1/x - 1/(e^x - 1)), by a different root finder than the module's.
+        from scipy.optimize import brentq
+        x = brentq(lambda x: 2 * (1 / x - 1 / math.expm1(x)) - lt, 1e-6, 50)
+        e0 = emt / 100 / x
+        A = 500 / math.expm1(x)
+        eps = e0 * math.log(1 + 20 / A)
+        assert s[name] == pytest.approx([-eps, eps], rel=1e-9)
+        assert m["k_" + name] == pytest.approx(20 * 0.980665 / eps, rel=1e-9)
+        assert m["k_bend_" + name] == pytest.approx(B * 9.80665e-5)
+        assert d["crimp_modulus"][name] == pytest.approx(A / e0 * 0.980665, rel=1e-9)
+    assert m["k_shear"] == pytest.approx(1.0 * 0.980665 * 180 / math.pi)
+    assert m["density"] == pytest.approx(0.15)
+    assert m["k_bend"] == pytest.approx(math.sqrt(0.12 * 0.03) * 9.80665e-5)
+    gamma = math.radians((10 - 0.5) / 1.0)        # (T/2 - 2HG/2) / G degrees
+    a = 1 + fabrics.strain_at(10, 4.0, 0.65)
+    b = 1 + fabrics.strain_at(10, 8.0, 0.6)
+    hi = math.sqrt(a * a + b * b + 2 * a * b * math.sin(gamma)) / math.sqrt(2) - 1
+    lo = math.sqrt(a * a + b * b - 2 * a * b * math.sin(gamma)) / math.sqrt(2) - 1
+    assert s["bias"] == pytest.approx([lo, hi], rel=1e-9)
+    assert d["shear_deg"] == pytest.approx(9.5)
+
+
+def test_bias_band_contains_the_automatic_one_and_the_shear_is_capped():
+    for n in fabrics.names():
+        d = fabrics.derive(n)
+        s = d["strain"]
+        lo, hi = fabrics.automatic_bias(s["warp"], s["weft"])
+        assert s["bias"][0] <= lo + 1e-15 and s["bias"][1] >= hi - 1e-15
+        assert 0 <= d["shear_deg"] <= fabrics.JAMMING_DEG
+        assert s["bias"][0] < 0 < s["bias"][1]
+
+
+def test_softer_in_shear_means_a_wider_bias_band(tmp_path):
+    stiff = fabrics.derive(fabrics.load(write(tmp_path, GOOD)))
+    soft = fabrics.derive(fabrics.load(write(tmp_path, GOOD.replace("G = 1.0", "G = 0.5"),
+                                             "soft.toml")))
+    assert soft["strain"]["bias"][1] > stiff["strain"]["bias"][1]
+    assert soft["strain"]["warp"] == stiff["strain"]["warp"]
+
+
+def test_docs_fabrics_md_holds_the_table_the_rule_gives():
+    """docs/fabrics.md's tables are `python -m cloth.fabrics`'s output: the stored bands are
+    what the rule gives on the data files (regenerate with that command)."""
+    with open(DOC) as fh:
+        doc = fh.read()
+    for line in fabrics.table_lines():
+        assert line in doc, f"docs/fabrics.md is stale (python -m cloth.fabrics): {line}"
+
+
+# ---- applying a fabric -------------------------------------------------------------------------
+def _cfg():
+    from scenes import hanging
+    from scenes.common import resolve
+    return resolve(hanging.DEFAULTS, [])
+
+
+def test_apply_fabric_sets_material_and_bands_and_keeps_the_rest():
+    cfg = _cfg()
+    out = fabrics.apply_fabric(cfg, "denim")
+    d = fabrics.derive("denim")
+    assert out["material"]["preset"] == "denim"
+    for k in ("density", "k_warp", "k_weft", "k_shear", "k_bend"):
+        assert out["material"][k] == d["material"][k]
+    for k in ("warp", "weft", "bias"):
+        assert out["strain"][k] == d["strain"][k]
+    assert out["material"]["damp_mass"] == cfg["material"]["damp_mass"]
+    assert out["strain"]["method"] == cfg["strain"]["method"]
+    assert cfg["material"]["preset"] == "soft"               # the input is not changed
+    from cloth.settings import Settings
+    Settings(out)                                            # a valid configuration
+
+
+def test_apply_fabric_on_settings_returns_checked_settings():
+    from cloth.settings import Settings
+    s = fabrics.apply_fabric(Settings(_cfg()), "cotton-jersey")
+    assert isinstance(s, Settings)
+    assert s.strain.weft == fabrics.derive("cotton-jersey")["strain"]["weft"]
+    assert s.material.preset == "cotton-jersey"
+
+
+def test_provenance_names_a_file_for_every_key_the_fabric_sets():
+    prov = fabrics.provenance("wool-suiting")
+    changes = fabrics.fabric_changes("wool-suiting")
+    for section, values in changes.items():
+        for k in values:
+            if k == "preset":
+                continue
+            assert "fabrics/wool-suiting.toml" in prov[f"{section}.{k}"]
+
+
+def test_a_fabric_name_is_a_material_preset_and_a_bad_one_names_both_kinds():
+    from scenes import hanging
+    from scenes.common import resolve
+    cfg = resolve(hanging.DEFAULTS, [{"material": {"preset": "denim"}}])
+    d = fabrics.derive("denim")["material"]
+    assert cfg["material"]["k_warp"] == d["k_warp"] and cfg["material"]["preset"] == "denim"
+    assert cfg["strain"]["warp"] == [-0.01, 0.01]          # a preset is the material only
+    with pytest.raises(ConfigError, match="use one of soft, cotton or a fabric .*denim"):
+        resolve(hanging.DEFAULTS, [{"material": {"preset": "tweed"}}])
