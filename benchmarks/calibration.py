@@ -520,14 +520,16 @@ def ledge_mesh(width, h, pattern="regular", direction="warp", seed=0, L=CANT_L,
 
 
 def ledge(rig, G=1.0, h=0.01, pattern="regular", direction="warp", seed=0, material=None,
-          width=CANT_WIDTH, L=CANT_L):
+          width=CANT_WIDTH, L=CANT_L, grain=None):
     """One ledge cantilever with q L^3 / B = G (B = ``material.k_bend``); returns the chord
     (root: the middle of the ledge's edge, tip: the middle of the free end) and
-    ratio = B_eff / B."""
+    ratio = B_eff / B. ``grain``: the warp's angle from the strip's axis (rad), instead of
+    the mesh's (an orthotropic fabric cut at any angle from any mesh)."""
     mat = material or make_material()
     q = mat.density * G_ACC
     mat.k_bend = q * L ** 3 / G
     uv, faces, angle = ledge_mesh(width, h, pattern, direction, seed, L=L)
+    angle = angle if grain is None else grain
     x = np.c_[uv[:, 0], np.zeros(len(uv)), uv[:, 1]]
     model = rig.load(uv, x, faces, uv[:, 0] <= 1e-12, angle, mat)
     try:
@@ -544,6 +546,47 @@ def ledge(rig, G=1.0, h=0.01, pattern="regular", direction="warp", seed=0, mater
                 width=width, chord_deg=float(np.degrees(chord)),
                 chord_ref_deg=float(np.degrees(chord_angle(G))),
                 ratio=G / G_from_chord(chord), steps=steps, faces=len(faces))
+
+
+# ---- orthotropic bending (#52): B_warp != B_weft ---------------------------------------------
+def strip_rigidity(b_warp, b_weft, angle):
+    """The B a narrow strip cut at ``angle`` (rad) from the warp reads, for Loom's orthotropic
+    plate (cloth/bending.py: B_warp, B_weft, no Poisson coupling, twisting rigidity
+    H = sqrt(B_warp B_weft)): its transverse curvature and twist are free, so B is 1 / S_ss of
+    the plate's compliance, 1 / B = cos^4 / B_warp + sin^4 / B_weft + 2 cos^2 sin^2 / H, i.e.
+    1 / sqrt(B) = cos^2 / sqrt(B_warp) + sin^2 / sqrt(B_weft). On the bias: the square of the
+    harmonic mean of sqrt(B_warp) and sqrt(B_weft)."""
+    c2, s2 = np.cos(angle) ** 2, np.sin(angle) ** 2
+    return 1.0 / (c2 / np.sqrt(b_warp) + s2 / np.sqrt(b_weft)) ** 2
+
+
+def cylindrical_rigidity(b_warp, b_weft, angle):
+    """The B of a wide plate bent into a cylinder across ``angle`` (its transverse curvature
+    and twist held at zero): sqrt(B) = cos^2 sqrt(B_warp) + sin^2 sqrt(B_weft), the
+    square of the arithmetic mean on the bias: the upper bound a wide strip's clamp tends to."""
+    c2, s2 = np.cos(angle) ** 2, np.sin(angle) ** 2
+    return (c2 * np.sqrt(b_warp) + s2 * np.sqrt(b_weft)) ** 2
+
+
+DIRECTION_ANGLE = {"warp": 0.0, "weft": np.pi / 2, "bias": np.pi / 4, "bias-": -np.pi / 4}
+
+
+def ledge_orthotropic(rig, ratio, G=1.0, h=0.01, pattern="regular", direction="warp",
+                      width=0.04, grain=None, L=CANT_L):
+    """A ledge cantilever of an orthotropic fabric with B_warp / B_weft = ``ratio``, scaled so
+    that the strip's expected rigidity (``strip_rigidity`` at the strip's grain angle) is
+    q L^3 / G; ``ratio`` in the result is B_eff / that. ``grain``: the warp's angle from the
+    strip (default: the direction's, with the mesh cut along it)."""
+    angle = DIRECTION_ANGLE[direction] if grain is None else grain
+    q = 0.15 * G_ACC
+    scale = q * L ** 3 / G / strip_rigidity(ratio, 1.0, angle)
+    mat = make_material(k_bend_warp=ratio * scale, k_bend_weft=scale)
+    r = ledge(rig, G=G, h=h, pattern=pattern, direction=direction, material=mat, width=width,
+              L=L, grain=grain)
+    r.update(bend_ratio=ratio, grain_deg=float(np.degrees(angle)),
+             cylindrical=float(cylindrical_rigidity(ratio, 1.0, angle)
+                               / strip_rigidity(ratio, 1.0, angle)))
+    return r
 
 
 def ledge_counts(r):

@@ -310,6 +310,62 @@ def isotropic_matrix(uv, faces, edge_verts, edge_faces, edge_opp, area, pinned=N
     return Q
 
 
+# ---------------------------------------------------------------------------------------------
+# Orthotropic bending (issue #52): B_warp, B_weft, and the plate's twist from them
+# ---------------------------------------------------------------------------------------------
+def orthotropic_stretch(b_warp, b_weft):
+    """alpha = (B_warp / B_weft)^(1/8): the material coordinates along the warp are divided by
+    it and those along the weft multiplied by it (``orthotropic_coordinates``). 1.0 exactly
+    when the two are equal."""
+    if b_warp == b_weft:
+        return 1.0
+    return float((b_warp / b_weft) ** 0.125)
+
+
+def orthotropic_coordinates(uv, faces, grain, alpha):
+    """Material coordinates on which the isotropic plate is the orthotropic one.
+
+    The isotropic energy (B'/2) |II|^2 integrated over coordinates u' = s1 / alpha,
+    v' = s2 alpha (s1, s2: the coordinates along the warp and the weft, alpha beta = 1 keeps
+    every area) is, in the original coordinates, (1/2) (B_warp k11^2 + B_weft k22^2
+    + 2 H k12^2) with B_warp = B' alpha^4, B_weft = B' / alpha^4 and H = B' = sqrt(B_warp B_weft):
+    the orthotropic plate with no Poisson coupling and Huber's twisting rigidity
+    (D12 + 2 D66 = sqrt(D11 D22), with D12 = 0). Every part of ``isotropic_matrix`` (the
+    cells' trace, the faces' deviator, free edges, clamps) is then the same construction on the
+    mapped mesh, and its natural boundary conditions are the orthotropic plate's (the energy
+    is the same functional). A strip along direction t (angle t from the warp) reads
+    1 / sqrt(B(t)) = cos^2 t / sqrt(B_warp) + sin^2 t / sqrt(B_weft) (docs/method.md §9.11).
+
+    The map is one linear map per connected piece of cloth, so every face of a piece must
+    have the same grain (``grain`` (F, 2, 2), columns warp and weft); a piece whose faces
+    disagree raises ValueError."""
+    uv = np.asarray(uv, np.float64)
+    faces = np.asarray(faces, np.int64)
+    grain = np.asarray(grain, np.float64)
+    n = len(uv)
+    out = uv.copy()
+    if alpha == 1.0:
+        return out
+    from scipy.sparse.csgraph import connected_components
+    rows = np.repeat(faces[:, 0], 2)
+    cols = faces[:, 1:].ravel()
+    graph = sp.csr_matrix((np.ones(len(rows)), (rows, cols)), (n, n))
+    ncomp, label = connected_components(graph, directed=False)
+    face_label = label[faces[:, 0]]
+    for c in range(ncomp):
+        fs = np.flatnonzero(face_label == c)
+        if not len(fs):
+            continue
+        g = grain[fs[0]]
+        if np.abs(grain[fs] - g).max() > 1e-9:
+            raise ValueError("orthotropic bending needs one grain per piece of cloth: piece "
+                             f"{c} (faces from {fs[0]}) has faces whose warp differs")
+        vs = label == c
+        s = uv[vs] @ g                       # (s1, s2): along the warp and the weft
+        out[vs] = np.c_[s[:, 0] / alpha, s[:, 1] * alpha] @ np.linalg.inv(g)
+    return out
+
+
 def rows_with_diagonal_first(Q):
     """(ptr (V + 1,) i32, col (nnz,) i32, val (nnz,) f64) of a square CSR matrix with each
     row's diagonal entry first (present even where it is zero): the kernels read the diagonal

@@ -21,7 +21,11 @@ Bending, one of two energies (``ClothModel.bending``):
   every direction (docs/calibration/calibration.md: back-to-back and ledge cantilevers over
   the calibration's patterns, directions, widths and 0.5-2 cm triangles). Its forces
   are -k_bend Q x and its stiffness k_bend Q, exactly; Q is stored by rows (``bend_ptr``,
-  ``bend_col``, ``bend_val``), and it couples vertices two rings apart.
+  ``bend_col``, ``bend_val``), and it couples vertices two rings apart. With ``k_bend_warp``
+  and ``k_bend_weft`` different, Q is built on mapped material coordinates (the orthotropic
+  plate, ``bending.orthotropic_coordinates``) and the factor is
+  ``Material.bend_scale()`` = sqrt(B_warp B_weft) instead of k_bend. The hinge energy takes
+  that factor too, isotropically.
 - hinge (discrete shells, for a curved rest shape): ``k_bend w_e (theta - theta_0)^2 / 2``
   per interior edge, theta its dihedral angle, ``w_e = BEND_CONSTANT |e|^2 / (A1 + A2)``
   (cloth/model.py); the dihedral-angle gradient is Bridson et al.'s (2003). B holds within
@@ -227,7 +231,7 @@ class ImplicitEuler:
         """``coef`` (``C_*``) for a launch: the step ``h`` (0 where the kernel has none), the
         material's and settings' values now, and the model's counts."""
         m, mat, s = self.model, self.model.material, self.settings
-        self._coef[:] = (h, *s.gravity, mat.k_warp, mat.k_weft, mat.k_shear, mat.k_bend,
+        self._coef[:] = (h, *s.gravity, mat.k_warp, mat.k_weft, mat.k_shear, mat.bend_scale(),
                          mat.damp_mass, mat.damp_stiff, s.stitch_stiffness, s.cg_tol,
                          s.cg_max_iters, m.n_verts, m.n_faces, self.n_hinges,
                          self.n_stitches)

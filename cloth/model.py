@@ -83,14 +83,36 @@ class Material:
     k_bend: float = _COTTON["k_bend"]            # N m, flexural rigidity B (BEND_CONSTANT)
     damp_mass: float = _COTTON["damp_mass"]      # 1/s, mass-proportional (air) damping
     damp_stiff: float = _COTTON["damp_stiff"]    # s, stiffness-proportional damping
+    # N m, B along the warp and along the weft (0: k_bend). When they differ the plate is
+    # orthotropic (cloth/bending.py: orthotropic_coordinates), its twisting rigidity
+    # sqrt(B_warp B_weft); read when the model is built (a load), not every step.
+    k_bend_warp: float = _COTTON["k_bend_warp"]
+    k_bend_weft: float = _COTTON["k_bend_weft"]
 
     def validate(self):
         for name in ("density", "k_warp", "k_weft"):
             if not getattr(self, name) > 0:
                 raise ModelError(f"material.{name} must be > 0 (got {getattr(self, name)})")
-        for name in ("k_shear", "k_bend", "damp_mass", "damp_stiff"):
+        for name in ("k_shear", "k_bend", "damp_mass", "damp_stiff", "k_bend_warp",
+                     "k_bend_weft"):
             if not getattr(self, name) >= 0:
                 raise ModelError(f"material.{name} must be >= 0 (got {getattr(self, name)})")
+
+    def bend_rigidities(self):
+        """(B_warp, B_weft), N m: k_bend_warp and k_bend_weft, each k_bend where it is 0."""
+        return (self.k_bend_warp or self.k_bend, self.k_bend_weft or self.k_bend)
+
+    def bend_scale(self):
+        """The factor the kernels multiply the bending matrix by: k_bend when bending is
+        isotropic (exactly), else sqrt(B_warp B_weft) (the orthotropic plate's matrix is the
+        isotropic one on mapped coordinates, ``bending.orthotropic_coordinates``)."""
+        bw, bf = self.bend_rigidities()
+        return self.k_bend if bw == bf == self.k_bend else float(np.sqrt(bw * bf))
+
+    def bend_alpha(self):
+        """``bending.orthotropic_stretch`` of this material (1.0: isotropic)."""
+        bw, bf = self.bend_rigidities()
+        return bending_energy.orthotropic_stretch(bw, bf) if bw > 0 and bf > 0 else 1.0
 
 
 @dataclass
@@ -215,6 +237,7 @@ class ClothModel:
         self.capacity_factor = capacity_factor
         self.v_cap = self.f_cap = self.e_cap = self.q_cap = 0
         self._bending = bending_energy.IsotropicBending()   # per-face terms kept across loads
+        self.bend_alpha = 1.0     # the orthotropic stretch the bending matrix was built with
         self.n_verts = self.n_faces = self.n_edges = self.n_bend = 0
         self.load(mesh, rest_x=rest_x)
 
@@ -276,7 +299,18 @@ class ClothModel:
         ev, ef, eo = build_edges(faces)
         nv, nf, ne = len(uv), len(faces), len(ev)
         if self.bending == "isotropic":
-            Q = self._bending.matrix(uv, faces, ef, eo, area, mesh.pinned, vertex_map)
+            alpha = self.material.bend_alpha()
+            if alpha != self.bend_alpha:
+                # The per-face terms were of other coordinates: start the cache afresh.
+                self._bending = bending_energy.IsotropicBending()
+                self.bend_alpha = alpha
+            buv = uv
+            if alpha != 1.0:
+                try:
+                    buv = bending_energy.orthotropic_coordinates(uv, faces, mesh.grain, alpha)
+                except ValueError as e:
+                    raise ModelError(str(e)) from None
+            Q = self._bending.matrix(buv, faces, ef, eo, area, mesh.pinned, vertex_map)
             bend_ptr, bend_col, bend_val = bending_energy.rows_with_diagonal_first(Q)
         else:
             bend_ptr, bend_col, bend_val = np.zeros(nv + 1, np.int32), np.zeros(0, np.int32), \

@@ -110,6 +110,10 @@ SCHEMA = {
         "k_weft": Key("N/m", "membrane stretch stiffness along the weft", lo=0),
         "k_shear": Key("N/m", "in-plane shear stiffness", lo=0),
         "k_bend": Key("N m", "flexural rigidity B of the plate, per unit width (bending energy density B kappa^2 / 2)", lo=0),
+        "k_bend_warp": Key("N m", "B for bending along the warp (0 = k_bend); with k_bend_weft "
+                           "different the plate is orthotropic (docs/method.md §9.11; read "
+                           "when the cloth is built)", lo=0),
+        "k_bend_weft": Key("N m", "B for bending along the weft (0 = k_bend)", lo=0),
         "damp_mass": Key("1/s", "mass-proportional damping", lo=0),
         "damp_stiff": Key("s", "stiffness-proportional damping", lo=0),
     },

@@ -40,6 +40,7 @@ from . import remesh                                   # stage "remesh"
 from .collision import THICKNESS, Collider  # stages "self_collision", "collision", "collision_final"
 from .dynamics import DynamicsSettings, ImplicitEuler  # stage "dynamics"
 from .model import CapacityExceeded, ClothModel, Material, MeshArrays
+from .config import ConfigError
 from .settings import Settings
 from .strain.solver import StrainLimiter              # stage "strain_limit" (cloth/strain/)
 
@@ -428,6 +429,13 @@ class Simulator:
         strain limiter's attributes and kernel parameters (``StrainLimiter.configure``), the
         model's material, the remesher, the collider's self-collision and which stages run
         (``_enable_stages``). Cheap: called on every live change."""
+        if self.model.bending == "isotropic" and \
+                settings.material_model().bend_alpha() != self.model.bend_alpha:
+            # The orthotropy is in the bending matrix, built with the cloth (bending.py:
+            # orthotropic_coordinates); scaling both rigidities together is live.
+            raise ConfigError("material.k_bend_warp / k_bend_weft: their ratio is read when the "
+                              "cloth is built; restart the scene with the new values (scaling "
+                              "both by one factor, or k_bend, is live)")
         st = settings.strain
         if self.strain is not None:
             self.strain.configure(st)

@@ -120,3 +120,79 @@ def test_one_row_of_pins_is_no_clamp():
     Q0 = bending.isotropic_matrix(uv, faces, ev, ef, eo, area)
     Q1 = bending.isotropic_matrix(uv, faces, ev, ef, eo, area, row)
     assert abs(Q1 - Q0).max() == 0.0
+
+
+# ---- orthotropic bending (issue #52) ---------------------------------------------------------
+def _strip_energy(L, W, h, pattern, field, alpha, grain_angle=0.0, clamp=True):
+    """(1/2) z^T Q z of the height field ``field(u, v)`` on a strip [-2h, L] x [0, W] whose
+    plate is orthotropic with stretch ``alpha`` (the warp at ``grain_angle`` from u), held
+    flat on u <= 0 when ``clamp`` (field evaluated at max(u, 0))."""
+    from cloth.model import grain_from_angle
+    uv, faces = make_sheet(L + 2 * h, W, int(round((L + 2 * h) / h)) + 1,
+                           int(round(W / h)) + 1, pattern, seed=2)
+    uv = uv - np.array([2 * h, 0.0])
+    ev, ef, eo = build_edges(faces)
+    area = signed_material_areas(uv, faces)
+    buv = bending.orthotropic_coordinates(uv, faces, grain_from_angle(grain_angle, len(faces)),
+                                          alpha)
+    Q = bending.isotropic_matrix(buv, faces, ev, ef, eo, area,
+                                 uv[:, 0] <= 1e-12 if clamp else None)
+    z = field(np.maximum(uv[:, 0], 0.0) if clamp else uv[:, 0], uv[:, 1])
+    return 0.5 * z @ (Q @ z)
+
+
+@pytest.mark.parametrize("pattern", ["regular", "alternating", "random"])
+@pytest.mark.parametrize("ratio", [4.0, 0.1])
+def test_orthotropic_plate_has_its_closed_form_energy_per_area(pattern, ratio):
+    # The plate of B_warp = ratio B_weft (H = sqrt(B_warp B_weft) = 1 here): energy density
+    # (1/2) (B_warp k11^2 + B_weft k22^2 + 2 H k12^2). Read far from the strip's ends as the
+    # difference of a 30 and a 20 cm strip (the ends are the same stencils; adding an affine
+    # map costs nothing), so the boundary layers cancel and the interior must be exact:
+    # bending along the warp (u^2 / 2, clamped at u = 0: B_warp / 2 per area), along the weft
+    # (the same strip with the warp turned to v: B_weft / 2) and twist (u v, all edges free:
+    # H per area).
+    alpha = bending.orthotropic_stretch(ratio, 1.0)
+    H = 1.0
+    b_warp, b_weft = H * alpha ** 4, H / alpha ** 4
+    assert b_warp / b_weft == pytest.approx(ratio)
+    W, dA = 0.06, 0.1 * 0.06
+
+    def per_area(field, **kw):
+        e = [_strip_energy(L, W, 0.01, pattern, field, alpha, **kw) for L in (0.2, 0.3)]
+        return (e[1] - e[0]) / dA
+    assert per_area(lambda u, v: 0.5 * u * u) == pytest.approx(b_warp / 2, rel=1e-8)
+    assert per_area(lambda u, v: 0.5 * u * u, grain_angle=np.pi / 2) == \
+        pytest.approx(b_weft / 2, rel=1e-8)
+    assert per_area(lambda u, v: u * v, clamp=False) == pytest.approx(H, rel=1e-8)
+
+
+def test_equal_rigidities_leave_the_isotropic_matrix_bit_for_bit():
+    assert bending.orthotropic_stretch(2e-5, 2e-5) == 1.0
+    uv, faces, ev, ef, eo, area = _mesh("random")
+    grain = np.tile(np.eye(2), (len(faces), 1, 1))
+    same = bending.orthotropic_coordinates(uv, faces, grain, 1.0)
+    assert np.array_equal(same, uv)
+    # The material: k_bend_warp = k_bend_weft = 0 (the default) is k_bend itself, exactly.
+    from cloth.model import Material
+    m = Material(k_bend=1.2345e-5)
+    assert m.bend_scale() == 1.2345e-5 and m.bend_alpha() == 1.0
+    m = Material(k_bend=1.0, k_bend_warp=4e-5, k_bend_weft=1e-5)
+    assert m.bend_scale() == pytest.approx(2e-5) and m.bend_alpha() == pytest.approx(4 ** 0.125)
+
+
+def test_orthotropic_coordinates_keep_areas_and_need_one_grain_per_piece():
+    from cloth.model import grain_from_angle
+    uv, faces, ev, ef, eo, area = _mesh("alternating")
+    g = grain_from_angle(0.3, len(faces))
+    buv = bending.orthotropic_coordinates(uv, faces, g, 1.4)
+    assert np.allclose(signed_material_areas(buv, faces), area, rtol=1e-12)
+    g[5] = grain_from_angle(0.0, 1)[0]
+    with pytest.raises(ValueError, match="one grain per piece"):
+        bending.orthotropic_coordinates(uv, faces, g, 1.4)
+    # Two separate pieces may have different grains.
+    uv2 = np.r_[uv, uv + [1.0, 0.0]]
+    faces2 = np.r_[faces, faces + len(uv)]
+    g2 = np.r_[grain_from_angle(0.0, len(faces)), grain_from_angle(np.pi / 2, len(faces))]
+    b2 = bending.orthotropic_coordinates(uv2, faces2, g2, 1.4)
+    assert np.allclose(b2[:len(uv), 0], uv[:, 0] / 1.4) and \
+        np.allclose(b2[len(uv):, 1], (uv[:, 1]) / 1.4)
