@@ -448,47 +448,87 @@ def test_heat_map_marks_the_band_edges():
 
 
 WINDOW_DRIVER = """
-import sys
+import os, sys
 sys.path.insert(0, {root!r})
 from cloth import backend
 backend.init("cpu", "f64")
+import numpy as np
+from PIL import ImageGrab
 from ui.state import AppState
 from ui.app import App
-st = AppState.from_scene("hanging", [{{"cloth": {{"resolution": 7}}}}])
-app = App(st, size=(640, 400), out_dir={out!r})
+st = AppState.from_scene({scene!r}, [{{"cloth": {{"resolution": 7}}}}])
+app = App(st, out_dir={out!r})       # sized to the screen, as the README's command opens it
+
+def fits(what):
+    # Every panel inside the window, and none with a scroll bar (its grab is (79, 79, 79),
+    # a colour nothing else in the window has).
+    img = np.asarray(ImageGrab.grab(xdisplay=os.environ["DISPLAY"]))[:, :, :3]
+    W, H = app.size_px
+    inside = all(x >= 0 and y >= 0 and x + w <= 1 + 1e-9 and y + h <= 1 + 1e-9
+                 for x, y, w, h in app.rects)
+    bars = 0
+    for x, y, w, h in app.rects:
+        box = img[int(y * H):int((y + h) * H), int(x * W):int((x + w) * W)]
+        bars += int(((box == 79).all(axis=2).sum(axis=0) > 20).sum())
+    print("fit", what, W, H, len(app.rects), inside, bars)
+
 for k in range(6):      # the initial state, the first step, two frames per other method
     app.frame()
 print("prepared at frame", st.sim.frame, "left", st.methods_to_prepare())
-for k in range(3):
+fits("default")
+for name in ("dynamics", "run", "strain"):      # open each closed section in turn
+    if not app.left.is_open(name):
+        app.left.toggle(name)
+    app.frame(); app.frame()
+    fits(name)
+st.color = "binding"; app.toggle_overlay("plot")
+app.frame(); app.frame()
+fits("plot")
+app.toggle_overlay("plot"); st.color = "warp-strain"
+if {full!r}:
     app.frame()
-app.toggle_record()
-for k in range(3):
+    app.toggle_record()
+    for k in range(3):
+        app.frame()
+    app.toggle_record()
+    shot = app.screenshot()
+    st.color, st.wireframe = "violation", True
     app.frame()
-app.toggle_record()
-shot = app.screenshot()
-st.color, st.wireframe = "violation", True
-app.frame()
-print("frame", st.sim.frame, "message", st.message)
+    print("frame", st.sim.frame, "message", st.message)
 """
 
 
 @pytest.mark.slow
-def test_window_app_runs_under_xvfb(tmp_path):
-    """The real window (panel, legend, recording, screenshot) in a virtual X server; a
-    separate process, since a window needs its own GGUI context."""
+@pytest.mark.parametrize("screen", ["1280x800", "1366x768"])
+def test_window_app_runs_under_xvfb(tmp_path, screen):
+    """The real window (panel, legend, recording, screenshot) in a virtual X server of the
+    README's screen and a laptop's; a separate process, since a window needs its own GGUI
+    context. Every panel fits the window it opens in: inside it, and without a scroll bar,
+    with each section of the control column opened in turn and with the teaching plot."""
     import shutil
     import subprocess
     if shutil.which("xvfb-run") is None:
         pytest.skip("xvfb-run is not installed (apt-get install xvfb)")
-    code = WINDOW_DRIVER.format(root=ROOT, out=str(tmp_path))
-    proc = subprocess.run(["xvfb-run", "-a", "-s", "-screen 0 1280x800x24", sys.executable,
+    full = screen == "1280x800"
+    code = WINDOW_DRIVER.format(root=ROOT, out=str(tmp_path), full=full,
+                                scene="hanging" if full else "drape")
+    proc = subprocess.run(["xvfb-run", "-a", "-s", f"-screen 0 {screen}x24", sys.executable,
                            "-c", code], capture_output=True, text=True, timeout=300)
     if "cannot open" in proc.stderr and "Vulkan" in proc.stderr:
         pytest.skip("no Vulkan device for a window")
     assert proc.returncode == 0, proc.stderr[-2000:]
+    fit = [line.split()[1:] for line in proc.stdout.splitlines() if line.startswith("fit ")]
+    assert len(fit) == 5, proc.stdout
+    width, height = (int(v) for v in screen.split("x"))
+    for what, w, h, n, inside, bars in fit:
+        # The window fits the screen, with room for a desktop's bars below.
+        assert int(w) <= width and int(h) <= height - 60, (what, w, h)
+        assert int(n) >= 2 and inside == "True" and bars == "0", (what, n, inside, bars)
+    if not full:
+        return
     # The first window frame does not step; the next four prepare svd and warp-weft.
     assert "prepared at frame 1 left []" in proc.stdout
-    assert "frame 8 message screenshot:" in proc.stdout
+    assert "message screenshot:" in proc.stdout
     rec = next((tmp_path / "recordings").iterdir())
     assert sorted(p.name for p in rec.iterdir()) == ["frame_0000.png", "frame_0001.png",
                                                       "frame_0002.png", "video.mp4"]
@@ -688,3 +728,18 @@ def test_settings_and_metrics_import_without_the_model_or_taichi():
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True,
                          text=True, check=True).stdout.strip()
     assert out == "[]", out
+
+
+def test_a_column_shows_the_newest_opened_sections_that_fit():
+    """The window's columns (ui/layout.py): sections close for room, the least recently
+    opened first, and open again when the room comes back; the newest always shows."""
+    from ui.layout import Accordion
+    a = Accordion(["run", "strain", "dynamics"])
+    heights = {"run": 200, "strain": 300, "dynamics": 150}
+    assert a.fit(heights, 69, 600) == 569 and a.shown == ["strain", "run"]
+    a.toggle("dynamics")                          # opened by the user: strain makes room
+    assert a.fit(heights, 69, 600) == 419 and a.shown == ["run", "dynamics"]
+    assert a.fit(heights, 69, 900) == 719 and set(a.shown) == set(heights)
+    a.toggle("run")                               # closed by the user: stays closed
+    assert a.fit(heights, 69, 900) == 519 and not a.is_open("run")
+    assert a.fit(heights, 69, 100) == 219 and a.shown == ["dynamics"]

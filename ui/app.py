@@ -29,14 +29,14 @@ import taichi as ti
 from cloth.strain.families import STRAIN_METHODS
 
 from .colormap import COLOR_MODES
+from .layout import (CHAR, CHROME, GAP, PAD, TEXT_ROW, WIDGET_ROW, Accordion, measure,
+                     panel_height, wrap_width)
 from .overlays import Layout, TeachingLayer, pick_face
 from .render import ClothRenderer, draw_cloth, fit_window, open_window
 from .state import AppState, readout_lines
 
-PANEL = (0.0, 0.0, 0.26, 1.0)            # controls: x, y (top-down), width, height
-VIEW = (0.74, 0.0, 0.26, 0.68)           # colour modes and read-outs, top right
-LEGEND = (0.74, 0.875, 0.26, 0.125)      # the legend (numbers), bottom right
-BAR = (0.755, 0.14, 0.23, 0.022)         # its colour bar (x, y bottom-up, w, h)
+COLUMN = 0.26          # the control column (left) and the view column (right): window fraction
+BAR_HEIGHT = 0.022     # the colour bar's height (window fraction), above its legend
 # The teaching view (x0, y0, x1, y1 bottom-up): the strain-space plot under the cloth, the
 # binding key in the right column below the read-outs; the cloth moves up while the plot shows.
 PLOT = (0.265, 0.005, 0.735, 0.41)
@@ -60,6 +60,15 @@ def moved(new, old):
     """Did the user move a slider? GGUI's sliders hand back float32, so an untouched one
     differs from the double it was given in the last digits."""
     return abs(new - old) > 1e-5 * max(1.0, abs(old))
+
+
+def sized(title, rect, size_px):
+    """A sub-window's name for its place and size: GGUI sets a sub-window's place and size
+    only when it first appears (ImGui's 'once'), so a panel that must grow or shrink is a new
+    ImGui window, told apart by the text after '##' (not shown)."""
+    W, H = size_px
+    x, y, w, h = (int(round(v * s)) for v, s in zip(rect, (W, H, W, H)))
+    return f"{title}##{x}.{y}.{w}.{h}"
 
 
 class Recorder:
@@ -105,6 +114,11 @@ class App:
         self._last = time.perf_counter()
         self.teach = TeachingLayer(state.overlays, refresh_every=PLOT_EVERY)
         self._hover_at = None      # (cursor, simulator frames) the hover was found for
+        # The columns' sections (ui/layout.py); closed ones show their header only.
+        self.left = Accordion(["run", "strain", "dynamics"])
+        self.right = Accordion(["colour", "readouts"])
+        self._legend_lines = 1
+        self.place()
         self.reset_view()
 
     # -- view ---------------------------------------------------------------------------------
@@ -115,7 +129,7 @@ class App:
         x0, y0, x1, y1 = PLOT
         w = (x1 - x0) / n
         boxes = [(x0 + k * w + 0.002, y0, x0 + (k + 1) * w - 0.002, y1) for k in range(n)]
-        return Layout(plot=boxes, key=KEY, bar=BAR)
+        return Layout(plot=boxes, key=KEY, bar=self.bar)
 
     def toggle_overlay(self, name):
         self.state.toggle_overlay(name)
@@ -136,16 +150,17 @@ class App:
             # Fit the three cloths between the panels, looking from the scene's direction.
             pts = np.concatenate([self.state.world_positions(i)
                                   for i in range(len(self.state.sims))])
-            r.orbit.fit(pts, r.aspect, x_range=(PANEL[2] + 0.01, VIEW[0] - 0.01),
+            r.orbit.fit(pts, r.aspect, x_range=(COLUMN + 0.01, 1 - COLUMN - 0.01),
                         y_range=(0.2, 0.8))
             r.orbit.home = (r.orbit.position.copy(), r.orbit.target.copy(), r.orbit.fov)
         r.orbit.apply(r.camera)
 
     def in_panel(self, pos):
-        x, y = pos
-        yd = 1 - y
-        return x < PANEL[0] + PANEL[2] or (x > VIEW[0] and yd < VIEW[1] + VIEW[3]) or \
-            (x > LEGEND[0] and yd > LEGEND[1] - 0.06 and self.state.color != "shading")
+        """Is the cursor over a panel (or the colour bar) rather than the 3-D view?"""
+        x, yd = pos[0], 1 - pos[1]
+        bx, by, bw, bh = self.bar
+        return any(rx <= x <= rx + rw and ry <= yd <= ry + rh for rx, ry, rw, rh in self.rects) \
+            or (bx <= x <= bx + bw and by - bh <= pos[1] <= by + 2 * bh)
 
     # -- input --------------------------------------------------------------------------------
     def handle_events(self):
@@ -276,128 +291,181 @@ class App:
         return hit
 
     # -- panel --------------------------------------------------------------------------------
+    # -- panels -------------------------------------------------------------------------------
+    def place(self):
+        """Pixel sizes of this frame's columns: the control column on the left, the view
+        column (colour modes and read-outs) on the right above the colour bar and its legend
+        (or above the binding key); see ui/layout.py."""
+        W, H = self.window.get_window_shape()
+        self.size_px = (W, H)
+        col = int(COLUMN * W)
+        self.wrap = wrap_width(col)
+        legend_h = panel_height((self._legend_lines + 1) * TEXT_ROW) \
+            if self.state.color not in ("shading", "binding") else 0
+        bar_h = int(BAR_HEIGHT * H)
+        key_h = int(KEY[3] * H) if self.state.color == "binding" else 0
+        bottom = legend_h + (2 * bar_h + GAP if legend_h else 0) + key_h
+        self.right_room = H - bottom - GAP
+        x0 = (W - col + PAD) / W
+        self.bar = (x0, (legend_h + 0.5 * bar_h) / H, (col - 2 * PAD) / W, bar_h / H)
+        self.legend_rect = ((W - col) / W, (H - legend_h) / H, col / W, legend_h / H)
+        self.rects = []
+
+    def _column(self, title, x_px, sections, accordion, room):
+        """One sub-window of sections (name, header label, draw(gui)) at ``x_px``, as tall
+        as its open sections (closing sections until it fits ``room`` px)."""
+        g, (W, H) = self.gui, self.size_px
+        heights = {name: measure(draw) for name, _, draw in sections}
+        content = accordion.fit(heights, WIDGET_ROW * len(sections), room - CHROME + 4)
+        rect = (x_px / W, 0.0, int(COLUMN * W) / W, min(panel_height(content), room) / H)
+        self.rects.append(rect)
+        with g.sub_window(sized(title, rect, self.size_px), *rect):
+            for name, label, draw in sections:
+                is_open = accordion.is_open(name)
+                if g.button(f"[{'-' if is_open else '+'}] {label}"):
+                    accordion.toggle(name)
+                elif is_open:
+                    draw(g)
+
     def panel(self):
-        g, st = self.gui, self.state
-        with g.sub_window("Loom", *PANEL):
-            # Scene and run control.
-            g.text(f"scene: {st.scene_name}" + ("   (comparison)" if st.compare else ""))
-            import scenes
-            names = list(scenes.SCENES)
-            if len(names) > 1:
-                for name in names:
-                    if name != st.scene_name and g.button(f"load {name}"):
-                        if st.switch_scene(name):
-                            self.reset_view()
-            if g.button("run" if st.paused else "pause"):
-                st.toggle_pause()
-            if g.button("step one frame"):
-                st.step()
-            if g.button("reset simulation"):
-                self.reset_sim()
-            if g.button("reset view"):
-                self.renderer.reset_camera()
-            if g.button("stop recording" if self.recorder else "record"):
-                self.toggle_record()
-            if g.button("screenshot"):
-                self.screenshot()
-            if st.message:
-                # Wrapped to the panel's width (GGUI clips a long line).
-                for line in textwrap.wrap(st.message[:300], 42):
-                    g.text(line, color=(0.8, 0.1, 0.1))
+        W, H = self.size_px
+        self._column("Loom", 0, [("run", "scene and run", self._run_section),
+                                 ("strain", "strain limiting", self._strain_section),
+                                 ("dynamics", "dynamics", self._dynamics_section)],
+                     self.left, H)
+        self._column("view", W - int(COLUMN * W),
+                     [("colour", "colour and overlays", self._colour_section),
+                      ("readouts", "read-outs", self.readouts)], self.right, self.right_room)
 
-            # Strain limiting.
-            g.text("")
-            g.text("strain limiting" + (": svd | warp-weft | mapping" if st.compare else ""))
-            if g.button("back to one method" if st.compare else "compare the three methods"):
-                if st.set_compare(not st.compare):
+    def _text(self, g, text, color=None):
+        """Text wrapped to the column (GGUI clips a long line)."""
+        for line in textwrap.wrap(text, self.wrap, subsequent_indent="  ") or [""]:
+            if color is None:
+                g.text(line)
+            else:
+                g.text(line, color=color)
+
+    def _run_section(self, g):
+        st = self.state
+        self._text(g, f"scene: {st.scene_name}" + ("   (comparison)" if st.compare else ""))
+        import scenes
+        for name in scenes.SCENES:
+            if name != st.scene_name and g.button(f"load {name}"):
+                if st.switch_scene(name):
                     self.reset_view()
-            if not st.compare:
-                current = st.method
-                for m in STRAIN_METHODS:
-                    if g.checkbox(m, m == current) and m != current:
-                        st.switch_method(m)
-            b = st.bands()
-            for name in ("warp", "weft", "bias"):
-                lo, hi = b[name]
-                nlo = g.slider_float(f"{name} min %", 100 * lo, -20.0, 0.0) / 100
-                nhi = g.slider_float(f"{name} max %", 100 * hi, 0.0, 20.0) / 100
-                if moved(nlo, lo) or moved(nhi, hi):
-                    st.set_band(name, nlo, nhi)
-            auto = g.checkbox("automatic bias band", st.auto_bias)
-            if auto != st.auto_bias:
-                st.set_auto_bias(auto)
-            rounds = g.slider_int("SL rounds", int(st.settings.strain.rounds), 1, 200)
-            if rounds != st.settings.strain.rounds:
-                st.set_rounds(rounds)
-            exact = g.checkbox("exact solve (slow)", st.exact_solve)
-            if exact != st.exact_solve:
-                st.set_exact_solve(exact)
+        if g.button("run" if st.paused else "pause"):
+            st.toggle_pause()
+        if g.button("step one frame"):
+            st.step()
+        if g.button("reset simulation"):
+            self.reset_sim()
+        if g.button("reset view"):
+            self.renderer.reset_camera()
+        if g.button("stop recording" if self.recorder else "record"):
+            self.toggle_record()
+        if g.button("screenshot"):
+            self.screenshot()
+        if st.message:
+            self._text(g, st.message[:300], color=(0.8, 0.1, 0.1))
 
-            # Dynamics.
-            g.text("")
-            sub = g.slider_int("substeps", int(st.settings.sim.substeps), 1, 20)
-            if sub != st.settings.sim.substeps:
-                st.set_substeps(sub)
-            mat = st.settings.material
-            for key, lo, hi in (("k_warp", -1.0, 4.0), ("k_weft", -1.0, 4.0),
-                                ("k_shear", -2.0, 3.0), ("k_bend", -8.0, -3.0)):
-                old = np.log10(max(getattr(mat, key), 1e-12))
-                new = g.slider_float(f"log10 {key}", old, lo, hi)
-                if moved(new, old):
-                    st.set_material(key, 10 ** new)
-            for key, hi in (("damp_mass", 2.0), ("damp_stiff", 0.02)):
-                new = g.slider_float(key, float(getattr(mat, key)), 0.0, hi)
-                if moved(new, getattr(mat, key)):
-                    st.set_material(key, new)
-            if st.has_remesh:
-                on = g.checkbox("remeshing", st.remesh_on)
-                if on != st.remesh_on:
-                    st.set_remesh(on)
-            if st.has_self_collision:
-                on = g.checkbox("self-collision", st.self_collision_on)
-                if on != st.self_collision_on:
-                    st.set_self_collision(on)
+    def _strain_section(self, g):
+        st = self.state
+        if st.compare:
+            g.text("svd | warp-weft | mapping")
+        if g.button("back to one method" if st.compare else "compare the three methods"):
+            if st.set_compare(not st.compare):
+                self.reset_view()
+        if not st.compare:
+            current = st.method
+            for m in STRAIN_METHODS:
+                if g.checkbox(m, m == current) and m != current:
+                    st.switch_method(m)
+        b = st.bands()
+        for name in ("warp", "weft", "bias"):
+            lo, hi = b[name]
+            nlo = g.slider_float(f"{name} min %", 100 * lo, -20.0, 0.0) / 100
+            nhi = g.slider_float(f"{name} max %", 100 * hi, 0.0, 20.0) / 100
+            if moved(nlo, lo) or moved(nhi, hi):
+                st.set_band(name, nlo, nhi)
+        auto = g.checkbox("automatic bias band", st.auto_bias)
+        if auto != st.auto_bias:
+            st.set_auto_bias(auto)
+        rounds = g.slider_int("SL rounds", int(st.settings.strain.rounds), 1, 200)
+        if rounds != st.settings.strain.rounds:
+            st.set_rounds(rounds)
+        exact = g.checkbox("exact solve (slow)", st.exact_solve)
+        if exact != st.exact_solve:
+            st.set_exact_solve(exact)
 
-        with g.sub_window("view", *VIEW):
-            g.text("colour (keys 1-8)")
-            for m in COLOR_MODES:
-                if g.checkbox(COLOR_LABELS[m], st.color == m):
-                    st.color = m
-            for name, label in (("axes", "principal axes (a)"), ("plot", "strain-space plot (g)")):
-                if g.checkbox(label, name in st.overlays) != (name in st.overlays):
-                    self.toggle_overlay(name)
-            st.wireframe = g.checkbox("wireframe (w)", st.wireframe)
-            st.smooth = g.checkbox("smooth shading (s)", st.smooth)
-            g.text("")
-            self.readouts()
+    def _dynamics_section(self, g):
+        st = self.state
+        sub = g.slider_int("substeps", int(st.settings.sim.substeps), 1, 20)
+        if sub != st.settings.sim.substeps:
+            st.set_substeps(sub)
+        mat = st.settings.material
+        for key, lo, hi in (("k_warp", -1.0, 4.0), ("k_weft", -1.0, 4.0),
+                            ("k_shear", -2.0, 3.0), ("k_bend", -8.0, -3.0)):
+            old = np.log10(max(getattr(mat, key), 1e-12))
+            new = g.slider_float(f"log10 {key}", old, lo, hi)
+            if moved(new, old):
+                st.set_material(key, 10 ** new)
+        for key, hi in (("damp_mass", 2.0), ("damp_stiff", 0.02)):
+            new = g.slider_float(key, float(getattr(mat, key)), 0.0, hi)
+            if moved(new, getattr(mat, key)):
+                st.set_material(key, new)
+        if st.has_remesh:
+            on = g.checkbox("remeshing", st.remesh_on)
+            if on != st.remesh_on:
+                st.set_remesh(on)
+        if st.has_self_collision:
+            on = g.checkbox("self-collision", st.self_collision_on)
+            if on != st.self_collision_on:
+                st.set_self_collision(on)
 
-    def readouts(self):
-        g, st = self.gui, self.state
+    def _colour_section(self, g):
+        st = self.state
+        g.text("colour (keys 1-8, c: next)")
+        for m in COLOR_MODES:
+            if g.checkbox(COLOR_LABELS[m], st.color == m):
+                st.color = m
+        for name, label in (("axes", "principal axes (a)"), ("plot", "strain-space plot (g)")):
+            if g.checkbox(label, name in st.overlays) != (name in st.overlays):
+                self.toggle_overlay(name)
+        st.wireframe = g.checkbox("wireframe (w)", st.wireframe)
+        st.smooth = g.checkbox("smooth shading (s)", st.smooth)
+
+    def readouts(self, g):
+        st = self.state
         for i in range(len(st.sims)):
             r = st.readouts(i)
             if i == 0:
-                g.text(f"frame {r['frame']}  t = {r['time']:.2f} s  "
-                       f"{r['faces']} faces")
-                g.text(f"{self.fps():.1f} fps  render {st.render_ms:.1f} ms  "
-                       f"sim {sum(st.readouts(k)['sim_ms'] for k in range(len(st.sims))):.1f} ms")
+                self._text(g, f"frame {r['frame']}  t = {r['time']:.2f} s  "
+                              f"{r['faces']} faces")
+                sim_ms = sum(st.readouts(k)['sim_ms'] for k in range(len(st.sims)))
+                self._text(g, f"{self.fps():.1f} fps  render {st.render_ms:.1f} ms  "
+                              f"sim {sim_ms:.1f} ms")
             if st.compare:
                 continue      # per-method numbers sit under each cloth
             stages = "  ".join(f"{SHORT.get(k, k)} {v:.1f}" for k, v in r["stage_ms"].items())
-            for line in textwrap.wrap(f"ms: {stages}", 42):
-                g.text(line)
-            for line in readout_lines(r):
+            self._text(g, f"ms: {stages}")
+            for line in readout_lines(r, self.wrap):
                 g.text(line)
 
     def legend(self, lg):
+        """The colour bar's title and band under the bar, and the tick labels each under its
+        tick (the font is monospaced: a label is centred on its tick's character column)."""
         if lg is None:
             return
-        g = self.gui
-        with g.sub_window("legend", *LEGEND):
-            g.text(lg.title + (f"  ({lg.note})" if lg.note else ""))
+        g, (W, _) = self.gui, self.size_px
+        self.rects.append(self.legend_rect)
+        with g.sub_window(sized("legend", self.legend_rect, self.size_px), *self.legend_rect):
             edges = [m for m in lg.marks if m != 0.0]
-            if edges:
-                g.text("band " + " .. ".join(lg.fmt(m) for m in edges) + "  (ticks; pale inside)")
-            g.text(f"{lg.fmt(lg.lo)}" + " " * 18 + f"{lg.fmt(lg.hi)}")
+            band = ("  band " + " .. ".join(lg.fmt(m) for m in edges)) if edges else ""
+            head = lg.title + band + (f"  ({lg.note})" if lg.note else "")
+            self._legend_lines = len(textwrap.wrap(head, self.wrap)) or 1
+            self._text(g, head)
+            # The bar spans the sub-window's text area exactly (``place``).
+            g.text(lg.tick_line(int(self.bar[2] * W) // CHAR))
 
     def labels(self):
         """Method names above the three cloths of the comparison view."""
@@ -437,7 +505,7 @@ class App:
             x = st.world_positions(i)[v]
             size = np.ptp(st.world_positions(i), axis=0).max()
             r.add_points("grab", np.stack([x, st.grab_target]), 0.02 * size, (0.1, 0.75, 0.25))
-        r.finish(legend, BAR)
+        r.finish(legend, self.bar)
         self.teach.draw_frame(r, st.sims, st.labels, st.color, self.layout())
         return legend
 
@@ -488,6 +556,7 @@ class App:
         self.frames_shown += 1
         t0 = time.perf_counter()
         self.sim_times.append(1e3 * (t0 - ts))
+        self.place()
         legend = self.draw()
         if self.recorder is not None and st.sim.frame != stepped_before:
             self.recorder.add(self.renderer.image())

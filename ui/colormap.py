@@ -105,6 +105,40 @@ class Legend:
             s += " | band edges " + ", ".join(fmt(m) for m in self.marks)
         return s + (f" ({self.note})" if self.note else "")
 
+    def ticks(self):
+        """(position 0..1 along the bar, label) for the bar's two ends and each tick mark
+        (band edge, zero) inside it, left to right: the labels written under the bar."""
+        out = [(0.0, self.fmt(self.lo))]
+        span = (self.hi - self.lo) or 1.0
+        out += [((m - self.lo) / span, self.fmt(m) if m else "0") for m in sorted(self.marks)
+                if 0.0 < (m - self.lo) / span < 1.0]
+        return out + [(1.0, self.fmt(self.hi))]
+
+    def place_ticks(self, width, measure=len, gap=1):
+        """The tick labels placed on a line ``width`` units long (characters or pixels;
+        ``measure(text)`` in the same units): [(start, text)], each centred under its tick
+        and kept inside the line; the band edges first, then the ends where they do not
+        overlap one already placed."""
+        ticks = self.ticks()
+        inner = ticks[1:-1]
+        order = ([tk for tk in inner if tk[1] != "0"] + [ticks[0], ticks[-1]] +
+                 [tk for tk in inner if tk[1] == "0"])
+        placed = []
+        for t, label in order:
+            w = measure(label)
+            start = min(max(t * width - w / 2, 0), width - w)
+            if all(start + w + gap <= a or b + gap <= start for a, b, _ in placed):
+                placed.append((start, start + w, label))
+        return [(a, label) for a, _, label in sorted(placed)]
+
+    def tick_line(self, n_chars):
+        """The tick labels as one line of ``n_chars`` monospaced characters."""
+        line = [" "] * n_chars
+        for start, label in self.place_ticks(n_chars):
+            k = int(round(start))
+            line[k:k + len(label)] = label
+        return "".join(line)[:n_chars].rstrip()
+
     def fmt(self, v):
         if self.unit == "strain":
             return f"{100 * v:+.2f}%"
