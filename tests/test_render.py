@@ -84,3 +84,30 @@ def test_strain_colour_modes_come_from_metrics():
     weft, _ = face_colors("weft-strain", x, uv, faces, grain, {"weft": [-0.05, 0.05]})
     assert np.all(warp[:, 0] > warp[:, 2])      # stretched: red
     assert np.all(weft[:, 2] > weft[:, 0])      # compressed: blue
+
+
+def test_headless_frames_say_what_they_show(renderer, tmp_path, monkeypatch):
+    """Each written frame carries a caption (scene, frame, time, method, bands) on a strip
+    along its top; the colour bar's band edges are written under their ticks. (The run draws
+    into this module's offscreen window: a second GGUI window in one process crashes.)"""
+    import imageio.v2 as imageio
+    import ui.render
+    from tests.test_scenes import make_sim
+    from ui.colormap import Legend
+    from ui.headless import HeadlessRun
+    from ui.render import frame_caption
+    sim, cfg = make_sim(cloth={"resolution": 7}, strain={"method": "warp-weft"})
+    cfg["scene"] = "hanging"
+    monkeypatch.setattr(ui.render, "open_window", lambda *a, **k: renderer.window)
+    run = HeadlessRun(sim, cfg, str(tmp_path), color="warp-strain", quiet=True, size=(320, 240))
+    assert run.run(2)
+    text = frame_caption(sim, "hanging")
+    assert text.startswith("hanging   frame 2   t = 0.07 s   warp-weft   warp -1..+1 %")
+    img = imageio.imread(tmp_path / "frames" / "frame_0002.png").astype(int)
+    strip, below = img[:15, :300], img[25:60, :300]
+    assert (strip.sum(axis=2) < 300).sum() > 100            # dark text on the strip
+    assert (below.sum(axis=2) < 300).sum() == 0             # the background below it
+    lg = Legend("warp strain", -0.02, 0.02, None, marks=[-0.01, 0.0, 0.01])
+    placed = dict((label, start) for start, label in lg.place_ticks(300, lambda t: 6 * len(t)))
+    assert abs(placed["-1.00%"] + 18 - 75) < 1 and abs(placed["+1.00%"] + 18 - 225) < 1
+    assert abs(placed["0"] + 3 - 150) < 1

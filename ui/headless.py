@@ -93,7 +93,8 @@ class HeadlessRun:
             from .render import draw_simulation
             draw_simulation(self.renderer, sim, self.color, teach=self.teach,
                             layout=self.layout)
-            img = self.renderer.image()
+            from .render import caption, frame_caption
+            img = caption(self.renderer.image(), frame_caption(sim, self.cfg.get("scene", "")))
             if self.images:
                 import imageio.v2 as imageio
                 imageio.imwrite(os.path.join(self.out, "frames", f"frame_{f:04d}.png"), img)
@@ -146,6 +147,7 @@ class HeadlessRun:
         every frame before it and ``self.diverged`` holds the error."""
         self._prepare()
         progress = None if self.quiet else Progress(frames)
+        frame_ms = []       # each frame's ms_total (metrics.csv): the progress line's median
         try:
             if progress:      # at once: the first frame may compile for a while
                 progress.update(0, "first frame")
@@ -158,8 +160,10 @@ class HeadlessRun:
                     return False
                 self._write_frame()
                 self._report_limit_miss(progress)
+                frame_ms.append(self.sim.frame_ms)
                 if progress:
-                    progress.update(k + 1, f"{self.sim.frame_ms:.0f} ms/frame simulated")
+                    progress.update(k + 1, f"simulation {np.median(frame_ms):.1f} ms a frame "
+                                           "(median of metrics.csv ms_total)")
             return True
         finally:
             if progress:

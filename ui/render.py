@@ -273,32 +273,65 @@ class ClothRenderer:
         return img
 
 
-def label_colorbar(img, legend, rect):
-    """Write the legend's title and numbers next to its colour bar (Pillow)."""
-    from PIL import Image, ImageDraw, ImageFont
-    h, w = img.shape[:2]
+def _font(h):
+    """Pillow's default font at a size that reads in an image ``h`` pixels high."""
+    from PIL import ImageFont
     size = max(9, min(14, h // 40))
     try:
-        font = ImageFont.load_default(size=size)
+        return ImageFont.load_default(size=size), size
     except TypeError:           # Pillow < 10.1: one bitmap size
-        font = ImageFont.load_default()
+        return ImageFont.load_default(), 11
+
+
+INK = (40, 40, 46)
+
+
+def label_colorbar(img, legend, rect):
+    """Write the legend's title and band above its colour bar and the numbers under it, each
+    band edge under its tick (Pillow)."""
+    from PIL import Image, ImageDraw
+    h, w = img.shape[:2]
+    font, size = _font(h)
     pil = Image.fromarray(img)
     d = ImageDraw.Draw(pil)
     x0, y0, bw, bh = rect
-    left, right = x0 * w, (x0 + bw) * w
+    left = x0 * w
     top, bottom = (1 - y0 - bh) * h, (1 - y0) * h
-    ink = (40, 40, 46)
     edges = [m for m in legend.marks if m != 0.0]
     above = top - 0.3 * (bottom - top) - 2
-    if edges:
-        d.text((left, above), "band " + " .. ".join(legend.fmt(m) for m in edges), fill=ink,
-               font=font, anchor="ls")
+    lines = [legend.title] + (["band " + " .. ".join(legend.fmt(m) for m in edges)] if edges
+                              else [])
+    for line in reversed(lines):      # kept inside the frame when the bar is near its edge
+        x = min(left, w - d.textlength(line, font=font) - 4)
+        d.text((x, above), line, fill=INK, font=font, anchor="ls")
         above -= size + 3
-    d.text((left, above), legend.title, fill=ink, font=font, anchor="ls")
     below = bottom + 0.3 * (bottom - top) + 2
-    d.text((left, below), legend.fmt(legend.lo), fill=ink, font=font, anchor="lt")
-    d.text((right, below), legend.fmt(legend.hi), fill=ink, font=font, anchor="rt")
+    for start, label in legend.place_ticks(bw * w, lambda t: d.textlength(t, font=font), 4):
+        d.text((left + start, below), label, fill=INK, font=font, anchor="lt")
     return np.asarray(pil)
+
+
+def caption(img, text):
+    """One line of text on a light strip along the frame's top edge (Pillow)."""
+    from PIL import Image, ImageDraw
+    h, w = img.shape[:2]
+    font, size = _font(h)
+    pil = Image.fromarray(img)
+    d = ImageDraw.Draw(pil)
+    d.rectangle((0, 0, w, size + 8), fill=(250, 250, 252))
+    d.text((6, 4), text, fill=INK, font=font, anchor="lt")
+    return np.asarray(pil)
+
+
+def frame_caption(sim, scene):
+    """What a headless frame shows, for its caption: the scene, frame, time, the method and
+    the bands in force (%)."""
+    def band(lo, hi):
+        return f"{100 * lo:+.3g}..{100 * hi:+.3g} %"
+    text = f"{scene}   frame {sim.frame}   t = {sim.time:.2f} s   {sim.method}"
+    if sim.method != "none":
+        text += "   " + "   ".join(f"{k} {band(*v)}" for k, v in sim.bands().items())
+    return text
 
 
 def draw_cloth(renderer, sim, key="cloth", color="shading", wireframe=False, smooth=True,
