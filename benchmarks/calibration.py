@@ -556,8 +556,8 @@ def strip_rigidity(b_warp, b_weft, angle):
     the plate's compliance, 1 / B = cos^4 / B_warp + sin^4 / B_weft + 2 cos^2 sin^2 / H, i.e.
     1 / sqrt(B) = cos^2 / sqrt(B_warp) + sin^2 / sqrt(B_weft). On the bias: the square of the
     harmonic mean of sqrt(B_warp) and sqrt(B_weft)."""
-    c2, s2 = np.cos(angle) ** 2, np.sin(angle) ** 2
-    return 1.0 / (c2 / np.sqrt(b_warp) + s2 / np.sqrt(b_weft)) ** 2
+    from cloth.bending import strip_rigidity as closed_form
+    return closed_form(b_warp, b_weft, angle)
 
 
 def cylindrical_rigidity(b_warp, b_weft, angle):
@@ -587,6 +587,53 @@ def ledge_orthotropic(rig, ratio, G=1.0, h=0.01, pattern="regular", direction="w
              cylindrical=float(cylindrical_rigidity(ratio, 1.0, angle)
                                / strip_rigidity(ratio, 1.0, angle)))
     return r
+
+
+ORTHO_RATIOS = (3.0, 4.0, 10.0)
+
+
+def orthotropic_sweep(rig, ratios=ORTHO_RATIOS, widths=(0.025, 0.04), h=0.01, log=print):
+    """``ledge_orthotropic`` over B_warp / B_weft, widths, both deflections, the three grid
+    patterns cut along warp, weft and bias, and one Delaunay mesh with the grain turned by
+    0, 90, 45, -45 and 30 deg (``--orthotropic``; docs/fabrics.md)."""
+    rows = []
+    for ratio in ratios:
+        for G in DEFLECTIONS:
+            for w in widths:
+                for p in PATTERNS:
+                    for d in ("warp", "weft", "bias", "bias-"):
+                        rows.append(ledge_orthotropic(rig, ratio, G=G, h=h, pattern=p,
+                                                      direction=d, width=w))
+                for gdeg in (0.0, 90.0, 45.0, -45.0, 30.0):
+                    r = ledge_orthotropic(rig, ratio, G=G, h=h, pattern=IRREGULAR,
+                                          direction="warp", width=w, grain=np.radians(gdeg))
+                    r["direction"] = f"{gdeg:g} deg"
+                    rows.append(r)
+                log(f"orthotropic ratio {ratio:g} G {G:g} width {100 * w:g} cm: " + " ".join(
+                    f"{r['ratio']:.3f}" for r in rows[-17:]))
+    return rows
+
+
+def orthotropic_lines(rows):
+    """The table of B_eff / strip_rigidity by case (docs/fabrics.md)."""
+    L = ["| B_warp / B_weft | G | width (cm) | pattern | warp | weft | bias | bias- | "
+         "bias: cylindrical / strip |", "|" + " --- |" * 9]
+    irr = ["| B_warp / B_weft | G | width (cm) | 0 deg | 90 deg | 45 deg | -45 deg | 30 deg |",
+           "|" + " --- |" * 8]
+    key = lambda r: (r["bend_ratio"], r["G"], r["width"])
+    for k in sorted({key(r) for r in rows}):
+        rs = [r for r in rows if key(r) == k]
+        for p in PATTERNS:
+            by = {r["direction"]: r for r in rs if r["pattern"] == p}
+            L.append(f"| {k[0]:g} | {k[1]:g} | {100 * k[2]:g} | {p} | " + " | ".join(
+                f"{by[d]['ratio']:.3f}" for d in ("warp", "weft", "bias", "bias-")) +
+                f" | {by['bias']['cylindrical']:.3f} |")
+        by = {r["direction"]: r for r in rs if r["pattern"] == IRREGULAR}
+        irr.append(f"| {k[0]:g} | {k[1]:g} | {100 * k[2]:g} | " + " | ".join(
+            f"{by[d]['ratio']:.3f}" for d in ("0 deg", "90 deg", "45 deg", "-45 deg",
+                                              "30 deg")) + " |")
+    return L + ["", "Delaunay strips (no mesh lines), the grain turned by the angle given:", ""] \
+        + irr
 
 
 def ledge_counts(r):
@@ -891,10 +938,19 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="h = 1 and 2 cm only")
     ap.add_argument("--out", default=os.path.join(ROOT, "docs", "calibration"))
+    ap.add_argument("--orthotropic", action="store_true",
+                    help="only the orthotropic ledge sweep (#52): print its tables "
+                         "(docs/fabrics.md; ~3 min)")
     a = ap.parse_args()
     from cloth import backend
     backend.init("cpu", "f64")
     t0 = time.perf_counter()
+    if a.orthotropic:
+        import sys
+        rows = orthotropic_sweep(Rig(capacity=700), log=lambda m: print(m, file=sys.stderr))
+        print("\n".join(orthotropic_lines(rows)))
+        print(f"\n({time.perf_counter() - t0:.0f} s)", file=sys.stderr)
+        return
     rows = run(quick=a.quick)
     from benchmarks.harness import command
     cmd = command("benchmarks.calibration")

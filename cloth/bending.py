@@ -322,6 +322,14 @@ def orthotropic_stretch(b_warp, b_weft):
     return float((b_warp / b_weft) ** 0.125)
 
 
+def strip_rigidity(b_warp, b_weft, angle):
+    """The B a narrow strip cut at ``angle`` (rad) from the warp reads on the orthotropic
+    plate: 1 / sqrt(B) = cos^2 / sqrt(B_warp) + sin^2 / sqrt(B_weft) (the plate's compliance
+    along the strip, its transverse curvature and twist free; docs/method.md §9.11)."""
+    c2, s2 = np.cos(angle) ** 2, np.sin(angle) ** 2
+    return 1.0 / (c2 / np.sqrt(b_warp) + s2 / np.sqrt(b_weft)) ** 2
+
+
 def orthotropic_coordinates(uv, faces, grain, alpha):
     """Material coordinates on which the isotropic plate is the orthotropic one.
 

@@ -363,8 +363,9 @@ def table_lines(directory=None):
           f"{LIMIT_LOAD:g} gf/cm, jamming cap {JAMMING_DEG:g} deg):", "",
           "| fabric | warp band (%) | weft band (%) | bias band (%) | shear at the limit (deg) "
           "| k_warp / k_weft (N/m) | crimp modulus warp / weft (N/m) | k_shear (N/m) | "
-          "density (kg/m^2) | k_bend_warp / k_bend_weft (uN m) |",
-          "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+          "density (kg/m^2) | k_bend_warp / k_bend_weft (uN m) | bending length warp / weft / "
+          "bias (cm) |",
+          "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for p in paths(directory):
         d = derive(load(p))
         m, s = d["material"], d["strain"]
@@ -372,8 +373,19 @@ def table_lines(directory=None):
                  f"{100 * s['bias'][0]:.3g} ... {100 * s['bias'][1]:.3g} | {d['shear_deg']:.3g} | "
                  f"{m['k_warp']:.4g} / {m['k_weft']:.4g} | {d['crimp_modulus']['warp']:.4g} / "
                  f"{d['crimp_modulus']['weft']:.4g} | {m['k_shear']:.4g} | {m['density']:.3g} | "
-                 f"{1e6 * m['k_bend_warp']:.3g} / {1e6 * m['k_bend_weft']:.3g} |")
+                 f"{1e6 * m['k_bend_warp']:.3g} / {1e6 * m['k_bend_weft']:.3g} | " +
+                 " / ".join(f"{100 * c:.2f}" for c in bending_lengths(d)) + " |")
     return L
+
+
+def bending_lengths(derived):
+    """ASTM D1388 bending lengths c = (B / (rho g))^(1/3), m, along warp, weft and bias, B the
+    strip's closed form (``bending.strip_rigidity``): what a lab's cantilever would read."""
+    from .bending import strip_rigidity
+    m = derived["material"]
+    w = m["density"] * 9.81
+    return [float((strip_rigidity(m["k_bend_warp"], m["k_bend_weft"], t) / w) ** (1 / 3))
+            for t in (0.0, math.pi / 2, math.pi / 4)]
 
 
 def main(argv=None):

@@ -178,7 +178,7 @@ def test_apply_fabric_sets_material_and_bands_and_keeps_the_rest():
     out = fabrics.apply_fabric(cfg, "denim")
     d = fabrics.derive("denim")
     assert out["material"]["preset"] == "denim"
-    for k in ("density", "k_warp", "k_weft", "k_shear", "k_bend"):
+    for k in ("density", "k_warp", "k_weft", "k_shear", "k_bend", "k_bend_warp", "k_bend_weft"):
         assert out["material"][k] == d["material"][k]
     for k in ("warp", "weft", "bias"):
         assert out["strain"][k] == d["strain"][k]
@@ -216,3 +216,15 @@ def test_a_fabric_name_is_a_material_preset_and_a_bad_one_names_both_kinds():
     assert cfg["strain"]["warp"] == [-0.01, 0.01]          # a preset is the material only
     with pytest.raises(ConfigError, match="use one of soft, cotton or a fabric .*denim"):
         resolve(hanging.DEFAULTS, [{"material": {"preset": "tweed"}}])
+
+
+def test_bending_lengths_are_the_closed_form_cantilever_readings():
+    d = fabrics.derive("cotton-jersey")
+    m = d["material"]
+    warp, weft, bias = fabrics.bending_lengths(d)
+    w = m["density"] * 9.81
+    assert warp == pytest.approx((m["k_bend_warp"] / w) ** (1 / 3))
+    assert weft == pytest.approx((m["k_bend_weft"] / w) ** (1 / 3))
+    # The bias strip: the square of the harmonic mean of the roots (docs/method.md §9.11).
+    rb = 2 / (1 / math.sqrt(m["k_bend_warp"]) + 1 / math.sqrt(m["k_bend_weft"]))
+    assert bias == pytest.approx((rb ** 2 / w) ** (1 / 3))
