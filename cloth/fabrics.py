@@ -348,6 +348,45 @@ def material_preset(name):
     return dict(derive(name)["material"])
 
 
+# ---- for main.py and the window --------------------------------------------------------------
+def list_lines(directory=None):
+    """``--list``'s fabric section: one line per fabric (name, kind, the record's status)."""
+    out = ["fabrics (--fabric NAME; fabrics/*.toml, docs/fabrics.md):"]
+    for p in paths(directory):
+        f = load(p)
+        out.append(f"  {f.name:18s} {f.kind}" + (f" [{f.source['status']}]"
+                                                  if f.source.get("status") else ""))
+    return out
+
+
+def annotate(lines, cfg):
+    """``--show-config``'s lines with, under each key whose value a fabric gave, a comment
+    saying where it came from. The fabric is ``cfg["material"]["preset"]`` when that names
+    one; a key another layer changed since (``--set``, a TOML file) gets no comment."""
+    name = cfg.get("material", {}).get("preset")
+    if name not in names():
+        return list(lines)
+    d = derive(name)
+    given = {f"material.{k}": v for k, v in d["material"].items()}
+    given.update({f"strain.{k}": v for k, v in d["strain"].items()})
+    out = []
+    for line in lines:
+        out.append(line)
+        key = line.split(" = ", 1)[0].strip()
+        if key in d["provenance"]:
+            section, k = key.split(".", 1)
+            value = cfg.get(section, {}).get(k)
+            if value is not None and _close(value, given[key]):
+                out.append(f"#   ^ from {d['provenance'][key]}")
+    return out
+
+
+def _close(a, b):
+    if isinstance(a, (list, tuple)):
+        return len(a) == len(b) and all(_close(x, y) for x, y in zip(a, b))
+    return math.isclose(float(a), float(b), rel_tol=1e-9, abs_tol=1e-15)
+
+
 # ---- the table of docs/fabrics.md ----------------------------------------------------------------
 def table_lines(directory=None):
     L = ["| fabric | kind | W (g/m^2) | EMT warp / weft (%) | LT warp / weft | B warp / weft "

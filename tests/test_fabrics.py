@@ -228,3 +228,37 @@ def test_bending_lengths_are_the_closed_form_cantilever_readings():
     # The bias strip: the square of the harmonic mean of the roots (docs/method.md §9.11).
     rb = 2 / (1 / math.sqrt(m["k_bend_warp"]) + 1 / math.sqrt(m["k_bend_weft"]))
     assert bias == pytest.approx((rb ** 2 / w) ** (1 / 3))
+
+
+def test_show_config_lines_say_where_a_fabrics_numbers_came_from():
+    from scenes.schema import show_config
+    cfg = fabrics.apply_fabric(_cfg(), "denim")
+    cfg["strain"]["weft"] = [-0.02, 0.02]                   # changed after the fabric
+    lines = fabrics.annotate(show_config(cfg), cfg)
+    text = "\n".join(lines)
+    i = next(n for n, line in enumerate(lines) if line.startswith("material.k_warp = "))
+    assert lines[i + 1].startswith("#   ^ from fabrics/denim.toml: secant of the warp curve")
+    j = next(n for n, line in enumerate(lines) if line.startswith("strain.weft = "))
+    assert not lines[j + 1].startswith("#   ^")            # no longer the fabric's
+    assert "#   ^ from fabrics/denim.toml: a bias strip under 20 gf/cm" in text
+    plain = show_config(_cfg())
+    assert fabrics.annotate(plain, _cfg()) == list(plain)    # preset "soft": nothing added
+
+
+def test_list_lines_name_every_fabric():
+    lines = fabrics.list_lines()
+    assert lines[0].startswith("fabrics (--fabric NAME")
+    assert [line.split()[0] for line in lines[1:]] == fabrics.names()
+
+
+def test_a_fabric_as_an_override_layer_is_apply_fabric_and_later_layers_win():
+    # main.py's --fabric: fabric_changes(name) as a layer of resolve's overrides, after a
+    # --config file and before --set and the band flags.
+    from scenes import hanging
+    from scenes.common import resolve
+    via_layer = resolve(hanging.DEFAULTS, [fabrics.fabric_changes("cotton-shirting")])
+    assert via_layer == fabrics.apply_fabric(_cfg(), "cotton-shirting")
+    later = resolve(hanging.DEFAULTS, [fabrics.fabric_changes("cotton-shirting"),
+                                       {"strain": {"warp": [-0.02, 0.02]}}])
+    assert later["strain"]["warp"] == [-0.02, 0.02]
+    assert later["material"]["k_warp"] == via_layer["material"]["k_warp"]

@@ -167,3 +167,24 @@ def test_the_strain_limiter_is_built_from_the_settings_alone():
                     with open(os.path.join(dirpath, name)) as fh:
                         hits = setter.findall(fh.read())
                     assert not hits, (name, hits)
+
+
+def test_the_bending_ratio_is_read_when_the_cloth_is_built(tmp_path):
+    # Issue #52: k_bend_warp / k_bend_weft's ratio lives in the bending matrix (built with the
+    # cloth); a live change of it is refused with one line and changes nothing, scaling both
+    # together is live (the kernels' factor, Material.bend_scale).
+    from cloth.config import ConfigError
+    from ui.state import AppState
+    (tmp_path / "sheet.obj").write_text(SHEET_OBJ)
+    (tmp_path / "s.toml").write_text('[cloth]\nmesh = "sheet.obj"\npins = [[-0.01, -0.01, '
+                                     '1.01, 0.01]]\n[material]\npreset = "cotton-jersey"\n')
+    st = AppState.from_scene(str(tmp_path / "s.toml"))
+    sim = st.sim
+    bw, bf = sim.settings.material.k_bend_warp, sim.settings.material.k_bend_weft
+    assert bw == pytest.approx(2 * bf) and sim.model.bend_alpha == pytest.approx(2 ** 0.125)
+    with pytest.raises(ConfigError, match="k_bend_weft: their ratio is read when the cloth"):
+        sim.set_material(k_bend_warp=3 * bw)
+    assert sim.settings.material.k_bend_warp == bw and sim.model.material.k_bend_warp == bw
+    sim.set_material(k_bend_warp=2 * bw, k_bend_weft=2 * bf)
+    assert sim.model.material.bend_scale() == pytest.approx(2 * np.sqrt(bw * bf))
+    check_copies(st)
