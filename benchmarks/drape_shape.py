@@ -2,7 +2,7 @@
 final draped shape must not depend on the solver's tolerance: the default and exact steps
 give the same drape, the same fold count, within the chaos floor").
 
-    python -m benchmarks.drape_shape --out docs/speed          # ~15 min, two runs at a time
+    python -m benchmarks.drape_shape --out docs/speed          # ~15 min, a run per core at a time
     python -m benchmarks.drape_shape --drops 0.95 --out /tmp/ds   # one height
 
 The drape scene (resolution 25, the default settings otherwise) runs FRAMES frames from each
@@ -20,13 +20,14 @@ and the fold counts agree as a distribution over the heights (one height's count
 draw of a chaotic outcome).
 
 Writes drape_shape.md, drape_shape.json and drape_shape.png (the hems seen from above, per
-height and solve) to --out; runs are cached in --out/drape_shape_runs/ (--fresh: run again).
+height and solve) to --out; runs are cached in --out/drape_shape_runs/ by what decides them
+(--fresh: run again). The runs are a sweep (``benchmarks.sweep``): a local cluster, one worker
+per core, or ``--scheduler tcp://HOST:PORT`` (docs/sweeps.md); a run that fails is listed on
+the page and its height left out.
 """
 import argparse
-import json
 import os
 import sys
-from concurrent.futures import ThreadPoolExecutor
 
 FRAMES = 90
 REST_FRAMES = 30                    # the last frames, over which the resting KE is averaged
@@ -80,7 +81,7 @@ def fold_count(x, loop, axis_xz, prominence=FOLD_PROMINENCE):
     return int(np.sum((peaks >= n) & (peaks < 2 * n)))
 
 
-def child(solve, drop, chaos):
+def child(solve, drop, chaos, frames=FRAMES):
     """One run: the final positions and faces, the lowest vertex, KE and ms per frame."""
     from cloth import backend
     backend.init("cpu", "f64")
@@ -88,7 +89,7 @@ def child(solve, drop, chaos):
     from benchmarks.harness import configure
     from cloth import metrics
     from cloth.simulator import Simulator
-    _, cfg, setup = configure("drape", {"cloth": {"drop": drop}, "strain": SOLVES[solve]})
+    _, cfg, setup = configure("drape", overrides_of(solve, drop))
     if chaos:
         rng = np.random.default_rng(1)
         step = rng.normal(size=setup.mesh.x.shape)
@@ -96,7 +97,7 @@ def child(solve, drop, chaos):
         setup.mesh.x += 1e-9 * step
     sim = Simulator(setup, cfg)
     ms, ke = [], []
-    for _ in range(FRAMES):
+    for _ in range(frames):
         sim.step_frame()
         ms.append(sim.stage("strain_limit").ms)
         ke.append(metrics.kinetic_energy(sim.model.velocities(), sim.model.mass))
@@ -107,12 +108,16 @@ def child(solve, drop, chaos):
             "sphere": cfg["sphere"]["center"]}
 
 
-def run_one(folder, solve, drop, chaos, fresh):
-    from benchmarks.harness import cached_run
-    tag = f"{solve.replace(' ', '_')}__{drop}" + ("__chaos" if chaos else "")
-    return cached_run(os.path.join(folder, tag + ".json"), "benchmarks.drape_shape",
-                      [solve, drop, chaos],
-                      f"{solve} / drop {drop}" + (" / 1 nm" if chaos else ""), fresh)
+def overrides_of(solve, drop):
+    return {"cloth": {"drop": drop}, "strain": SOLVES[solve]}
+
+
+def sweep_run(solve, drop, chaos):
+    """The sweep's run of (solve, drop, chaos)."""
+    from benchmarks.sweep import Run
+    return Run("benchmarks.drape_shape:child", [solve, drop, chaos, FRAMES],
+               f"{solve} / drop {drop}" + (" / 1 nm" if chaos else ""),
+               scene=("drape", overrides_of(solve, drop)))
 
 
 def summarize(runs, drops):
@@ -153,13 +158,14 @@ def permutation_p(a, b, draws=20000):
     return hits / draws
 
 
-def write_report(out, rows, seconds, cmd):
+def write_report(out, rows, seconds, cmd, failed=((), ())):
+    """The page; ``failed``: (the sweep's runs, their results), whose errors it lists."""
     import numpy as np
     from benchmarks.harness import header, write_json
     solves = list(SOLVES)
     lines = [
         "# Does the resting drape depend on the strain solve?", "",
-        header(cmd, seconds) + " (The seconds: the runs' own, two at a time.)", "",
+        header(cmd, seconds) + " (The seconds: the runs' own, summed.)", "",
         f"The drape scene (resolution 25, 1152 faces) for {FRAMES} frames from each height, "
         "once per solve and once more with every vertex's start moved by 1 nm. *floor*: the "
         "RMS distance between a run's resting sheet and its 1 nm twin's, over the sheet's "
@@ -197,7 +203,9 @@ def write_report(out, rows, seconds, cmd):
               f"{p_folds:.2f} (two-sided permutation test).",
               "- strain limiting ms a frame (median over the heights): " + ", ".join(
                   f"{s} {ms[s]:.0f}" for s in solves) + ".",
-              "", "![the hems from above](drape_shape.png)", ""]
+              "", "![the hems from above](drape_shape.png)"]
+    from benchmarks.sweep import failed_lines
+    lines += failed_lines(*failed) + [""]
     with open(os.path.join(out, "drape_shape.md"), "w") as fh:
         fh.write("\n".join(lines))
     write_json(out, "drape_shape", {"rows": rows}, cmd, seconds)
@@ -243,30 +251,28 @@ def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--out", default="docs/speed")
     p.add_argument("--drops", type=float, nargs="+", default=list(DROPS))
-    p.add_argument("--jobs", type=int, default=2)
-    p.add_argument("--fresh", action="store_true")
-    p.add_argument("--child", help=argparse.SUPPRESS)
+    from benchmarks.sweep import add_arguments, run_sweep
+    add_arguments(p)
     a = p.parse_args(argv)
-    if a.child:
-        print(json.dumps(child(*json.loads(a.child))))
-        return
     os.makedirs(a.out, exist_ok=True)
     folder = os.path.join(a.out, "drape_shape_runs")
-    os.makedirs(folder, exist_ok=True)
     plan = [(s, d, c) for d in a.drops for s in SOLVES for c in (False, True)]
+    sweep = [sweep_run(*r) for r in plan]
     print(f"drape_shape: {len(plan)} runs of {FRAMES} frames", file=sys.stderr)
-    with ThreadPoolExecutor(a.jobs) as pool:
-        results = list(pool.map(lambda r: run_one(folder, *r, a.fresh), plan))
-    failed = [(r, res["error"]) for r, res in zip(plan, results) if "error" in res]
-    if failed:
-        raise SystemExit(f"drape_shape: {len(failed)} runs failed, e.g. {failed[0]}")
+    results = run_sweep(sweep, folder, a.scheduler, a.workers, a.fresh, name="drape_shape")
     runs = dict(zip(plan, results))
-    rows = summarize(runs, a.drops)
-    # The runs' own time (cached runs count what they took when they ran).
+    # A height is summarized when its four runs finished.
+    drops = [d for d in a.drops if all("error" not in runs[(s, d, c)]
+                                       for s in SOLVES for c in (False, True))]
+    if not drops:
+        raise SystemExit("drape_shape: no height has all its runs: "
+                         + next(r["error"] for r in results if "error" in r)[-600:])
+    rows = summarize(runs, drops)
+    # The runs' own time, summed (cached runs count what they took when they ran).
     from benchmarks.harness import command
-    write_report(a.out, rows, sum(r.get("wall_s", 0.0) for r in results) / a.jobs,
-                 command("benchmarks.drape_shape", argv))
-    plot(a.out, runs, a.drops)
+    write_report(a.out, rows, sum(r.get("wall_s", 0.0) for r in results),
+                 command("benchmarks.drape_shape", argv), failed=(sweep, results))
+    plot(a.out, runs, drops)
     print(open(os.path.join(a.out, "drape_shape.md")).read())
 
 

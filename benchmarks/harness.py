@@ -1,8 +1,9 @@
 """What the benchmarks share: the header every results page starts with (``header``: the
 command, commit, date and CPU model), its JSON (``write_json``), a scene's configuration and
-set-up (``configure``), a start moved by 1 nm (``nudge_start``) and a cached child run
-(``cached_run``). A new Simulator per run is cheap: every kernel compiles once per process, so
-no benchmark keeps Simulators around.
+set-up (``configure``), a start moved by 1 nm (``nudge_start``) and a scene run for some
+frames (``scene_run``). A new Simulator per run is cheap: every kernel compiles once per
+process, so no benchmark keeps Simulators around. Sweeps of runs (each run a task in a worker
+process that keeps its kernels, cached by what decides it): ``benchmarks.sweep``.
 
 Every benchmark backs a page listed in docs/index.md and follows one protocol:
 ``python -m benchmarks.NAME --out DIR`` writes the page (NAME.md) and its JSON into DIR. Run from
@@ -99,26 +100,20 @@ def configure(scene, overrides):
     return module, cfg, module.build(cfg)
 
 
-def cached_run(path, module, args, label, fresh=False, error_chars=300):
-    """One benchmark run in its own process, cached as JSON at ``path``: ``python -m module
-    --child JSON(args)``, whose last stdout line is the result's JSON. A failed run returns
-    {"error": the end of its stderr} and is not cached; a finished one gets ``wall_s``.
-    Prints ``label`` and the time (or the error) to stderr."""
-    import json
-    if os.path.exists(path) and not fresh:
-        with open(path) as fh:
-            return json.load(fh)
-    t0 = time.time()
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    proc = subprocess.run([sys.executable, "-m", module, "--child", json.dumps(args)],
-                          capture_output=True, text=True, cwd=root)
-    if proc.returncode != 0:
-        result = {"error": proc.stderr[-600:]}
-    else:
-        result = json.loads(proc.stdout.strip().splitlines()[-1])
-        result["wall_s"] = time.time() - t0
-        with open(path, "w") as fh:
-            json.dump(result, fh)
-    print(f"  {label}" + (f": error {result['error'][-error_chars:]}" if "error" in result
-                          else f" ({result['wall_s']:.0f} s)"), file=sys.stderr, flush=True)
-    return result
+def scene_run(scene, overrides, frames, nudge_seed=None):
+    """A scene run for ``frames`` frames in this process (a sweep's smallest run, e.g. for a
+    test): the final positions, the kinetic energy a frame and the face count.
+    ``nudge_seed``: the start moved by 1 nm (``nudge_start``)."""
+    from cloth import backend
+    backend.init("cpu", "f64")
+    from cloth import metrics
+    from cloth.simulator import Simulator
+    _, cfg, setup = configure(scene, overrides)
+    if nudge_seed is not None:
+        nudge_start(setup, seed=nudge_seed)
+    sim = Simulator(setup, cfg)
+    ke = []
+    for _ in range(frames):
+        sim.step_frame()
+        ke.append(metrics.kinetic_energy(sim.model.velocities(), sim.model.mass))
+    return {"x": sim.model.positions().tolist(), "ke": ke, "faces": int(sim.model.n_faces)}

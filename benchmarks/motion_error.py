@@ -22,13 +22,15 @@ kinetic energy kept through the landing, KE(frame 8) / KE(frame 6).
 
 Writes motion_error.md, motion_error.json and motion_error.png (ms a frame against the error
 at frame 10, per case) to --out; the runs are cached in --out/motion_error_runs/ (delete it,
-or pass --fresh, to measure again).
+or pass --fresh, to measure again). The runs are a sweep (``benchmarks.sweep``): by default
+on a local cluster, one worker process per core, each keeping its kernels between runs;
+``--scheduler tcp://HOST:PORT`` runs them on a cluster (docs/sweeps.md). A run is cached by
+what decides it (the code, the scene's configuration, the solve's settings), so an edited
+``--extra`` solve reruns only its own runs.
 """
 import argparse
 import json
 import os
-import sys
-from concurrent.futures import ThreadPoolExecutor
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 FRAMES = 30
@@ -63,19 +65,16 @@ SOLVES = {
 DRAPE_SOLVES = ("reference", "default", "exact")
 
 
-def child(case, solve, drop=None):
-    """One run: positions at FRAMES_AT, strain ms per frame, kinetic energy per frame."""
+def child(case, solve, drop=None, settings=None, frames=FRAMES):
+    """One run: positions at FRAMES_AT, strain ms per frame, kinetic energy per frame.
+    ``settings``: the solve's strain settings (default ``SOLVES[solve]``)."""
     from cloth import backend
     backend.init("cpu", "f64")
     import numpy as np
     from benchmarks.harness import configure
     from cloth import metrics
     from cloth.simulator import Simulator
-    scene, overrides = CASES[case]
-    overrides = json.loads(json.dumps(overrides))
-    overrides.setdefault("strain", {}).update(SOLVES[solve])
-    if drop is not None:
-        overrides.setdefault("cloth", {})["drop"] = drop
+    scene, overrides = overrides_of(case, solve, drop, settings)
     _, cfg, setup = configure(scene, overrides)
     if solve.startswith("chaos"):
         rng = np.random.default_rng(int(solve.split()[-1]) if solve != "chaos" else 1)
@@ -85,7 +84,7 @@ def child(case, solve, drop=None):
         setup.mesh.x[free] += 1e-9 * step[free]
     sim = Simulator(setup, cfg)
     out = {"x": {}, "ms": [], "ke": [], "converged": 0, "stationarity": [], "rounds": []}
-    for frame in range(1, FRAMES + 1):
+    for frame in range(1, frames + 1):
         # AL rounds a frame, over every projection in it (the contact re-projections too).
         before = sim.strain.rounds_total
         sim.step_frame()
@@ -102,17 +101,22 @@ def child(case, solve, drop=None):
     return out
 
 
-def _run_file(folder, case, solve, drop):
-    tag = f"{case}__{solve.replace(' ', '_')}" + ("" if drop is None else f"__{drop}")
-    return os.path.join(folder, tag + ".json")
+def overrides_of(case, solve, drop, settings=None):
+    """The scene and overrides a run builds (``settings``: the solve's, default SOLVES')."""
+    scene, overrides = CASES[case]
+    overrides = json.loads(json.dumps(overrides))
+    overrides.setdefault("strain", {}).update(SOLVES[solve] if settings is None else settings)
+    if drop is not None:
+        overrides.setdefault("cloth", {})["drop"] = drop
+    return scene, overrides
 
 
-def run_one(folder, case, solve, drop, fresh):
-    from benchmarks.harness import cached_run
-    return cached_run(_run_file(folder, case, solve, drop), "benchmarks.motion_error",
-                      [case, solve, drop, {solve: SOLVES[solve]}],
-                      f"{case} / {solve}" + ("" if drop is None else f" / drop {drop}"),
-                      fresh, error_chars=200)
+def sweep_run(case, solve, drop):
+    """The sweep's run of (case, solve, drop)."""
+    from benchmarks.sweep import Run
+    return Run("benchmarks.motion_error:child", [case, solve, drop, SOLVES[solve], FRAMES],
+               f"{case} / {solve}" + ("" if drop is None else f" / drop {drop}"),
+               scene=overrides_of(case, solve, drop))
 
 
 def rms(a, b, diagonal):
@@ -233,7 +237,8 @@ def trade_off(rows, drows, runs):
     return L
 
 
-def write_report(out, runs, drape, cmd):
+def write_report(out, runs, drape, cmd, failed=((), ())):
+    """The page; ``failed``: (the sweep's runs, their results), whose errors it lists."""
     from benchmarks.harness import header, write_json
     from cloth import backend
     rows, drows = summarize(runs), summarize_drape(drape)
@@ -241,7 +246,7 @@ def write_report(out, runs, drape, cmd):
     write_json(out, "motion_error", {"rows": rows, "drape": drows}, cmd, seconds)
     mode = backend.forced_compile_mode() or "optimised"
     L = ["# Motion error against exactly solved motion\n",
-         header(cmd, seconds) + f" (The seconds: the runs' own, two at a time; {mode} "
+         header(cmd, seconds) + f" (The seconds: the runs' own, summed; {mode} "
          "kernels.)\n",
          "Each case runs from its start, one substep per frame. Error: RMS vertex distance to "
          "the reference run at that frame over the cloth's diagonal. The reference solves each "
@@ -296,6 +301,8 @@ def write_report(out, runs, drape, cmd):
     L += trade_off(rows, drows, runs)
     L.append("")
     L.append("![speed against error](motion_error.png)")
+    from benchmarks.sweep import failed_lines
+    L += failed_lines(*failed)
     L.append("")
     with open(os.path.join(out, "motion_error.md"), "w") as fh:
         fh.write("\n".join(L))
@@ -341,9 +348,8 @@ def main(argv=None):
     ap.add_argument("--extra", nargs="+", default=[], metavar="NAME=JSON",
                     help="more solves: a name and strain settings, e.g. "
                          "'tol5={\"solve\": \"exact\", \"tol\": 1e-5}'")
-    ap.add_argument("--jobs", type=int, default=2)
-    ap.add_argument("--fresh", action="store_true", help="measure again, ignoring cached runs")
-    ap.add_argument("--child", help=argparse.SUPPRESS)
+    from benchmarks.sweep import add_arguments
+    add_arguments(ap)
     a = ap.parse_args(argv)
     drape_solves = list(DRAPE_SOLVES)
     for item in a.extra:
@@ -351,11 +357,6 @@ def main(argv=None):
         SOLVES[name] = json.loads(value)
         a.solves.append(name)
         drape_solves.append(name)        # an extra solve runs every drop
-    if a.child:
-        case, solve, drop, extra = json.loads(a.child)
-        SOLVES.update(extra)
-        print(json.dumps(child(case, solve, drop)))
-        return
     folder = os.path.join(a.out, "motion_error_runs")
     os.makedirs(folder, exist_ok=True)
     plan = []
@@ -365,24 +366,22 @@ def main(argv=None):
             plan += [(case, s, None) for s in a.solves]
         else:
             plan += [(case, s, None) for s in a.solves]
-    print(f"{len(plan)} runs", file=sys.stderr)
-    # Every case and solve of the last report are read back from the cache, so a report
-    # always covers what has been measured, not only this invocation's cases.
-    with ThreadPoolExecutor(max_workers=a.jobs) as pool:
-        results = list(pool.map(lambda p: run_one(folder, *p, a.fresh), plan))
+    # Every case and solve cached under the current code is read back, so a report always
+    # covers what has been measured, not only this invocation's cases.
+    from benchmarks.sweep import cached_entries, run_sweep
+    sweep = [sweep_run(*p) for p in plan]
+    results = run_sweep(sweep, folder, a.scheduler, a.workers, a.fresh, name="motion_error")
     runs, drape = {}, {}
-    for name in sorted(os.listdir(folder)):
-        parts = name[:-5].split("__")
-        with open(os.path.join(folder, name)) as fh:
-            run = json.load(fh)
-        case, solve = parts[0], parts[1].replace("_", " ")
-        if len(parts) == 3:
-            drape.setdefault(solve, {})[float(parts[2])] = run
+    for entry in cached_entries(folder):
+        case, solve, drop = entry["args"][:3]
+        run = entry["result"]
+        if drop is not None:
+            drape.setdefault(solve, {})[float(drop)] = run
         else:
             runs.setdefault(case, {})[solve] = run
-    del results
     from benchmarks.harness import command
-    write_report(a.out, runs, drape, command("benchmarks.motion_error", argv))
+    write_report(a.out, runs, drape, command("benchmarks.motion_error", argv),
+                 failed=(sweep, results))
     print(f"wrote {os.path.join(a.out, 'motion_error.md')}")
 
 
