@@ -203,8 +203,10 @@ SCHEMA = {
         "touching": Key("", "scene files: names of obstacles the cloth must touch at the end"),
     },
     "camera": {
-        "position": Key("m", "camera position"),
-        "lookat": Key("m", "point the camera looks at"),
+        "position": Key("m", "camera position; scene files: [] (the default) frames the cloth "
+                             "and the obstacles, seen from the front and 22 deg above"),
+        "lookat": Key("m", "point the camera looks at; scene files: [] (the default) the "
+                           "centre of the cloth and the obstacles"),
         "fov": Key("deg", "vertical field of view", lo=1, hi=170),
     },
     "pull": {

@@ -16,7 +16,7 @@
     motion = {velocity = [0.0, 0.0, 0.1]}
     [collision]
     thickness = 0.005
-    [camera]
+    [camera]                        # optional: without it the view frames cloth and obstacles
     position = [0.0, 1.5, 3.0]
     [strain]
     method = "mapping"
@@ -61,7 +61,8 @@ FILE_SECTIONS = {
     "pins": [],                   # moving pin groups: {box = [...], motion = {...}}
     "obstacles": [],              # [[obstacles]] tables, see OBSTACLE_KEYS
     "collision": {"thickness": THICKNESS, "self_collision": False},
-    "camera": {"position": [0.0, 1.5, 3.0], "lookat": [0.0, 1.0, 0.0], "fov": 40.0},
+    # [] (the default): placed so that the cloth and the obstacles fill the view (``framing``).
+    "camera": {"position": [], "lookat": [], "fov": 40.0},
     # What the scene is for, tested by the final check on top of the checks every scene file
     # gets (finite, pins on their targets, outside the obstacles, seams closed, limits held).
     "check": {
@@ -274,6 +275,14 @@ class SceneFile:
         specs = [self._obstacle_spec(o, k) for k, o in enumerate(cfg["obstacles"])]
         _number(cfg["collision"]["thickness"], "collision.thickness", positive=True)
         _check_targets(cfg["check"], specs)
+        cam = cfg["camera"]
+        for key in ("position", "lookat"):
+            if len(cam[key]):
+                _vec3(cam[key], f"camera.{key}")
+        if len(cam["position"]) and len(cam["lookat"]) and \
+                np.allclose(cam["position"], cam["lookat"]):
+            raise ConfigError("camera.position and camera.lookat are the same point: move the "
+                              "camera back, or leave both out to frame the scene")
         return g, mesh, groups, stitches, specs, tol
 
     def _stitch_file(self, path, g):
@@ -385,6 +394,7 @@ class SceneFile:
 
     # -- build (Taichi) ----------------------------------------------------------------------
     def build(self, cfg):
+        from cloth import collision as col
         from cloth.simulator import SceneSetup
         g, mesh, groups, stitches, specs, tol = self.check(cfg)
         for note in g.notes:
@@ -399,12 +409,12 @@ class SceneFile:
                     sel = _inside(uv_pinned, box, tol)
                     out[sel] = motion.apply(t, rest[sel])
                 return out
-        cam = cfg["camera"]
+        framed = [mesh.x] + [o.mesh_at(0.0)[0] for o in obstacles
+                             if not isinstance(o, col.Plane)]
         return SceneSetup(mesh=mesh, material=material_from(cfg), pin_motion=pin_motion,
                           obstacles=obstacles, stitches=stitches if len(stitches) else None,
                           self_collision=bool(cfg["collision"]["self_collision"]),
-                          camera={"position": list(cam["position"]),
-                                  "lookat": list(cam["lookat"]), "fov": cam["fov"]},
+                          camera=framing(np.concatenate(framed), **cfg["camera"]),
                           check_final=lambda sim: check_final(sim, cfg))
 
     @staticmethod
@@ -458,6 +468,38 @@ def _check_targets(check, specs):
         raise ConfigError(f"check.drape_over = '{check['drape_over']}' is a "
                           f"{names[check['drape_over']]['kind']}: draping is checked over a "
                           "sphere")
+
+
+# The view a framed camera looks along (from the front, 22 degrees above: a sheet lying on an
+# obstacle shows its top), and the screen box it fills: the window's middle, between its two columns, is about
+# 0.8 as wide as it is high; a headless frame (4:3) then has room to spare at the sides.
+FRAMING_DIRECTION = np.array([0.0, 1.0, 2.5]) / np.linalg.norm([0.0, 1.0, 2.5])
+FRAMING_ASPECT, FRAMING_FILL = 0.8, 0.85
+
+
+def framing(points, position=(), lookat=(), fov=40.0):
+    """The scene's camera (position, lookat, fov): what the file gives, the rest chosen so
+    that ``points`` (the cloth and the bounded obstacles) fill FRAMING_FILL of a view
+    FRAMING_ASPECT wide: the target at the points' bounding-box centre unless given, the eye
+    along the given position's direction (else FRAMING_DIRECTION) at the nearest distance
+    where every point projects inside."""
+    pts = np.asarray(points, float)
+    target = np.asarray(lookat, float) if len(lookat) else 0.5 * (pts.min(0) + pts.max(0))
+    if len(position):
+        return {"position": [float(v) for v in position],
+                "lookat": [float(v) for v in target], "fov": float(fov)}
+    d = FRAMING_DIRECTION
+    right = np.cross(-d, [0.0, 1.0, 0.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, -d)
+    t = np.tan(np.radians(fov) / 2) * FRAMING_FILL
+    rel = pts - target
+    # A point at depth (dist - rel.d) is inside when |rel.right| <= depth t aspect and
+    # |rel.up| <= depth t: the distance is the largest of those bounds.
+    need = rel @ d + np.maximum(np.abs(rel @ right) / (t * FRAMING_ASPECT), np.abs(rel @ up) / t)
+    dist = max(float(need.max()), 0.1)
+    return {"position": [float(v) for v in target + dist * d],
+            "lookat": [float(v) for v in target], "fov": float(fov)}
 
 
 def check_final(sim, cfg):

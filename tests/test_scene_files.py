@@ -427,3 +427,39 @@ def test_a_garment_started_stretched_is_projected_onto_its_limits_before_the_fir
     assert np.abs(sim.model.positions() - x0).max() > 1e-3 and row["kinetic_energy"] == 0.0
     phi, _ = setup.obstacles[0].sdf(sim.model.positions())
     assert phi.min() > 0.0
+
+
+def test_a_scene_file_without_a_camera_frames_its_cloth_and_obstacles(tmp_path, capsys):
+    """The issue's case: a 0.8 m sheet over a box, no [camera]. The view frames both (every
+    cloth vertex and box corner inside the window's middle between its columns, and filling
+    it), from the front and above; a given camera is kept; a bad one is one line."""
+    import scenes
+    from scenes.common import resolve
+    from ui.camera import OrbitCamera
+    v = [(x, 0.9, z) for z in (-0.4, 0.0, 0.4) for x in (-0.4, 0.0, 0.4)]
+    vt = [(x + 0.4, z + 0.4) for x, _, z in v]
+    faces = []
+    for r in range(2):
+        for c in range(2):
+            a = 3 * r + c + 1
+            faces += [f"{a}/{a} {a + 3}/{a + 3} {a + 4}/{a + 4}", f"{a}/{a} {a + 4}/{a + 4} {a + 1}/{a + 1}"]
+    box = '[[obstacles]]\nkind = "box"\ncenter = [0.0, 0.3, 0.0]\nextents = [0.5, 0.6, 0.5]\n'
+    path = scene(tmp_path, obj_text(v, vt, faces), extra=box)
+    module = scenes.get(path)
+    setup = module.build(resolve(module.DEFAULTS, []))
+    cam = setup.camera
+    eye, target = np.array(cam["position"]), np.array(cam["lookat"])
+    assert eye[2] > target[2] and eye[1] > target[1]          # from the front, above
+    corners = np.array([[x, y, z] for x in (-0.25, 0.25) for y in (0.0, 0.6)
+                        for z in (-0.25, 0.25)])
+    pts = np.concatenate([np.array(v, float), corners])
+    orbit = OrbitCamera(cam["position"], cam["lookat"], cam["fov"])
+    s, depth = orbit.project(pts, aspect=0.8)                   # the window's middle
+    assert (depth > 0).all() and (s > 0.05).all() and (s < 0.95).all(), s
+    assert np.ptp(s, axis=0).max() > 0.75                       # and fills it
+    path = scene(tmp_path, extra=box + '[camera]\nposition = [0.0, 2.0, 3.0]\n')
+    module = scenes.get(path)
+    setup = module.build(resolve(module.DEFAULTS, []))
+    assert setup.camera["position"] == [0.0, 2.0, 3.0]
+    path = scene(tmp_path, extra='[camera]\nposition = [0.0, 2.0]\n')
+    assert_one_line(*run(capsys, path), "camera.position")

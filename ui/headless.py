@@ -94,7 +94,7 @@ class HeadlessRun:
             draw_simulation(self.renderer, sim, self.color, teach=self.teach,
                             layout=self.layout)
             from .render import caption, frame_caption
-            img = caption(self.renderer.image(), frame_caption(sim, self.cfg.get("scene", "")))
+            img = caption(self.renderer.image(), frame_caption(sim, os.path.basename(self.cfg.get("scene", ""))))
             if self.images:
                 import imageio.v2 as imageio
                 imageio.imwrite(os.path.join(self.out, "frames", f"frame_{f:04d}.png"), img)
