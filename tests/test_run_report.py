@@ -2,6 +2,7 @@
 round-trip through --show-config and config.toml, and meshes that are not surfaces refused."""
 import csv
 
+import numpy as np
 import pytest
 
 import main as loom_main
@@ -108,3 +109,67 @@ def test_a_bowtie_vertex_is_refused_with_its_line(capsys, tmp_path):
     rc = loom_main.main([path, "--headless", "--quiet", "--no-images"])
     err = capsys.readouterr().err
     assert_one_line(rc, err, "cloth.obj:14", "bowtie", "give each fan its own vertex")
+
+
+def _stretch_down(sim, cfg):
+    """The hanging sheet stretched 5 % along the warp, down from its pins (5x its band)."""
+    x = sim.model.positions()
+    top = cfg["cloth"]["top"]
+    x[:, 1] = top - 1.05 * (top - x[:, 1])
+    sim.model.set_positions(x)
+    return sim
+
+
+def _corner_off(sim, cfg):
+    """The pull scene's dragged corner 5 cm off its target."""
+    x, uv = sim.model.positions(), sim.model.uv
+    corner = np.isclose(uv[:, 0], cfg["cloth"]["height"]) & np.isclose(uv[:, 1], 0.0)
+    x[corner] += [0.0, 0.0, 0.05]
+    sim.model.set_positions(x)
+    return sim
+
+
+def _flat_on_top(sim, cfg):
+    """A sheet lying flat on the sphere's top like a board, late in the run."""
+    from tests.test_final_checks import drape_case, fake, sheet_over_sphere
+    drape, cfg, c, r, t, late, _ = drape_case()
+    return fake(sheet_over_sphere(c, r, 0.5 * t, flat_from=-1.0), late)
+
+
+def _slid_down(sim, cfg):
+    """The shirt slid down to the waist, its seam closed."""
+    from tests.test_final_checks import fake, on_body
+    low = on_body(1.0, 1.2)
+    low[1] = low[0]
+    return fake(low, 2.5, np.array([[0, 1]]))
+
+
+WRONG_STATES = {"hanging": (_stretch_down, "limits are not held"),
+                "pull": (_corner_off, "off its target"),
+                "drape": (_flat_on_top, "not draped"),
+                "tshirt": (_slid_down, "slid down")}
+
+
+@pytest.mark.parametrize("scene", sorted(WRONG_STATES))
+def test_each_builtin_scenes_wrong_state_exits_with_the_check_code(scene, capsys, tmp_path,
+                                                                     monkeypatch):
+    """Each built-in scene's plainly wrong state (tests/test_final_checks.py) at the end of a
+    main.py run: the scene's own final check fails it, the run prints why and exits 5. The
+    frame's physics is skipped (the state is put in by hand), so only the verdict's way out
+    is under test here."""
+    import scenes
+    from cloth.simulator import Simulator
+    module = scenes.get(scene)
+    check, why = WRONG_STATES[scene]
+    original = module.check_final
+    monkeypatch.setattr(module, "check_final", lambda sim, cfg: original(check(sim, cfg), cfg))
+
+    def no_physics(sim):
+        sim.frame += 1
+        sim.time += 1.0 / sim.settings.sim.fps
+    monkeypatch.setattr(Simulator, "step_frame", no_physics)
+    size = [] if scene == "tshirt" else ["--resolution", 7]
+    rc, out, err = run_main(capsys, scene, "--headless", "--quiet", "--no-images", "--frames", 1,
+                            *size, "--out", tmp_path / "o")
+    assert "final check: FAILED" in out and why in out, out
+    assert rc == loom_main.EXIT_CHECK_FAILED, err
