@@ -262,3 +262,18 @@ def test_a_fabric_as_an_override_layer_is_apply_fabric_and_later_layers_win():
                                        {"strain": {"warp": [-0.02, 0.02]}}])
     assert later["strain"]["warp"] == [-0.02, 0.02]
     assert later["material"]["k_warp"] == via_layer["material"]["k_warp"]
+
+
+def test_cusick_specimen_mesh_and_shadow_of_a_flat_specimen():
+    # benchmarks/cusick.py: the 30 cm specimen, rings on the rim and the support's edge, its
+    # area; a flat specimen's shadow is the specimen (DC = 1), a shrunk one's scales.
+    from benchmarks import cusick
+    uv, faces = cusick.disk_mesh(0.02)
+    r = np.linalg.norm(uv, axis=1)
+    assert np.isclose(r.max(), 0.15) and np.sum(np.isclose(r, 0.09)) >= 12
+    from cloth.model import signed_material_areas
+    a = signed_material_areas(uv, faces)
+    assert a.min() > 0 and a.sum() == pytest.approx(np.pi * 0.15 ** 2, rel=0.01)
+    x = np.c_[uv[:, 0], np.full(len(uv), 0.5), uv[:, 1]]
+    assert cusick.shadow_area(x, faces) == pytest.approx(a.sum(), rel=0.01)
+    assert cusick.shadow_area(0.5 * x, faces) == pytest.approx(0.25 * a.sum(), rel=0.02)

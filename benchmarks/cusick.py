@@ -1,0 +1,167 @@
+"""The Cusick drape of the fabric records (issue #52 item 4): ISO 9073-9 / BS 5058 geometry, a
+disk of cloth 30 cm across held between two disks 18 cm across, left to hang.
+
+    python -m benchmarks.cusick --out /tmp/cusick                    # every fabric, h = 1 cm
+    python -m benchmarks.cusick --h 0.01 0.005 --starts 3 --out DIR  # mesh convergence
+
+The specimen is a Delaunay triangulation of a hexagonal lattice of spacing h inside the disk
+(near-equilateral triangles: Loom's bending reads soft on stretched ones, docs/fabrics.md),
+with rings of vertices on the rim and on the support's edge. Every vertex within the support
+(r <= 9 cm) is pinned, so the faces there are held flat: the clamp of the drapemeter's two
+disks. Material and bands: the fabric's (cloth/fabrics.py, ``apply_fabric``), method
+``--method`` (mapping). Each start moves every free vertex by up to ``k`` nm vertically
+(k = 0, 1, 2, ...: a drape's folds are chaotic), and a run stops once the RMS speed stays
+below 1 mm/s for 10 frames (not before 1.5 s) or after ``--seconds``. Drape coefficient, from the shadow (the
+draped cloth projected on the horizontal plane, rasterised at 0.5 mm):
+DC = (A_shadow - A_support) / (A_specimen - A_support); the median over the starts is the
+reading, with the folds (local maxima of the rim's radius around the circle).
+"""
+import argparse
+import os
+import time
+
+import numpy as np
+
+R_SPECIMEN, R_SUPPORT = 0.15, 0.09       # m (ISO 9073-9: 30 cm specimen, 18 cm disks)
+HEIGHT = 0.5                             # m: the support's height (nothing below it)
+MIN_SECONDS = 1.5                        # s: no run stops before (a flat start is calm too)
+
+
+def disk_mesh(h, R=R_SPECIMEN, r_clamp=R_SUPPORT):
+    """(uv, faces): the specimen meshed at spacing ``h`` (see the module docstring)."""
+    from scipy.spatial import Delaunay
+    n = int(np.ceil(R / h)) + 2
+    i, j = np.meshgrid(np.arange(-n, n + 1), np.arange(-n, n + 1), indexing="ij")
+    pts = np.c_[(i + 0.5 * (j % 2)).ravel() * h, j.ravel() * h * np.sqrt(3) / 2]
+    r = np.linalg.norm(pts, axis=1)
+    keep = (r < R - 0.5 * h) & (np.abs(r - r_clamp) > 0.45 * h)
+    rings = []
+    for rr in (R, r_clamp):
+        m = max(int(round(2 * np.pi * rr / h)), 12)
+        t = 2 * np.pi * np.arange(m) / m
+        rings.append(rr * np.c_[np.cos(t), np.sin(t)])
+    uv = np.r_[pts[keep], np.concatenate(rings)]
+    faces = Delaunay(uv).simplices
+    a, b, c = uv[faces[:, 0]], uv[faces[:, 1]], uv[faces[:, 2]]
+    area = 0.5 * ((b - a)[:, 0] * (c - a)[:, 1] - (b - a)[:, 1] * (c - a)[:, 0])
+    faces[area < 0] = faces[area < 0][:, ::-1]
+    faces = faces[np.abs(area) > 1e-6 * h * h]
+    return uv, faces.astype(np.int32)
+
+
+def shadow_area(x, faces, pixel=5e-4):
+    """Area (m^2) of the union of the triangles projected on the x-z plane, rasterised."""
+    P = x[:, [0, 2]]
+    lo = P.min(axis=0) - pixel
+    n = np.ceil((P.max(axis=0) + pixel - lo) / pixel).astype(int) + 1
+    covered = np.zeros(n, bool)
+    for f in faces:
+        a, b, c = P[f]
+        bl = np.floor((np.minimum(np.minimum(a, b), c) - lo) / pixel).astype(int)
+        tr = np.ceil((np.maximum(np.maximum(a, b), c) - lo) / pixel).astype(int)
+        gx, gy = np.meshgrid(np.arange(bl[0], tr[0] + 1), np.arange(bl[1], tr[1] + 1),
+                             indexing="ij")
+        q = np.stack([gx, gy], -1) * pixel + lo
+        d = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+        if abs(d) < 1e-18:
+            continue
+        l1 = ((b[0] - q[..., 0]) * (c[1] - q[..., 1]) - (b[1] - q[..., 1]) * (c[0] - q[..., 0])) / d
+        l2 = ((c[0] - q[..., 0]) * (a[1] - q[..., 1]) - (c[1] - q[..., 1]) * (a[0] - q[..., 0])) / d
+        inside = (l1 >= 0) & (l2 >= 0) & (l1 + l2 <= 1)
+        covered[gx[inside], gy[inside]] = True
+    return covered.sum() * pixel * pixel
+
+
+def folds(x, uv, R=R_SPECIMEN):
+    """Number of folds: local maxima of the rim's projected radius around the circle
+    (smoothed over 3 rim vertices, maxima at least 10 % of the radius range prominent)."""
+    rim = np.flatnonzero(np.abs(np.linalg.norm(uv, axis=1) - R) < 1e-9)
+    rim = rim[np.argsort(np.arctan2(uv[rim, 1], uv[rim, 0]))]
+    rad = np.linalg.norm(x[rim][:, [0, 2]], axis=1)
+    rad = (np.roll(rad, 1) + rad + np.roll(rad, -1)) / 3
+    span = rad.max() - rad.min()
+    peak = (rad > np.roll(rad, 1)) & (rad >= np.roll(rad, -1))
+    # prominence: above the mean by 10 % of the range
+    return int(np.sum(peak & (rad > rad.mean() + 0.1 * span)))
+
+
+def run(fabric, h=0.01, start=0, method="mapping", seconds=4.0, log=print, compression=None):
+    """One drape: returns dict(fabric, h, start, DC, folds, frames, seconds, faces).
+    ``compression``: the bands' lower ends set to -compression (strain) instead of the
+    fabric's mirror image of the upper ends."""
+    from cloth import fabrics
+    from cloth.model import MeshArrays
+    from cloth.simulator import SceneSetup, Simulator
+    from scenes.common import material_from, resolve, scene_defaults
+    uv, faces = disk_mesh(h)
+    x = np.c_[uv[:, 0], np.full(len(uv), HEIGHT), uv[:, 1]]
+    pinned = np.linalg.norm(uv, axis=1) <= R_SUPPORT + 1e-9
+    if start:
+        rng = np.random.default_rng(start)
+        x[~pinned, 1] += start * 1e-9 * rng.uniform(-1.0, 1.0, (~pinned).sum())
+    cfg = resolve(scene_defaults({"strain": {"method": method}}), [])
+    cfg = fabrics.apply_fabric(cfg, fabric)
+    if compression is not None:
+        for k in ("warp", "weft", "bias"):
+            cfg["strain"][k] = [min(-compression, cfg["strain"][k][0]), cfg["strain"][k][1]]
+    cfg["output"] = dict(cfg["output"], images=False, meshes=False)
+    setup = SceneSetup(mesh=MeshArrays(uv=uv, x=x, faces=faces, pinned=pinned),
+                       material=material_from(cfg))
+    sim = Simulator(setup, cfg)
+    t0 = time.perf_counter()
+    calm, frames = 0, int(round(seconds * cfg["sim"]["fps"]))
+    for f in range(frames):
+        sim.step_frame()
+        v = sim.model.velocities()
+        rms = float(np.sqrt(np.mean(np.sum(v[~pinned] ** 2, axis=1))))
+        calm = calm + 1 if rms < 1e-3 else 0
+        if calm >= 10 and sim.time >= MIN_SECONDS:
+            break
+    xs = sim.model.positions()
+    a_sup, a_spec = np.pi * R_SUPPORT ** 2, np.pi * R_SPECIMEN ** 2
+    dc = (shadow_area(xs, faces) - a_sup) / (a_spec - a_sup)
+    out = dict(fabric=fabric, h=h, start=start, DC=float(dc), folds=folds(xs, uv),
+               frames=f + 1, rms_end=rms, seconds=time.perf_counter() - t0, faces=len(faces),
+               lowest=float(HEIGHT - xs[:, 1].min()))
+    log(f"{fabric:17s} h={100 * h:g} cm start {start}: DC {dc:.3f}, {out['folds']} folds, "
+        f"{out['frames']} frames (rms {1000 * rms:.2f} mm/s), {out['seconds']:.0f} s")
+    return out
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--fabrics", nargs="*", default=None)
+    ap.add_argument("--h", nargs="*", type=float, default=[0.01])
+    ap.add_argument("--starts", type=int, default=3)
+    ap.add_argument("--method", default="mapping")
+    ap.add_argument("--seconds", type=float, default=4.0)
+    ap.add_argument("--compression", type=float, default=None,
+                    help="lower ends of the bands at -this strain (default: the fabric's)")
+    ap.add_argument("--out", default=None)
+    a = ap.parse_args()
+    from cloth import backend, fabrics
+    backend.init("cpu", "f64")
+    rows = []
+    for name in a.fabrics or fabrics.names():
+        for h in a.h:
+            for s in range(a.starts):
+                rows.append(run(name, h, s, a.method, a.seconds, compression=a.compression))
+    L = ["| fabric | h (cm) | faces | DC per start | median DC | folds | frames |",
+         "| --- | --- | --- | --- | --- | --- | --- |"]
+    for name in a.fabrics or fabrics.names():
+        for h in a.h:
+            rs = [r for r in rows if r["fabric"] == name and r["h"] == h]
+            L.append(f"| {name} | {100 * h:g} | {rs[0]['faces']} | "
+                     + ", ".join(f"{r['DC']:.3f}" for r in rs)
+                     + f" | {np.median([r['DC'] for r in rs]):.3f} | "
+                     + ", ".join(str(r["folds"]) for r in rs) + " | "
+                     + ", ".join(str(r["frames"]) for r in rs) + " |")
+    print("\n".join(L))
+    if a.out:
+        os.makedirs(a.out, exist_ok=True)
+        with open(os.path.join(a.out, "cusick.md"), "w") as fh:
+            fh.write("\n".join(L) + "\n")
+
+
+if __name__ == "__main__":
+    main()
