@@ -651,6 +651,7 @@ class TourApp(App):
         self.settle, self.phase, self.held = settle, -1, 0
         self.caption, self.facts = "", None
         super().__init__(state, **kw)
+        self.teach.fixed_axes = True          # each method's plot on axes that hold still
         self.advance()
 
     def advance(self):

@@ -251,7 +251,7 @@ def draw_key(cv, title, entries, box):
     for k, (label, rgb, count) in enumerate(entries):
         top = y1 - (20 + 15 * k) * py
         cv.rect(x0 + 6 * px, top - 10 * py, x0 + 18 * px, top, rgb)
-        cv.text(f"{label} ({count})", x0 + 23 * px, top, INK, 10)
+        cv.text(label if count is None else f"{label} ({count})", x0 + 23 * px, top, INK, 10)
 
 
 @dataclass
@@ -296,6 +296,8 @@ class TeachingLayer:
         self.selected = None                  # (simulator index, face)
         self.hover = None                     # (simulator index, face) under the cursor
         self.refresh_every = refresh_every
+        self.fixed_axes = False               # the plot's axes only grow, per method (the tour)
+        self._held = {}                       # method -> the plot's ranges so far
         self._sites = {}
         self._canvas = None                   # the last plot's keys, age and redraw call
         self._buffer_key = f"teach{next(_LAYERS)}"
@@ -395,7 +397,9 @@ class TeachingLayer:
                 _, _, Dm_inv = self._mesh_cache(i, sim)
                 iso = sim.strain.isotropy if sim.strain is not None else 0.0
                 panels, _ = teaching.strain_plot(sim.method, m.positions(), m.faces, Dm_inv,
-                                                 m.grain, sim.bands(), iso, binds[i])
+                                                 m.grain, sim.bands(), iso, binds[i],
+                                                 held=self._held.setdefault(sim.method, {})
+                                                 if self.fixed_axes else None)
                 x0, y0, x1, y1 = boxes[i]
                 if len(sims) == 1:      # side by side
                     mid = 0.5 * (x0 + x1)
@@ -442,9 +446,31 @@ class TeachingLayer:
                             if len(sims) == 1 or not name.startswith("free")]
             title = ("binding constraint (largest multiplier)" if len(sims) == 1 else
                      "binding constraint per method (grey: free)")
+        elif layout is not None and len(sims) == 1 and ("axes" in self.on or want_plot):
+            entries, title = self.marks_key(sims[0], binds[0], want_plot), "key"
         return self.draw_canvas(renderer, sims, labels, binds,
                                 layout.plot if want_plot else None,
                                 layout.key if layout is not None else None, entries, title)
+
+    def marks_key(self, sim, bind, plot):
+        """The key of the principal axes' strokes and of the plot's dots and box (the binding
+        map has its own key): (label, colour, count or None)."""
+        from .teaching import GLYPH_COMPRESSION, GLYPH_STRETCH
+        entries = []
+        if "axes" in self.on:
+            entries += [("stretch axis", GLYPH_STRETCH[-1][1], None),
+                        ("compression axis", GLYPH_COMPRESSION[-1][1], None),
+                        ("warp and weft threads", np.asarray(THREAD), None)]
+        if plot:
+            _, key = binding_colors(sim.method, bind, sim.model.n_faces)
+            entries += [("dot: " + name, rgb, n) for name, rgb, n in key]
+            if sim.method == "mapping":
+                entries.append(("dark dot: thread strains", FAINT, None))
+            if sim.method in ("svd", "warp-weft", "mapping"):
+                entries.append(("box: feasible region", REGION_EDGE, None))
+            if sim.method in ("svd", "none"):
+                entries.append(("outline: bands, not bounded", REFERENCE, None))
+        return entries
 
     def _draw_plot_marks(self, renderer):
         """The selected and the hovered face's points in the plot, ringed."""

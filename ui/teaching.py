@@ -150,7 +150,7 @@ class Panel:
         return np.clip(np.stack([u, v], axis=1), 0.0, 1.0)
 
 
-def strain_plot(method, x, faces, Dm_inv, grain, bands, iso=0.0, bind=None):
+def strain_plot(method, x, faces, Dm_inv, grain, bands, iso=0.0, bind=None, held=None):
     """The two panels of the strain-space plot for one simulator state.
 
     Left, the principal plane (eta1 - 1, eta2 - 1): svd's box (eta1 in the warp band, eta2
@@ -158,8 +158,23 @@ def strain_plot(method, x, faces, Dm_inv, grain, bands, iso=0.0, bind=None):
     warp-weft's box (its bias constraint is an interval, given in the title); under mapping
     the mapped strains of both principal pairs with mapping's box, the thread strains faint
     behind them (they may leave the box, up to sqrt 2 x at 45 degrees). Points are coloured
-    by the face's binding constraint (``bind``, as ``binding``)."""
+    by the face's binding constraint (``bind``, as ``binding``).
+
+    ``held``: a dict kept between calls (the tour keeps one per method) whose axes only grow:
+    each panel's range is the union of its ranges so far, so a cloud settling onto its box
+    does so on axes that hold still once it has spread, and the pauses of one method share
+    them."""
     warp, weft, bias = strain_bands(bands)
+    calls = iter(range(4))
+
+    def extent(values, band):
+        lo, hi = nice_extent(values, band)
+        if held is None:
+            return lo, hi
+        key = next(calls)
+        old = held.get(key, (lo, hi))
+        held[key] = (min(lo, old[0]), max(hi, old[1]))
+        return held[key]
     b = {"warp": warp, "weft": weft, "bias": bias}
     sp = metrics.strain_space(method if method in metrics.CONSTRAINT_NAMES else "none",
                               x, faces, Dm_inv, grain, b, iso)
@@ -171,8 +186,8 @@ def strain_plot(method, x, faces, Dm_inv, grain, bands, iso=0.0, bind=None):
 
     svd = own == "svd"
     pr = Panel("principal strains", "eta1 - 1", "eta2 - 1",
-               nice_extent(sp["principal"][:, 0], warp if svd else None),
-               nice_extent(sp["principal"][:, 1], weft if svd else None),
+               extent(sp["principal"][:, 0], warp if svd else None),
+               extent(sp["principal"][:, 1], weft if svd else None),
                sp["principal"], rgb, ids, diagonal=True)
     if own == "svd":
         pr.region = metrics.feasible_region("svd", "principal", b)
@@ -192,13 +207,13 @@ def strain_plot(method, x, faces, Dm_inv, grain, bands, iso=0.0, bind=None):
             cols[2 * np.nonzero(on)[0] + j] = rgb[on]
         allv = np.concatenate([pts, sp["grain"]])
         gr = Panel("mapped strains c(eta - 1)", "along warp", "along weft",
-                   nice_extent(allv[:, 0], warp), nice_extent(allv[:, 1], weft), pts, cols,
+                   extent(allv[:, 0], warp), extent(allv[:, 1], weft), pts, cols,
                    np.repeat(ids, 2), region=metrics.feasible_region("mapping", "mapped", b),
                    faint=sp["grain"])
         gr.note = "mapping's box; dark dots: thread strains (up to sqrt 2 x band)"
     else:
-        gr = Panel("thread strains", "warp", "weft", nice_extent(sp["grain"][:, 0], warp),
-                   nice_extent(sp["grain"][:, 1], weft), sp["grain"], rgb, ids)
+        gr = Panel("thread strains", "warp", "weft", extent(sp["grain"][:, 0], warp),
+                   extent(sp["grain"][:, 1], weft), sp["grain"], rgb, ids)
         if own == "warp-weft":
             gr.region = metrics.feasible_region("warp-weft", "grain", b)
             lo, hi = metrics.feasible_region("warp-weft", "bias", b)

@@ -26,7 +26,7 @@ SETTLE_FRAMES = 150        # 5 s at 30 fps: the hanging scene's rest check appli
 SETTLE_EVERY = 3           # settling frames kept in the headless sequence
 HOLD_S = 4.0               # a pause's length in the video
 SIZE = (1280, 720)
-TOUR_LAYOUT = Layout(plot=[(0.515, 0.01, 0.995, 0.60)], key=(0.60, 0.625, 0.93, 0.845),
+TOUR_LAYOUT = Layout(plot=[(0.515, 0.01, 0.995, 0.60)], key=(0.60, 0.605, 0.995, 0.85),
                      bar=(0.04, 0.06, 0.40, 0.022), view_x=(0.04, 0.48), view_y=(0.05, 0.82))
 CAPTION_BOX = (0.0, 0.855, 1.0, 1.0)
 
@@ -108,6 +108,24 @@ def caption(step, f):
                 "principal stretch pass the warp band: the larger deformation and richer "
                 "wrinkles of the paper's Table 1.")
     return head + body
+
+
+def provenance():
+    """The page's line of where it came from: the command, the code's commit, the date and
+    the machine."""
+    import platform
+    import subprocess
+    import sys
+    import time
+    try:
+        here = os.path.dirname(os.path.abspath(__file__))
+        sha = subprocess.run(["git", "-C", here, "rev-parse", "--short", "HEAD"],
+                             capture_output=True, text=True).stdout.strip() or "unknown"
+    except OSError:
+        sha = "unknown"
+    args = " ".join(a for a in sys.argv[1:])
+    return (f"Made by `python main.py {args}` at commit {sha} on {time.strftime('%Y-%m-%d')} "
+            f"({os.cpu_count()} cores, {platform.machine()}); the pictures are `steps/`.")
 
 
 def draw_caption(renderer, text, box=CAPTION_BOX, step_label=""):
@@ -195,15 +213,18 @@ class TourRecorder:
         window = open_window("Loom tour (offscreen)", SIZE, show_window=False)
         self.renderer = ClothRenderer(window, st.sim.setup.camera)
         self.teach = TeachingLayer(("plot",))
+        self.teach.fixed_axes = True
         for sub in ("frames", "steps"):
             os.makedirs(os.path.join(self.out, sub), exist_ok=True)
             for p in glob.glob(os.path.join(self.out, sub, "*.png")):
                 os.remove(p)
         fps = st.settings.sim.fps
-        captions = ["# Loom tour: the paper's Table 1 with the three methods\n"]
+        captions = ["# Loom tour: the paper's Table 1 with the three methods\n",
+                    provenance() + "\n"]
         total = len(METHODS) * self.settle
         progress = None if self.quiet else Progress(total)
         done, k = 0, 0
+        verdicts = []         # (method, ok, message): the scene's final check after settling
         with imageio.get_writer(os.path.join(self.out, "video.mp4"), fps=fps,
                                 macro_block_size=8, quality=7) as writer:
             for method in METHODS:
@@ -226,6 +247,7 @@ class TourRecorder:
                                 f"{st.sim.time:.2f} s); each triangle is a point in strain "
                                 "space, coloured by the constraint that binds it.")
                         self._emit(self._draw(text, f"{method}  settling"), writer)
+                verdicts.append((method,) + st.sim.setup.check_final(st.sim))
                 fa = facts(st.sim)
                 for step in [one for one in STEPS if one.method == method]:
                     k += 1
@@ -236,10 +258,14 @@ class TourRecorder:
                     imageio.imwrite(os.path.join(
                         self.out, "steps", f"step_{k:02d}_{method}_{step.view}.png"), img)
                     self._emit(img, writer, repeat=int(HOLD_S * fps))
-                    captions.append(f"{k}. **{method}, {step.view}**: {text}\n")
+                    name = f"step_{k:02d}_{method}_{step.view}.png"
+                    captions.append(f"{k}. **{method}, {step.view}**: {text}\n\n"
+                                    f"   ![{method}, {step.view}](steps/{name})\n")
         if progress:
             progress.close()
         with open(os.path.join(self.out, "captions.md"), "w") as fh:
             fh.write("\n".join(captions))
         print(f"loom: wrote the tour to {self.out}/ (frames/, steps/, captions.md, video.mp4)")
-        return 0
+        for method, ok, message in verdicts:
+            print(f"final check ({method}): {'ok' if ok else 'FAILED'} ({message})")
+        return 0 if all(ok for _, ok, _ in verdicts) else 5     # main.EXIT_CHECK_FAILED
