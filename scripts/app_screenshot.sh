@@ -3,10 +3,11 @@
 # a virtual X display, grabbed whole (panel and read-out included; the app's own screenshot
 # holds the 3-D scene only). Needs Xvfb (make vulkan installs it) and the venv.
 #   bash scripts/app_screenshot.sh [seconds=75] [out=docs/screenshot.png] [scene args...]
+# SCREEN=WxH sets the virtual screen (default the README's 1280x800; the window fits it).
 set -euo pipefail
 wait_s=${1:-75}; out=${2:-docs/screenshot.png}; shift 2 || true
 display=:97
-Xvfb $display -screen 0 1400x900x24 >/dev/null 2>&1 &
+Xvfb $display -screen 0 ${SCREEN:-1280x800}x24 >/dev/null 2>&1 &
 xvfb=$!
 trap 'kill $app $xvfb 2>/dev/null || true' EXIT
 sleep 2
