@@ -478,7 +478,7 @@ class App:
             r = st.readouts(i)
             w, h = 0.155, 0.16
             if 0 <= sx <= 1 and 0 <= sy <= 1:
-                with self.gui.sub_window(label, float(np.clip(sx - w / 2, 0, 1 - w)),
+                with self.gui.sub_window(label, float(np.clip(sx - w / 2, COLUMN, 1 - COLUMN - w)),
                                          float(np.clip(1 - sy - h, 0, 1 - h)), w, h):
                     sl = r["stage_ms"].get("strain_limit", 0.0)
                     self.gui.text(f"SL {r['sl_iterations']} it, {sl:.1f} ms")
