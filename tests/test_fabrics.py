@@ -97,7 +97,8 @@ def test_the_curve_goes_through_emt_at_500_gf_cm_with_the_kes_energy(emt, lt):
     F = A * np.expm1(e / e0)
     assert F[-1] == pytest.approx(500.0, rel=1e-9)
     wt = np.trapezoid(F, e) if hasattr(np, "trapezoid") else np.trapz(F, e)
-    assert wt / (500 * emt / 100 / 2) == pytest.approx(lt, rel=1e-6)     # KES: LT = WT / (Fm EMT / 2)
+    # KES: LT = WT / (Fm EMT / 2)
+    assert wt / (500 * emt / 100 / 2) == pytest.approx(lt, rel=1e-6)
     assert fabrics.strain_at(500.0, emt, lt) == pytest.approx(emt / 100, rel=1e-9)
 
 
