@@ -11,8 +11,9 @@ with rings of vertices on the rim and on the support's edge. Every vertex within
 disks. Material and bands: the fabric's (cloth/fabrics.py, ``apply_fabric``), method
 ``--method`` (mapping). Each start moves every free vertex by up to ``k`` nm vertically
 (k = 0, 1, 2, ...: a drape's folds may be chaotic; docs/fabrics.md found these are not),
-and a run stops once the RMS speed stays below 1 mm/s for 10 frames (not before 1.5 s) or after ``--seconds``. Drape coefficient,
-from the shadow (the draped cloth projected on the horizontal plane, rasterised at 0.5 mm):
+and a run stops once the RMS speed stays below 1 mm/s for 10 frames (not before 1.5 s) or
+after ``--seconds``. Drape coefficient, from the shadow (the draped cloth projected on the
+horizontal plane, rasterised at 0.5 mm):
 DC = (A_shadow - A_support) / (A_specimen - A_support); the median over the starts is the
 reading, with the folds (local maxima of the rim's radius around the circle).
 """

@@ -35,7 +35,8 @@ gf cm/cm^2; KES defines LT = WT / (Fm EMT / 2), so either gives the other), bend
    the limit load (below it the convex curve is softer: the crimp modulus, 0.8-0.95 k on the
    woven records here, 0.2-0.4 k on the jersey, ``derive(...)['crimp_modulus']``). Shear:
    ``k_shear`` = G per radian, ``G * 0.980665 * 180 / pi`` N/m (Loom's membrane: the shear
-   force per width per radian of shear angle). The shear hysteresis is not modelled (Loom's membrane is elastic).
+   force per width per radian of shear angle). The shear hysteresis is not modelled (Loom's
+   membrane is elastic).
 4. *The bias band* (warp-weft's third band): a bias strip under the limit load T =
    ``LIMIT_LOAD`` along it. In thread axes that load is a tension T/2 in each thread and a
    shear force T/2 per width; the shear angle is the KES loading branch solved for it,
