@@ -262,7 +262,10 @@ def _submit_all(client, runs, todo, results, folder, code, retries, progress):
     futures = {}
     for i in todo:
         run = runs[i]
-        f = client.submit(_execute, run.fn, run.args, code, key=f"{run.label}-{run.key[:16]}",
+        # One key prefix for every run: the runs form one task group, which the scheduler
+        # queues and hands out as workers free up (a key per label would be a group per run,
+        # each sent at once to a worker that may be busy with a long run).
+        f = client.submit(_execute, run.fn, run.args, code, key=f"loom-run-{run.key[:32]}",
                           pure=False, retries=retries)
         futures[f] = i
     for f in as_completed(futures):
