@@ -57,7 +57,11 @@ def parse_args(argv):
         formatter_class=_HelpFormatter)
     p.add_argument("scene", nargs="?", default=None,
                    help="scene name (see --list) or a scene file, e.g. scenes/examples/drape.toml")
-    p.add_argument("--list", action="store_true", help="list the scenes and exit")
+    p.add_argument("--list", action="store_true", help="list the scenes and fabrics and exit")
+    p.add_argument("--fabric", metavar="NAME",
+                   help="a measured fabric (fabrics/*.toml, see --list): its material and the "
+                   "strain bands derived from its data (docs/fabrics.md); --set and the band "
+                   "flags apply on top")
     p.add_argument("--show-config", action="store_true",
                    help="print every settable key of the scene with its value and exit")
     p.add_argument("--headless", action="store_true", help="no window: write files to --out")
@@ -213,6 +217,8 @@ def main(argv=None):
             for f in sorted(os.listdir(examples)):
                 if f.endswith(".toml"):
                     print(f"  {os.path.relpath(os.path.join(examples, f))}")
+        from cloth import fabrics
+        print("\n".join(fabrics.list_lines()))
         return 0
     if args.tour and not (args.list or args.show_config):
         from ui.tour import run_tour
@@ -232,6 +238,9 @@ def main(argv=None):
         name = args.scene or config_scene or scenes.DEFAULT_SCENE
         module = scenes.get(name)
         name = getattr(module, "NAME", name)      # a scene file: its file name without .toml
+        if args.fabric:
+            from cloth import fabrics
+            overrides.append(fabrics.fabric_changes(args.fabric))
         overrides += [parse_assignment(s) for s in args.set]
         overrides.append(flag_overrides(args, module.DEFAULTS))
         from scenes.common import resolve
@@ -249,7 +258,8 @@ def main(argv=None):
     if args.show_config:
         print(f"# settable keys of scene '{name}' (use --set KEY=VALUE or a TOML file; "
               "docs/scenes.md)")
-        for line in show_config(cfg):
+        from cloth import fabrics
+        for line in fabrics.annotate(show_config(cfg), cfg):
             print(line)
         return 0
 

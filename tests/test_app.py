@@ -447,6 +447,12 @@ def test_heat_map_marks_the_band_edges():
     assert legend.marks == [-0.01, 0.0, 0.01] and legend.lo < -0.01 < 0.01 < legend.hi
 
 
+def xvfb_run():
+    """xvfb-run on a free display, searched from a number of this process's own: two test
+    workers starting xvfb-run -a at once can both take the first free number."""
+    return ["xvfb-run", "-a", "-n", str(100 + os.getpid() % 800)]
+
+
 WINDOW_DRIVER = """
 import os, sys
 sys.path.insert(0, {root!r})
@@ -476,7 +482,7 @@ for k in range(6):      # the initial state, the first step, two frames per othe
     app.frame()
 print("prepared at frame", st.sim.frame, "left", st.methods_to_prepare())
 fits("default")
-for name in ("dynamics", "run", "strain"):      # open each closed section in turn
+for name in ("dynamics", "fabric", "run", "strain"):      # open each section in turn
     if not app.left.is_open(name):
         app.left.toggle(name)
     app.frame(); app.frame()
@@ -512,13 +518,13 @@ def test_window_app_runs_under_xvfb(tmp_path, screen):
     full = screen == "1280x800"
     code = WINDOW_DRIVER.format(root=ROOT, out=str(tmp_path), full=full,
                                 scene="hanging" if full else "drape")
-    proc = subprocess.run(["xvfb-run", "-a", "-s", f"-screen 0 {screen}x24", sys.executable,
+    proc = subprocess.run([*xvfb_run(), "-s", f"-screen 0 {screen}x24", sys.executable,
                            "-c", code], capture_output=True, text=True, timeout=300)
     if "cannot open" in proc.stderr and "Vulkan" in proc.stderr:
         pytest.skip("no Vulkan device for a window")
     assert proc.returncode == 0, proc.stderr[-2000:]
     fit = [line.split()[1:] for line in proc.stdout.splitlines() if line.startswith("fit ")]
-    assert len(fit) == 5, proc.stdout
+    assert len(fit) == 6, proc.stdout
     width, height = (int(v) for v in screen.split("x"))
     for what, w, h, n, inside, bars in fit:
         # The window fits the screen, with room for a desktop's bars below.
@@ -602,7 +608,7 @@ def teach_window(tmp_path_factory):
     if shutil.which("xvfb-run") is None:
         pytest.skip("xvfb-run is not installed (apt-get install xvfb)")
     code = TEACH_DRIVER.format(root=ROOT, out=str(tmp_path_factory.mktemp("teach_window")))
-    proc = subprocess.run(["xvfb-run", "-a", "-s", "-screen 0 1280x800x24", sys.executable,
+    proc = subprocess.run([*xvfb_run(), "-s", "-screen 0 1280x800x24", sys.executable,
                            "-c", code], capture_output=True, text=True, timeout=300)
     if "cannot open" in proc.stderr and "Vulkan" in proc.stderr:
         pytest.skip("no Vulkan device for a window")
@@ -743,3 +749,28 @@ def test_a_column_shows_the_newest_opened_sections_that_fit():
     a.toggle("run")                               # closed by the user: stays closed
     assert a.fit(heights, 69, 900) == 519 and not a.is_open("run")
     assert a.fit(heights, 69, 100) == 219 and a.shown == ["dynamics"]
+
+
+def test_the_bending_slider_scales_an_orthotropic_plate_keeping_its_ratio():
+    """A fabric's plate bends differently along warp and weft; the window's one k_bend
+    slider scales both rigidities (the ratio is fixed when the cloth is built)."""
+    from ui.state import AppState
+    st = AppState.from_scene("hanging", [{"cloth": {"resolution": 5}, "material": {
+        "k_bend": 1e-5, "k_bend_warp": 2e-5, "k_bend_weft": 5e-6}}])
+    assert st.set_material("k_bend", 3e-5)
+    mat = st.settings.material
+    assert (mat.k_bend, mat.k_bend_warp, mat.k_bend_weft) == pytest.approx((3e-5, 6e-5, 1.5e-5))
+
+
+def test_a_fabric_picked_in_the_window_restarts_the_scene_in_its_material_and_bands():
+    from cloth import fabrics
+    from ui.state import AppState
+    st = AppState.from_scene("hanging", [{"cloth": {"resolution": 5}}])
+    st.switch_method("warp-weft")
+    assert st.fabric is None
+    assert st.set_fabric("denim") and st.fabric == "denim"
+    derived = fabrics.derive("denim")
+    assert st.settings.material.k_warp == pytest.approx(derived["material"]["k_warp"])
+    assert st.bands()["warp"] == pytest.approx(tuple(derived["strain"]["warp"]))
+    assert st.method == "warp-weft" and st.sim.frame == 0       # kept; restarted
+    assert not st.set_fabric("no-such-cloth") and "no-such-cloth" in st.message

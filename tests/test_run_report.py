@@ -173,3 +173,24 @@ def test_each_builtin_scenes_wrong_state_exits_with_the_check_code(scene, capsys
                             *size, "--out", tmp_path / "o")
     assert "final check: FAILED" in out and why in out, out
     assert rc == loom_main.EXIT_CHECK_FAILED, err
+
+
+def test_a_fabric_sets_material_and_bands_and_says_where_they_came_from(capsys, tmp_path):
+    """--fabric NAME: its material and derived bands, each annotated in --show-config with
+    the data it came from; --set applies on top; an unknown name is one line (exit 2); --list
+    names the fabrics."""
+    from cloth import fabrics
+    rc, out, err = run_main(capsys, "hanging", "--fabric", "denim", "--set",
+                            "strain.weft=[-0.02, 0.02]", "--show-config")
+    assert rc == 0, err
+    lines = out.splitlines()
+    warp = next(k for k, ln in enumerate(lines) if ln.startswith("strain.warp = "))
+    assert "from fabrics/denim.toml" in lines[warp + 1]
+    weft = next(k for k, ln in enumerate(lines) if ln.startswith("strain.weft = "))
+    assert lines[weft].startswith("strain.weft = [-0.02, 0.02]")
+    assert "from fabrics/" not in lines[weft + 1]           # overridden: no longer the fabric's
+    assert 'material.preset = "denim"' in out
+    rc, out, err = run_main(capsys, "hanging", "--fabric", "no-such-cloth", *SMALL)
+    assert_one_line(rc, err, "no-such-cloth")
+    rc, out, err = run_main(capsys, "--list")
+    assert all(name in out for name in fabrics.names())

@@ -115,7 +115,7 @@ class App:
         self.teach = TeachingLayer(state.overlays, refresh_every=PLOT_EVERY)
         self._hover_at = None      # (cursor, simulator frames) the hover was found for
         # The columns' sections (ui/layout.py); closed ones show their header only.
-        self.left = Accordion(["run", "strain", "dynamics"])
+        self.left = Accordion(["run", "strain", "dynamics", "fabric"])
         self.right = Accordion(["colour", "readouts"])
         self._legend_lines = 1
         self.place()
@@ -331,7 +331,8 @@ class App:
         W, H = self.size_px
         self._column("Loom", 0, [("run", "scene and run", self._run_section),
                                  ("strain", "strain limiting", self._strain_section),
-                                 ("dynamics", "dynamics", self._dynamics_section)],
+                                 ("dynamics", "dynamics", self._dynamics_section),
+                                 ("fabric", "fabric", self._fabric_section)],
                      self.left, H)
         self._column("view", W - int(COLUMN * W),
                      [("colour", "colour and overlays", self._colour_section),
@@ -421,6 +422,17 @@ class App:
             on = g.checkbox("self-collision", st.self_collision_on)
             if on != st.self_collision_on:
                 st.set_self_collision(on)
+
+    def _fabric_section(self, g):
+        """Measured fabrics (fabrics/*.toml): a click restarts the scene in that fabric, its
+        material and bands derived from the data (docs/fabrics.md)."""
+        from cloth import fabrics
+        st = self.state
+        self._text(g, f"now: {st.fabric or st.settings.material.preset + ' (preset)'}")
+        for name in fabrics.names():
+            if name != st.fabric and g.button(f"use {name}"):
+                if st.set_fabric(name):
+                    self.reset_view()
 
     def _colour_section(self, g):
         st = self.state

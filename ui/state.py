@@ -244,6 +244,29 @@ class AppState:
         self._install(None, cfg)
         return True
 
+    @property
+    def fabric(self):
+        """The measured fabric the material and bands came from (``set_fabric``), or None."""
+        from cloth import fabrics
+        preset = self.settings.material.preset
+        return preset if preset in fabrics.names() else None
+
+    def set_fabric(self, name):
+        """Restart the scene in fabric ``name``: its material and its derived bands
+        (cloth/fabrics.py); the method, the damping and the other settings are kept. The
+        cloth is rebuilt, since its mass and its bending ratio are read when it is built."""
+        from cloth import fabrics
+        from cloth.config import ConfigError
+        try:
+            cfg = fabrics.apply_fabric(self._settings_dict(), name)
+            cfg["scene"] = self.scene_name
+            self._install(None, cfg)
+        except (ConfigError, ValueError) as err:
+            self.message = str(err)
+            return False
+        self.message, self.failed = f"fabric {name}: material and bands from its data", False
+        return True
+
     def set_compare(self, on):
         """Switch between the single view and the comparison view (svd, warp-weft and mapping
         side by side) of the current scene with the current settings; both restart at frame 0.
@@ -386,8 +409,15 @@ class AppState:
         """Change a stiffness or damping live (the dynamics reads the material every step)."""
         if key not in MATERIAL_KEYS:
             raise ValueError(f"material key must be one of {MATERIAL_KEYS}")
-        value = float(value)
-        return self._each(lambda s: s.set_material(**{key: value}))
+        changes = {key: float(value)}
+        mat = self.settings.material
+        if key == "k_bend" and mat.k_bend > 0:
+            # An orthotropic plate (a fabric's k_bend_warp / k_bend_weft) keeps its ratio: the
+            # slider scales both directions (a live change of the ratio is refused).
+            for k in ("k_bend_warp", "k_bend_weft"):
+                if getattr(mat, k) > 0:
+                    changes[k] = getattr(mat, k) * changes["k_bend"] / mat.k_bend
+        return self._each(lambda s: s.set_material(**changes))
 
     # -- optional stages ----------------------------------------------------------------------
     @property
