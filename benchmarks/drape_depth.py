@@ -12,16 +12,15 @@ y = 0.25 ... 0.85 m, its equator at 0.55) and the kinetic energy kept through th
 KE(frame 8) / KE(frame 6) (the sheet touches the sphere in frame 6-7; the part in contact
 stops, the rest keeps falling).
 
-Each solve runs in its own process (all drops in one): ``strain.solve = "fast"`` (the default)
-and ``"exact"`` (each projection solved to its minimiser). A solve that stops before the
+Each (solve, drop) is a run of a sweep (``benchmarks.sweep``: a local cluster, one worker
+process per core, or ``--scheduler tcp://HOST:PORT``; runs cached in --out/drape_depth_runs/,
+--fresh runs them again): ``strain.solve = "fast"`` (the default) and ``"exact"`` (each
+projection solved to its minimiser). A solve that stops before the
 minimiser keeps x near where it starts; each vertex starts moved on at its last velocity when
 faster than the settle speed (cloth/strain/defaults.py), so a landing sheet keeps its motion.
 """
 import argparse
-import json
 import os
-import subprocess
-import sys
 import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -34,54 +33,52 @@ DRAPED_BELOW = 0.55
 PLAN = [("isotropic", s) for s in ("fast", "exact")]
 
 
-def child(bending, solve, drops=DROPS):
-    """All drops of one solve."""
+def overrides_of(bending, solve, drop):
+    return {"sim": {"bending": bending}, "cloth": {"drop": drop}, "strain": {"solve": solve}}
+
+
+def child(bending, solve, drop, frames=FRAMES):
+    """One drop of one solve: the lowest vertex, the KE kept through the landing, SL ms."""
     from cloth import backend
     backend.init("cpu", "f64")
     import numpy as np
-    import scenes
-    from scenes.common import resolve
+    from benchmarks.harness import configure
     from cloth import metrics
     from cloth.simulator import Simulator
-    mod = scenes.get("drape")
-    runs = []
-    for drop in drops:
-        cfg = resolve(mod.DEFAULTS, [{"sim": {"bending": bending}, "cloth": {"drop": drop},
-                                      "strain": {"solve": solve}}])
-        sim = Simulator(mod.build(cfg), cfg)
-        ms, ke = [], []
-        for _ in range(FRAMES):
-            sim.step_frame()
-            ms.append(sim.stage("strain_limit").ms)
-            ke.append(metrics.kinetic_energy(sim.model.velocities(), sim.model.mass))
-        runs.append(dict(drop=drop, lowest=float(sim.model.positions()[:, 1].min()),
-                         ke_kept=float(ke[7] / ke[5]), sl_ms_median=float(np.median(ms[1:]))))
-    return dict(bending=bending, solve=str(solve), runs=runs, faces=sim.model.n_faces)
+    _, cfg, setup = configure("drape", overrides_of(bending, solve, drop))
+    sim = Simulator(setup, cfg)
+    ms, ke = [], []
+    for _ in range(frames):
+        sim.step_frame()
+        ms.append(sim.stage("strain_limit").ms)
+        ke.append(metrics.kinetic_energy(sim.model.velocities(), sim.model.mass))
+    return dict(drop=drop, lowest=float(sim.model.positions()[:, 1].min()),
+                ke_kept=float(ke[7] / ke[5]), sl_ms_median=float(np.median(ms[1:])),
+                faces=int(sim.model.n_faces))
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--out", default=os.path.join(ROOT, "docs", "speed"))
-    ap.add_argument("--child", help=argparse.SUPPRESS)
     ap.add_argument("--bending", default="isotropic", choices=("isotropic", "hinge"))
+    from benchmarks.sweep import Run, add_arguments, failed_lines, run_sweep
+    add_arguments(ap)
     a = ap.parse_args(argv)
-    if a.child:
-        print(json.dumps(child(*json.loads(a.child))))
-        return
     from benchmarks.harness import command, header, write_json
     cmd = command("benchmarks.drape_depth", argv)
     t0, rows = time.time(), []
-    plan = [(a.bending, solve) for _, solve in PLAN]
-    for i, args in enumerate(plan):
-        print(f"[{i + 1}/{len(plan)}] {args} ({time.time() - t0:.0f} s)", file=sys.stderr,
-              flush=True)
-        out = subprocess.run([sys.executable, "-m", "benchmarks.drape_depth", "--child",
-                              json.dumps(args)], capture_output=True, text=True, cwd=ROOT)
-        if out.returncode != 0:
-            rows.append(dict(bending=args[0], solve=str(args[1]), error=out.stderr[-300:]))
+    plan = [(a.bending, solve, drop) for _, solve in PLAN for drop in DROPS]
+    sweep = [Run("benchmarks.drape_depth:child", [*p, FRAMES], f"{p[1]} / drop {p[2]}",
+                 scene=("drape", overrides_of(*p))) for p in plan]
+    results = run_sweep(sweep, os.path.join(a.out, "drape_depth_runs"), a.scheduler,
+                        a.workers, a.fresh, name="drape_depth")
+    for _, solve in PLAN:
+        mine = [r for p, r in zip(plan, results) if p[1] == solve]
+        ok = [r for r in mine if "error" not in r]
+        if not ok:
+            rows.append(dict(bending=a.bending, solve=str(solve), error=mine[0]["error"][-300:]))
         else:
-            rows.append(json.loads(out.stdout.strip().splitlines()[-1]))
-        print(json.dumps(rows[-1]), file=sys.stderr, flush=True)
+            rows.append(dict(bending=a.bending, solve=str(solve), runs=ok, faces=ok[0]["faces"]))
     seconds = time.time() - t0
     write_json(a.out, "drape_depth", {"rows": rows}, cmd, seconds)
     L = ["# Drape depth against the strain solve's exactness\n",
@@ -105,6 +102,7 @@ def main(argv=None):
                  + ", ".join(f"{v:.2f}" for v in low)
                  + f" | {np.median([x['ke_kept'] for x in r['runs']]):.3f}"
                  + f" | {np.median([x['sl_ms_median'] for x in r['runs']]):.0f} |")
+    L += failed_lines(sweep, results)
     L.append("")
     with open(os.path.join(a.out, "drape_depth.md"), "w") as fh:
         fh.write("\n".join(L))
