@@ -98,6 +98,7 @@ class Simulator:
         self._sl_stationarity = 0.0
         self._remesh_deferred = 0      # remeshes deferred in a row (RemeshParams.defer_ops)
         self._remeshed_once = False    # a remesh was applied since the scene's mesh was loaded
+        self._carried_motion = None    # (v_last, valid) carried by the last remesh
         self.model = ClothModel(setup.mesh, setup.material,
                                 capacity_factor=self._capacity_factor(setup.mesh,
                                                                       self.settings.remesh),
@@ -294,6 +295,7 @@ class Simulator:
         obstacle_distance = self._obstacle_distance if self.setup.obstacles else None
         face_data = self.strain.face_state() if self.strain is not None and \
             params.warm_multipliers else None
+        motion = self.strain.last_velocity() if self.strain is not None else None
         # Pins and seam vertices are frozen: never removed or moved, seams never split.
         frozen = mesh.pinned.copy()
         stitches = self.dynamics.stitches_np
@@ -331,6 +333,12 @@ class Simulator:
         self.dynamics.set_warm_start(dv)
         if self.strain is not None and new_face_data:   # only with remesh.warm_multipliers
             self.strain.set_face_state(new_face_data)
+        # The cloth's motion carried to the new vertices (kept through the re-projection that
+        # follows: ``_remesh_reproject``).
+        self._carried_motion = None
+        if motion is not None:
+            self._carried_motion = (remesh.transfer_vertex_data(motion[0], stats), motion[1])
+            self.strain.set_last_velocity(*self._carried_motion)
         if self._held is not None:
             self._find_held_again()
 
@@ -348,10 +356,14 @@ class Simulator:
             self._project_limits(self.h, self.time)
             self.remesh_stats["reprojected"] = True
             # Its correction is the remesh's, not the cloth's motion: the next projection
-            # starts from the substep's start (carried on, it kept the remeshed mapping sheet
-            # moving: refined to 426 faces where it settles at 188, and three of 300 frames
-            # stalled for 100 rounds; tests/test_strain_scenes.py).
-            self.strain.forget_last_velocity()
+            # moves on at the motion carried from before the remesh, not at this correction
+            # (carried on, the correction kept the remeshed mapping sheet moving: refined to
+            # 426 faces where it settles at 188, and three of 300 frames stalled for 100
+            # rounds; tests/test_strain_scenes.py).
+            if self._carried_motion is not None:
+                self.strain.set_last_velocity(*self._carried_motion)
+            else:
+                self.strain.forget_last_velocity()
 
     def _defer_unmade(self, mesh, Mv, frozen, edges, params):
         """Defer this frame's remesh without making it when it would start from few
