@@ -572,14 +572,14 @@ def test_a_landing_keeps_its_motion_across_the_remesh_that_refines_it():
     from benchmarks.harness import configure
     from cloth.simulator import Simulator
     energy, faces = {}, {}
-    for remesh in (False, True):
+    for remeshed in (False, True):
         _, cfg, setup = configure("drape", {"cloth": {"resolution": 9}, "remesh": {
-            "enabled": remesh, "size_min": 0.04, "size_max": 0.15}})
+            "enabled": remeshed, "size_min": 0.04, "size_max": 0.15}})
         sim = Simulator(setup, cfg)
         ke = []
         for _ in range(6):
             sim.step_frame()
             ke.append(sim.metrics_row()["kinetic_energy"])
-        energy[remesh], faces[remesh] = np.array(ke), sim.model.n_faces
+        energy[remeshed], faces[remeshed] = np.array(ke), sim.model.n_faces
     assert faces[True] > 3 * faces[False]                  # refined as it landed
     assert np.all(energy[True][4:] >= 0.75 * energy[False][4:]), energy
