@@ -104,6 +104,8 @@ def main(argv=None):
     ap.add_argument("--seeds", type=int, default=1,
                     help="Table 2: runs per setting; runs after the first start from positions "
                          "perturbed by 1 micrometre, to show how much the measures move by chance")
+    from benchmarks.sweep import add_arguments
+    add_arguments(ap)           # Table 2's runs are a sweep (docs/sweeps.md)
     args = ap.parse_args(argv)
     args.out = args.out or os.path.join("results", f"table{args.table}")
     from benchmarks.harness import command
