@@ -275,6 +275,10 @@ def _submit_all(client, runs, todo, results, folder, code, retries, progress):
             result = json.loads(json.dumps(f.result(), default=_plain))
         except Exception as exc:       # the task's workers died too often, or it could not run
             result = {"error": f"{type(exc).__name__}: {exc}"}
+            if "deserializ" in str(exc):
+                result["error"] += (" (the scheduler and every worker import benchmarks.sweep: "
+                                    "start them from the repository's root with "
+                                    "PYTHONPATH=$PWD, docs/sweeps.md)")
         results[i] = result
         if "error" in result:
             progress.failed += 1
