@@ -282,7 +282,8 @@ def _submit_all(client, runs, todo, results, folder, code, retries, progress):
         results[i] = result
         if "error" in result:
             progress.failed += 1
-            progress.update(f"  {run.label}: failed: {result['error'].strip()[-300:]}")
+            last = [l for l in result["error"].strip().splitlines() if l.strip()][-1:] or ["?"]
+            progress.update(f"  {run.label}: failed: {last[0].strip()[:300]}")
             continue
         with open(cache_path(folder, run) + ".part", "w") as fh:
             json.dump({"key": run.key, "code": code, "fn": run.fn, "args": run.args,

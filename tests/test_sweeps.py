@@ -29,11 +29,12 @@ DASK = os.path.join(os.path.dirname(sys.executable), "dask")
 FRAMES = 3
 
 
-def probe(resolution, frames, claim_dir=None, hold=0.0):
+def probe(resolution, frames, claim_dir=None, hold=0.0, copy=0):
     """A run the workers import from here: ``harness.scene_run`` of the hanging sheet, with
     the worker's pid. The first run to start (``claim_dir``: it claims the folder's one file)
     writes its pid there and waits ``hold`` s before running, so the test can kill its worker
-    in the middle of it; no other run waits."""
+    in the middle of it; no other run waits. ``copy``: tells apart runs that are otherwise the
+    same (runs with the same arguments are one task)."""
     if claim_dir is not None:
         try:
             fd = os.open(os.path.join(claim_dir, "claim"), os.O_CREAT | os.O_EXCL | os.O_WRONLY)
@@ -130,7 +131,7 @@ def test_a_killed_worker_loses_only_its_task(cluster, local, tmp_path):
     address, workers = cluster
     claim = tmp_path / "claim_dir"
     claim.mkdir()
-    runs = [sw.Run("tests.test_sweeps:probe", [r, FRAMES, str(claim), 30.0],
+    runs = [sw.Run("tests.test_sweeps:probe", [r, FRAMES, str(claim), 30.0, k],
                    f"hanging {r} #{k}", scene=("hanging", {"cloth": {"resolution": r}}))
             for k in range(3) for r in (5, 6)]
     killed = {}
