@@ -18,8 +18,9 @@
   the same results on any machine and any number of workers.
 - The cache: a run's result is kept in ``folder`` as ``LABEL.KEY.json``, KEY a hash of what
   decides the result: the code (``code_fingerprint``: every file under cloth/, scenes/ and
-  assets/), the run function's source, its arguments and, for a run that names its scene and
-  overrides, the scene's resolved configuration. A sweep that stopped resumes where it was; a
+  assets/), the run function's source, its arguments, the compile mode and thread count set in
+  the environment (``KEY_ENV``) and, for a run that names its scene and overrides, the scene's
+  resolved configuration. A sweep that stopped resumes where it was; a
   changed setting reruns only the runs it changes; changed code reruns everything.
 - Failures: a run that raises returns ``{"error": traceback}``, is not cached, and the sweep
   goes on (the benchmark's page lists it). A worker that dies (killed, out of memory) loses only
@@ -46,6 +47,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CODE_DIRS = ("cloth", "scenes", "assets")
 RETRIES = 2
 THREADS = 1             # Taichi's CPU threads in a worker (TI_CPU_MAX_NUM_THREADS overrides)
+KEY_ENV = ("LOOM_FAST_COMPILE", "TI_CPU_MAX_NUM_THREADS")     # part of every run's cache key
 
 
 @dataclass
@@ -95,7 +97,10 @@ def resolved_config(scene, overrides):
 def run_key(run, code):
     """The hash of what decides a run's result (see the module's docstring)."""
     what = {"code": code, "fn": run.fn, "source": inspect.getsource(_function(run.fn)),
-            "args": run.args, "threads": THREADS}
+            "args": run.args, "threads": THREADS,
+            # How the kernels are compiled and threaded (a local cluster's workers inherit
+            # the client's environment): either can change a chaotic run's last bits.
+            "env": {k: os.environ.get(k, "") for k in KEY_ENV}}
     if run.scene is not None:
         what["config"] = resolved_config(*run.scene)
     text = json.dumps(what, sort_keys=True, default=str)
