@@ -774,3 +774,21 @@ def test_a_fabric_picked_in_the_window_restarts_the_scene_in_its_material_and_ba
     assert st.bands()["warp"] == pytest.approx(tuple(derived["strain"]["warp"]))
     assert st.method == "warp-weft" and st.sim.frame == 0       # kept; restarted
     assert not st.set_fabric("no-such-cloth") and "no-such-cloth" in st.message
+
+
+def test_a_window_run_reports_each_final_check_and_its_exit_code_says_so(capsys):
+    """As a window closes, each simulator's final check is printed; one that fails makes
+    the run's exit code 5 (headless runs, the tour and the comparison view alike)."""
+    from types import SimpleNamespace
+
+    from ui.app import final_checks
+
+    def sim(ok):
+        return SimpleNamespace(setup=SimpleNamespace(check_final=lambda s: (ok, "why")))
+    state = SimpleNamespace(labels=["svd", "mapping"], sims=[sim(True), sim(False)],
+                            failed=False)
+    assert final_checks(state) is False
+    out = capsys.readouterr().out
+    assert "final check (svd): ok (why)" in out and "final check (mapping): FAILED (why)" in out
+    state.sims = [sim(True), sim(True)]
+    assert final_checks(state) is True

@@ -612,10 +612,26 @@ class App:
                 "fps": 1000.0 / float(ft.mean()) if ft.size else 0.0}
 
 
+def final_checks(state):
+    """The scene's final check of each simulator as the window closes, printed like a
+    headless run's; True if every one held (a window run then exits 0, else 5, as headless
+    runs do: a script driving the window, e.g. with LOOM_APP_FRAMES, can see a failure)."""
+    held = True
+    for label, sim in zip(state.labels, state.sims):
+        if sim.setup.check_final is None or state.failed:
+            continue
+        ok, message = sim.setup.check_final(sim)
+        held = held and ok
+        print(f"final check ({label}): {'ok' if ok else 'FAILED'} ({message})")
+    return held
+
+
 def _run(state, make=None, size=None):
     max_frames = os.environ.get("LOOM_APP_FRAMES")
     app = App(state, size) if make is None else make(state)
     code = app.run(int(max_frames) if max_frames else None)
+    if code == 0 and not final_checks(state):
+        code = 5        # main.EXIT_CHECK_FAILED
     if max_frames:
         s = app.stats()
         share = 100 * s["render_ms"] / max(s["frame_ms"], 1e-9)
