@@ -29,6 +29,12 @@ DASK = os.path.join(os.path.dirname(sys.executable), "dask")
 FRAMES = 3
 
 
+def sheet(resolution):
+    """The runs' settings: the free sheet (no strain solve), so that a worker loads few
+    kernels; what is tested is where runs go and what comes back."""
+    return {"cloth": {"resolution": resolution}, "strain": {"method": "none"}}
+
+
 def probe(resolution, frames, claim_dir=None, hold=0.0, copy=0):
     """A run the workers import from here: ``harness.scene_run`` of the hanging sheet, with
     the worker's pid. The first run to start (``claim_dir``: it claims the folder's one file)
@@ -44,14 +50,14 @@ def probe(resolution, frames, claim_dir=None, hold=0.0, copy=0):
             os.write(fd, str(os.getpid()).encode())
             os.close(fd)
             time.sleep(hold)
-    out = scene_run("hanging", {"cloth": {"resolution": resolution}}, frames)
+    out = scene_run("hanging", sheet(resolution), frames)
     out["pid"] = os.getpid()
     return out
 
 
 def runs_of(resolutions, frames=FRAMES, **kw):
     return [sw.Run("tests.test_sweeps:probe", [r, frames, *kw.get("extra", [])],
-                   f"hanging {r} x {frames}", scene=("hanging", {"cloth": {"resolution": r}}))
+                   f"hanging {r} x {frames}", scene=("hanging", sheet(r)))
             for r in resolutions]
 
 
@@ -113,7 +119,7 @@ def cluster(tmp_path_factory):
 @pytest.fixture(scope="module")
 def local():
     """The same runs in this process: what every way of running must give."""
-    return {r: scene_run("hanging", {"cloth": {"resolution": r}}, FRAMES) for r in (5, 6)}
+    return {r: scene_run("hanging", sheet(r), FRAMES) for r in (5, 6)}
 
 
 def same(result, reference):
@@ -132,7 +138,7 @@ def test_a_killed_worker_loses_only_its_task(cluster, local, tmp_path):
     claim = tmp_path / "claim_dir"
     claim.mkdir()
     runs = [sw.Run("tests.test_sweeps:probe", [r, FRAMES, str(claim), 30.0, k],
-                   f"hanging {r} #{k}", scene=("hanging", {"cloth": {"resolution": r}}))
+                   f"hanging {r} #{k}", scene=("hanging", sheet(r)))
             for k in range(3) for r in (5, 6)]
     killed = {}
 
