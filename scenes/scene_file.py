@@ -401,14 +401,13 @@ class SceneFile:
             import sys
             print(f"loom: note: {cfg['cloth']['mesh']}: {note}", file=sys.stderr)
         obstacles = [self._make_obstacle(s) for s in specs]
-        pin_motion = None
-        if groups:
-            def pin_motion(t, uv_pinned, rest):
-                out = rest.copy()
-                for box, motion in groups:
-                    sel = _inside(uv_pinned, box, tol)
-                    out[sel] = motion.apply(t, rest[sel])
-                return out
+        def moved_pins(t, uv_pinned, rest):
+            out = rest.copy()
+            for box, motion in groups:
+                sel = _inside(uv_pinned, box, tol)
+                out[sel] = motion.apply(t, rest[sel])
+            return out
+        pin_motion = moved_pins if groups else None
         framed = [mesh.x] + [o.mesh_at(0.0)[0] for o in obstacles
                              if not isinstance(o, col.Plane)]
         return SceneSetup(mesh=mesh, material=material_from(cfg), pin_motion=pin_motion,
