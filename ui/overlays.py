@@ -268,11 +268,12 @@ class Layout:
 
 def frame_layout(overlays):
     """Headless frames: with the plot, the cloth in the left half and the two panels in the
-    right half's lower part, the key above them; else the key at the top right."""
+    right half's lower part, the key above them; else the key at the top right. The key
+    stays below the frame's caption strip (``render.caption``: at most 0.045 of the height)."""
     if "plot" in overlays:
-        return Layout(plot=[(0.515, 0.01, 0.995, 0.62)], key=(0.60, 0.66, 0.93, 0.985),
+        return Layout(plot=[(0.515, 0.01, 0.995, 0.62)], key=(0.60, 0.66, 0.93, 0.95),
                       bar=(0.04, 0.06, 0.40, 0.022), view_x=(0.04, 0.48), view_y=(0.10, 0.92))
-    return Layout(plot=[], key=(0.71, 0.70, 0.995, 0.99))
+    return Layout(plot=[], key=(0.71, 0.70, 0.995, 0.95))
 
 
 class TeachingLayer:
