@@ -42,16 +42,11 @@ def child(bending, solve, drop, frames=FRAMES):
     from cloth import backend
     backend.init("cpu", "f64")
     import numpy as np
-    from benchmarks.harness import configure
-    from cloth import metrics
+    from benchmarks.harness import configure, run_drape_frames
     from cloth.simulator import Simulator
     _, cfg, setup = configure("drape", overrides_of(bending, solve, drop))
     sim = Simulator(setup, cfg)
-    ms, ke = [], []
-    for _ in range(frames):
-        sim.step_frame()
-        ms.append(sim.stage("strain_limit").ms)
-        ke.append(metrics.kinetic_energy(sim.model.velocities(), sim.model.mass))
+    ms, ke = run_drape_frames(sim, frames)
     return dict(drop=drop, lowest=float(sim.model.positions()[:, 1].min()),
                 ke_kept=float(ke[7] / ke[5]), sl_ms_median=float(np.median(ms[1:])),
                 faces=int(sim.model.n_faces))

@@ -86,8 +86,7 @@ def child(solve, drop, chaos, frames=FRAMES):
     from cloth import backend
     backend.init("cpu", "f64")
     import numpy as np
-    from benchmarks.harness import configure
-    from cloth import metrics
+    from benchmarks.harness import configure, run_drape_frames
     from cloth.simulator import Simulator
     _, cfg, setup = configure("drape", overrides_of(solve, drop))
     if chaos:
@@ -96,11 +95,7 @@ def child(solve, drop, chaos, frames=FRAMES):
         step /= np.linalg.norm(step, axis=1, keepdims=True)
         setup.mesh.x += 1e-9 * step
     sim = Simulator(setup, cfg)
-    ms, ke = [], []
-    for _ in range(frames):
-        sim.step_frame()
-        ms.append(sim.stage("strain_limit").ms)
-        ke.append(metrics.kinetic_energy(sim.model.velocities(), sim.model.mass))
+    ms, ke = run_drape_frames(sim, frames)
     x = sim.model.positions()
     return {"x": x.tolist(), "faces": np.asarray(sim.model.faces).tolist(),
             "lowest": float(x[:, 1].min()), "ms": ms, "ke": ke,

@@ -17,6 +17,8 @@ import subprocess
 import sys
 import time
 
+from cloth.provenance import commit
+
 
 def command(module, argv=None):
     """The command line that ran a benchmark: ``python -m benchmarks.NAME ARGS`` (ARGS: this
@@ -75,20 +77,16 @@ def machine(date=True):
             + (f", run {time.strftime('%Y-%m-%d')}" if date else ""))
 
 
-def commit():
-    """The git commit of the code measured (LOOM_COMMIT overrides it, for runs from an
-    exported copy of a commit)."""
-    if os.environ.get("LOOM_COMMIT"):
-        return os.environ["LOOM_COMMIT"]
-    try:
-        root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-        out = subprocess.run(["git", "-C", root, "rev-parse", "--short", "HEAD"],
-                             capture_output=True, text=True).stdout.strip()
-        dirty = subprocess.run(["git", "-C", root, "status", "--porcelain", "cloth", "scenes"],
-                               capture_output=True, text=True).stdout.strip()
-        return (out + (" (cloth/ or scenes/ modified)" if dirty else "")) or "unknown"
-    except OSError:
-        return "unknown"
+def run_drape_frames(sim, frames):
+    """Step ``frames`` frames; each frame's strain-limiting ms and kinetic energy (J): what
+    the drape benchmarks read of a landing."""
+    from cloth import metrics
+    ms, ke = [], []
+    for _ in range(frames):
+        sim.step_frame()
+        ms.append(sim.stage("strain_limit").ms)
+        ke.append(metrics.kinetic_energy(sim.model.velocities(), sim.model.mass))
+    return ms, ke
 
 
 def configure(scene, overrides):

@@ -114,17 +114,13 @@ def provenance():
     """The page's line of where it came from: the command, the code's commit, the date and
     the machine."""
     import platform
-    import subprocess
     import sys
     import time
-    try:
-        here = os.path.dirname(os.path.abspath(__file__))
-        sha = subprocess.run(["git", "-C", here, "rev-parse", "--short", "HEAD"],
-                             capture_output=True, text=True).stdout.strip() or "unknown"
-    except OSError:
-        sha = "unknown"
-    args = " ".join(a for a in sys.argv[1:])
-    return (f"Made by `python main.py {args}` at commit {sha} on {time.strftime('%Y-%m-%d')} "
+
+    from cloth.provenance import commit
+    args = " ".join(sys.argv[1:])
+    return (f"Made by `python main.py {args}` at commit {commit()} on "
+            f"{time.strftime('%Y-%m-%d')} "
             f"({os.cpu_count()} cores, {platform.machine()}); the pictures are `steps/`.")
 
 
