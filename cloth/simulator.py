@@ -293,9 +293,6 @@ class Simulator:
         remesh, params = self.remesher
         mesh = self.model.mesh_arrays()
         obstacle_distance = self._obstacle_distance if self.setup.obstacles else None
-        face_data = self.strain.face_state() if self.strain is not None and \
-            params.warm_multipliers else None
-        motion = self.strain.last_velocity() if self.strain is not None else None
         # Pins and seam vertices are frozen: never removed or moved, seams never split.
         frozen = mesh.pinned.copy()
         stitches = self.dynamics.stitches_np
@@ -308,6 +305,10 @@ class Simulator:
             self.remesh_stats.update(ms=1e3 * (time.perf_counter() - t0),
                                      ms_cpu=1e3 * (time.process_time() - c0))
             return
+        # What the solver carries to the new mesh, read only for a remesh that is made.
+        face_data = self.strain.face_state() if self.strain is not None and \
+            params.warm_multipliers else None
+        motion = self.strain.last_velocity() if self.strain is not None else None
         new, new_face_data, stats = remesh.remesh(mesh, params, obstacle_distance=obstacle_distance,
                                                   face_data=face_data, frozen_verts=frozen,
                                                   sizing=Mv, edges=edges)

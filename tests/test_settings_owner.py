@@ -125,12 +125,17 @@ SHEET_OBJ = "".join(f"v {x} {1.0 - y} 0\n" for y in (0, 0.5, 1) for x in (0, 0.5
              (5, 9, 8)))
 
 
-def test_the_self_collision_box_is_a_setting_the_collider_follows(tmp_path):
+def sheet_scene(tmp_path, section):
+    """The app on a scene file: the 2 x 2 sheet pinned along one edge, plus ``section``."""
     from ui.state import AppState
     (tmp_path / "sheet.obj").write_text(SHEET_OBJ)
     (tmp_path / "s.toml").write_text('[cloth]\nmesh = "sheet.obj"\npins = [[-0.01, -0.01, '
-                                     '1.01, 0.01]]\n[collision]\nself_collision = true\n')
-    st = AppState.from_scene(str(tmp_path / "s.toml"))
+                                     '1.01, 0.01]]\n' + section)
+    return AppState.from_scene(str(tmp_path / "s.toml"))
+
+
+def test_the_self_collision_box_is_a_setting_the_collider_follows(tmp_path):
+    st = sheet_scene(tmp_path, '[collision]\nself_collision = true\n')
     sim = st.sim
     assert st.has_self_collision and st.self_collision_on
     assert sim.settings.collision.self_collision
@@ -174,11 +179,7 @@ def test_the_bending_ratio_is_read_when_the_cloth_is_built(tmp_path):
     # cloth); a live change of it is refused with one line and changes nothing, scaling both
     # together is live (the kernels' factor, Material.bend_scale).
     from cloth.config import ConfigError
-    from ui.state import AppState
-    (tmp_path / "sheet.obj").write_text(SHEET_OBJ)
-    (tmp_path / "s.toml").write_text('[cloth]\nmesh = "sheet.obj"\npins = [[-0.01, -0.01, '
-                                     '1.01, 0.01]]\n[material]\npreset = "cotton-jersey"\n')
-    st = AppState.from_scene(str(tmp_path / "s.toml"))
+    st = sheet_scene(tmp_path, '[material]\npreset = "cotton-jersey"\n')
     sim = st.sim
     bw, bf = sim.settings.material.k_bend_warp, sim.settings.material.k_bend_weft
     assert bw == pytest.approx(2 * bf) and sim.model.bend_alpha == pytest.approx(2 ** 0.125)
