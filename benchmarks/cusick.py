@@ -86,10 +86,28 @@ def folds(x, uv, R=R_SPECIMEN):
     return int(np.sum(peak & (rad > rad.mean() + 0.1 * span)))
 
 
-def run(fabric, h=0.01, start=0, method="mapping", seconds=4.0, log=print, compression=None):
-    """One drape: returns dict(fabric, h, start, DC, folds, frames, seconds, faces).
+def strain_summary(x, uv, faces, h):
+    """Over the skirt's faces (outside the support): the 5th percentile of the smaller principal
+    strain, the 95th of the larger, and the area change (area-weighted)."""
+    from cloth import metrics
+    F = metrics.deformation_gradients(x, faces, metrics.material_Dm_inv(uv, faces))
+    s = metrics.principal_stretches(F)[0]
+    skirt = np.linalg.norm(uv[faces].mean(axis=1), axis=1) > R_SUPPORT + h
+    e = uv[faces[:, 1]] - uv[faces[:, 0]], uv[faces[:, 2]] - uv[faces[:, 0]]
+    a = np.abs(e[0][:, 0] * e[1][:, 1] - e[0][:, 1] * e[1][:, 0])[skirt]
+    return dict(eps_lo=float(np.percentile(s[skirt, 1] - 1, 5)),
+                eps_hi=float(np.percentile(s[skirt, 0] - 1, 95)),
+                area=float((a * s[skirt, 0] * s[skirt, 1]).sum() / a.sum() - 1))
+
+
+def run(fabric, h=0.01, start=0, method="mapping", seconds=4.0, log=print, compression=None,
+        scale=None):
+    """One drape: returns dict(fabric, h, start, DC, folds, frames, seconds, faces, x (the
+    final positions), eps_lo, eps_hi, area (``strain_summary``)).
     ``compression``: the bands' lower ends set to -compression (strain) instead of the
-    fabric's mirror image of the upper ends."""
+    fabric's mirror image of the upper ends. ``scale``: {"membrane", "shear", "bend"} factors on
+    the fabric's k_warp and k_weft, k_shear, and bending rigidities (the sensitivity runs of
+    docs/fabrics.md)."""
     from cloth import fabrics
     from cloth.model import MeshArrays
     from cloth.simulator import SceneSetup, Simulator
@@ -102,6 +120,11 @@ def run(fabric, h=0.01, start=0, method="mapping", seconds=4.0, log=print, compr
         x[~pinned, 1] += start * 1e-9 * rng.uniform(-1.0, 1.0, (~pinned).sum())
     cfg = resolve(scene_defaults({"strain": {"method": method}}), [])
     cfg = fabrics.apply_fabric(cfg, fabric)
+    for key, names in (("membrane", ("k_warp", "k_weft")), ("shear", ("k_shear",)),
+                       ("bend", ("k_bend", "k_bend_warp", "k_bend_weft"))):
+        for k in names:
+            if k in cfg["material"]:
+                cfg["material"][k] *= (scale or {}).get(key, 1.0)
     if compression is not None:
         for k in ("warp", "weft", "bias"):
             cfg["strain"][k] = [min(-compression, cfg["strain"][k][0]), cfg["strain"][k][1]]
@@ -123,7 +146,7 @@ def run(fabric, h=0.01, start=0, method="mapping", seconds=4.0, log=print, compr
     dc = (shadow_area(xs, faces) - a_sup) / (a_spec - a_sup)
     out = dict(fabric=fabric, h=h, start=start, DC=float(dc), folds=folds(xs, uv),
                frames=f + 1, rms_end=rms, seconds=time.perf_counter() - t0, faces=len(faces),
-               lowest=float(HEIGHT - xs[:, 1].min()))
+               lowest=float(HEIGHT - xs[:, 1].min()), x=xs, **strain_summary(xs, uv, faces, h))
     log(f"{fabric:17s} h={100 * h:g} cm start {start}: DC {dc:.3f}, {out['folds']} folds, "
         f"{out['frames']} frames (rms {1000 * rms:.2f} mm/s), {out['seconds']:.0f} s")
     return out
@@ -138,17 +161,22 @@ def main():
     ap.add_argument("--seconds", type=float, default=4.0)
     ap.add_argument("--compression", type=float, default=None,
                     help="lower ends of the bands at -this strain (default: the fabric's)")
+    for k in ("membrane", "shear", "bend"):
+        ap.add_argument(f"--{k}-scale", type=float, default=1.0,
+                        help=f"a factor on the fabric's {k} stiffness (default 1)")
     ap.add_argument("--out", default=None)
     a = ap.parse_args()
+    scale = dict(membrane=a.membrane_scale, shear=a.shear_scale, bend=a.bend_scale)
     from cloth import backend, fabrics
     backend.init("cpu", "f64")
     rows = []
     for name in a.fabrics or fabrics.names():
         for h in a.h:
             for s in range(a.starts):
-                rows.append(run(name, h, s, a.method, a.seconds, compression=a.compression))
-    L = ["| fabric | h (cm) | faces | DC per start | median DC | folds | frames |",
-         "| --- | --- | --- | --- | --- | --- | --- |"]
+                rows.append(run(name, h, s, a.method, a.seconds, compression=a.compression,
+                                scale=scale))
+    L = ["| fabric | h (cm) | faces | DC per start | median DC | folds | frames | principal "
+         "strain p5 / p95 (%) |", "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     for name in a.fabrics or fabrics.names():
         for h in a.h:
             rs = [r for r in rows if r["fabric"] == name and r["h"] == h]
@@ -156,7 +184,8 @@ def main():
                      + ", ".join(f"{r['DC']:.3f}" for r in rs)
                      + f" | {np.median([r['DC'] for r in rs]):.3f} | "
                      + ", ".join(str(r["folds"]) for r in rs) + " | "
-                     + ", ".join(str(r["frames"]) for r in rs) + " |")
+                     + ", ".join(str(r["frames"]) for r in rs) + " | "
+                     + f"{100 * rs[0]['eps_lo']:.2f} / {100 * rs[0]['eps_hi']:.2f} |")
     print("\n".join(L))
     if a.out:
         os.makedirs(a.out, exist_ok=True)

@@ -278,3 +278,16 @@ def test_cusick_specimen_mesh_and_shadow_of_a_flat_specimen():
     x = np.c_[uv[:, 0], np.full(len(uv), 0.5), uv[:, 1]]
     assert cusick.shadow_area(x, faces) == pytest.approx(a.sum(), rel=0.01)
     assert cusick.shadow_area(0.5 * x, faces) == pytest.approx(0.25 * a.sum(), rel=0.02)
+
+
+def test_cusick_strain_summary_of_a_flat_and_a_stretched_specimen():
+    # benchmarks/cusick.py's strain summary over the skirt: zero on the flat specimen, the
+    # stretch on a specimen stretched 1 % every way (area +2.01 %).
+    from benchmarks import cusick
+    uv, faces = cusick.disk_mesh(0.02)
+    x = np.c_[uv[:, 0], np.full(len(uv), 0.5), uv[:, 1]]
+    s = cusick.strain_summary(x, uv, faces, 0.02)
+    assert max(abs(s["eps_lo"]), abs(s["eps_hi"]), abs(s["area"])) < 1e-12
+    s = cusick.strain_summary(x * [1.01, 1.0, 1.01], uv, faces, 0.02)
+    assert s["eps_lo"] == pytest.approx(0.01) and s["eps_hi"] == pytest.approx(0.01)
+    assert s["area"] == pytest.approx(0.0201)
