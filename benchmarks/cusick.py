@@ -28,25 +28,40 @@ HEIGHT = 0.5                             # m: the support's height (nothing belo
 MIN_SECONDS = 1.5                        # s: no run stops before (a flat start is calm too)
 
 
-def disk_mesh(h, R=R_SPECIMEN, r_clamp=R_SUPPORT):
-    """(uv, faces): the specimen meshed at spacing ``h`` (see the module docstring)."""
-    from scipy.spatial import Delaunay
+EDGE_W = 0.025                           # m: the band beyond the support's edge ``edge_h`` meshes
+
+
+def _lattice(h, R):
     n = int(np.ceil(R / h)) + 2
     i, j = np.meshgrid(np.arange(-n, n + 1), np.arange(-n, n + 1), indexing="ij")
-    pts = np.c_[(i + 0.5 * (j % 2)).ravel() * h, j.ravel() * h * np.sqrt(3) / 2]
-    r = np.linalg.norm(pts, axis=1)
-    keep = (r < R - 0.5 * h) & (np.abs(r - r_clamp) > 0.45 * h)
-    rings = []
-    for rr in (R, r_clamp):
-        m = max(int(round(2 * np.pi * rr / h)), 12)
+    return np.c_[(i + 0.5 * (j % 2)).ravel() * h, j.ravel() * h * np.sqrt(3) / 2]
+
+
+def disk_mesh(h, R=R_SPECIMEN, r_clamp=R_SUPPORT, edge_h=None):
+    """(uv, faces): the specimen meshed at spacing ``h`` (see the module docstring); with
+    ``edge_h`` < h, at spacing ``edge_h`` within ``EDGE_W`` of the support's edge and inside
+    it (the skirt's bending boundary layer there, docs/fabrics.md), ``h`` beyond."""
+    from scipy.spatial import Delaunay
+    e = h if edge_h is None or edge_h >= h else edge_h
+    cut = r_clamp + EDGE_W if e < h else 0.0
+    parts = []
+    for hh, inside in ((e, True), (h, False)) if e < h else ((h, False),):
+        pts = _lattice(hh, R)
+        r = np.linalg.norm(pts, axis=1)
+        keep = (r < R - 0.5 * hh) & (np.abs(r - r_clamp) > 0.45 * e)
+        if e < h:
+            keep &= (r <= cut) if inside else (r > cut + 0.5 * hh)
+        parts.append(pts[keep])
+    for rr, hh in ((R, h), (r_clamp, e)):
+        m = max(int(round(2 * np.pi * rr / hh)), 12)
         t = 2 * np.pi * np.arange(m) / m
-        rings.append(rr * np.c_[np.cos(t), np.sin(t)])
-    uv = np.r_[pts[keep], np.concatenate(rings)]
+        parts.append(rr * np.c_[np.cos(t), np.sin(t)])
+    uv = np.concatenate(parts)
     faces = Delaunay(uv).simplices
     a, b, c = uv[faces[:, 0]], uv[faces[:, 1]], uv[faces[:, 2]]
     area = 0.5 * ((b - a)[:, 0] * (c - a)[:, 1] - (b - a)[:, 1] * (c - a)[:, 0])
     faces[area < 0] = faces[area < 0][:, ::-1]
-    faces = faces[np.abs(area) > 1e-6 * h * h]
+    faces = faces[np.abs(area) > 1e-6 * e * e]
     return uv, faces.astype(np.int32)
 
 
@@ -101,18 +116,18 @@ def strain_summary(x, uv, faces, h):
 
 
 def run(fabric, h=0.01, start=0, method="mapping", seconds=4.0, log=print, compression=None,
-        scale=None):
+        scale=None, edge_h=None):
     """One drape: returns dict(fabric, h, start, DC, folds, frames, seconds, faces, x (the
     final positions), eps_lo, eps_hi, area (``strain_summary``)).
     ``compression``: the bands' lower ends set to -compression (strain) instead of the
     fabric's mirror image of the upper ends. ``scale``: {"membrane", "shear", "bend"} factors on
     the fabric's k_warp and k_weft, k_shear, and bending rigidities (the sensitivity runs of
-    docs/fabrics.md)."""
+    docs/fabrics.md). ``edge_h``: ``disk_mesh``'s finer spacing at the support's edge."""
     from cloth import fabrics
     from cloth.model import MeshArrays
     from cloth.simulator import SceneSetup, Simulator
     from scenes.common import material_from, resolve, scene_defaults
-    uv, faces = disk_mesh(h)
+    uv, faces = disk_mesh(h, edge_h=edge_h)
     x = np.c_[uv[:, 0], np.full(len(uv), HEIGHT), uv[:, 1]]
     pinned = np.linalg.norm(uv, axis=1) <= R_SUPPORT + 1e-9
     if start:
@@ -164,8 +179,12 @@ def main():
     for k in ("membrane", "shear", "bend"):
         ap.add_argument(f"--{k}-scale", type=float, default=1.0,
                         help=f"a factor on the fabric's {k} stiffness (default 1)")
+    ap.add_argument("--edge-h", type=float, nargs="*", default=None,
+                    help="triangle size within 2.5 cm of the support's edge, one per --h "
+                         "(default: each --h)")
     ap.add_argument("--out", default=None)
     a = ap.parse_args()
+    edge = dict(zip(a.h, a.edge_h or a.h))
     scale = dict(membrane=a.membrane_scale, shear=a.shear_scale, bend=a.bend_scale)
     from cloth import backend, fabrics
     backend.init("cpu", "f64")
@@ -174,13 +193,14 @@ def main():
         for h in a.h:
             for s in range(a.starts):
                 rows.append(run(name, h, s, a.method, a.seconds, compression=a.compression,
-                                scale=scale))
+                                scale=scale, edge_h=edge[h]))
     L = ["| fabric | h (cm) | faces | DC per start | median DC | folds | frames | principal "
          "strain p5 / p95 (%) |", "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     for name in a.fabrics or fabrics.names():
         for h in a.h:
             rs = [r for r in rows if r["fabric"] == name and r["h"] == h]
-            L.append(f"| {name} | {100 * h:g} | {rs[0]['faces']} | "
+            at = f" ({100 * edge[h]:g} at the edge)" if edge[h] < h else ""
+            L.append(f"| {name} | {100 * h:g}{at} | {rs[0]['faces']} | "
                      + ", ".join(f"{r['DC']:.3f}" for r in rs)
                      + f" | {np.median([r['DC'] for r in rs]):.3f} | "
                      + ", ".join(str(r["folds"]) for r in rs) + " | "

@@ -278,6 +278,14 @@ def test_cusick_specimen_mesh_and_shadow_of_a_flat_specimen():
     x = np.c_[uv[:, 0], np.full(len(uv), 0.5), uv[:, 1]]
     assert cusick.shadow_area(x, faces) == pytest.approx(a.sum(), rel=0.01)
     assert cusick.shadow_area(0.5 * x, faces) == pytest.approx(0.25 * a.sum(), rel=0.02)
+    # graded: half the spacing within 2.5 cm of the support's edge, the same disk
+    uv2, faces2 = cusick.disk_mesh(0.02, edge_h=0.01)
+    a2 = signed_material_areas(uv2, faces2)
+    assert a2.min() > 0 and a2.sum() == pytest.approx(a.sum(), rel=0.005)
+    c = np.linalg.norm(uv2[faces2].mean(axis=1), axis=1)
+    edge, out = (c > 0.09) & (c < 0.11), c > 0.125
+    assert np.median(a2[edge]) < 0.4 * np.median(a2[out])
+    assert np.sum(np.isclose(np.linalg.norm(uv2, axis=1), 0.09)) >= 2 * 28
 
 
 def test_cusick_strain_summary_of_a_flat_and_a_stretched_specimen():
