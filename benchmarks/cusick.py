@@ -116,23 +116,28 @@ def strain_summary(x, uv, faces, h):
 
 
 def run(fabric, h=0.01, start=0, method="mapping", seconds=4.0, log=print, compression=None,
-        scale=None, edge_h=None):
+        scale=None, edge_h=None, amplitude=1e-9, turn=0.0, band_scale=(1.0, 1.0)):
     """One drape: returns dict(fabric, h, start, DC, folds, frames, seconds, faces, x (the
     final positions), eps_lo, eps_hi, area (``strain_summary``)).
     ``compression``: the bands' lower ends set to -compression (strain) instead of the
     fabric's mirror image of the upper ends. ``scale``: {"membrane", "shear", "bend"} factors on
     the fabric's k_warp and k_weft, k_shear, and bending rigidities (the sensitivity runs of
-    docs/fabrics.md). ``edge_h``: ``disk_mesh``'s finer spacing at the support's edge."""
+    docs/fabrics.md). ``edge_h``: ``disk_mesh``'s finer spacing at the support's edge.
+    ``amplitude`` (m): a start's largest displacement per unit of ``start``; ``turn`` (deg): the
+    mesh's lattice turned from the warp; ``band_scale``: factors on the warp and weft bands and
+    on the bias band (the drape's locking runs)."""
     from cloth import fabrics
     from cloth.model import MeshArrays
     from cloth.simulator import SceneSetup, Simulator
     from scenes.common import material_from, resolve, scene_defaults
     uv, faces = disk_mesh(h, edge_h=edge_h)
+    c, s = np.cos(np.radians(turn)), np.sin(np.radians(turn))
+    uv = uv @ np.array([[c, s], [-s, c]])
     x = np.c_[uv[:, 0], np.full(len(uv), HEIGHT), uv[:, 1]]
     pinned = np.linalg.norm(uv, axis=1) <= R_SUPPORT + 1e-9
     if start:
         rng = np.random.default_rng(start)
-        x[~pinned, 1] += start * 1e-9 * rng.uniform(-1.0, 1.0, (~pinned).sum())
+        x[~pinned, 1] += start * amplitude * rng.uniform(-1.0, 1.0, (~pinned).sum())
     cfg = resolve(scene_defaults({"strain": {"method": method}}), [])
     cfg = fabrics.apply_fabric(cfg, fabric)
     for key, names in (("membrane", ("k_warp", "k_weft")), ("shear", ("k_shear",)),
@@ -140,6 +145,8 @@ def run(fabric, h=0.01, start=0, method="mapping", seconds=4.0, log=print, compr
         for k in names:
             if k in cfg["material"]:
                 cfg["material"][k] *= (scale or {}).get(key, 1.0)
+    for k, f in (("warp", band_scale[0]), ("weft", band_scale[0]), ("bias", band_scale[1])):
+        cfg["strain"][k] = [f * e for e in cfg["strain"][k]]
     if compression is not None:
         for k in ("warp", "weft", "bias"):
             cfg["strain"][k] = [min(-compression, cfg["strain"][k][0]), cfg["strain"][k][1]]
@@ -182,6 +189,12 @@ def main():
     ap.add_argument("--edge-h", type=float, nargs="*", default=None,
                     help="triangle size within 2.5 cm of the support's edge, one per --h "
                          "(default: each --h)")
+    ap.add_argument("--amplitude", type=float, default=1.0,
+                    help="a start's largest vertical displacement per start index, nm")
+    ap.add_argument("--turn", type=float, default=0.0, help="the mesh's lattice turned, deg")
+    ap.add_argument("--band-scale", type=float, nargs=2, default=(1.0, 1.0),
+                    metavar=("THREADS", "BIAS"), help="factors on the warp and weft bands and on "
+                    "the bias band")
     ap.add_argument("--out", default=None)
     a = ap.parse_args()
     edge = dict(zip(a.h, a.edge_h or a.h))
@@ -193,7 +206,8 @@ def main():
         for h in a.h:
             for s in range(a.starts):
                 rows.append(run(name, h, s, a.method, a.seconds, compression=a.compression,
-                                scale=scale, edge_h=edge[h]))
+                                scale=scale, edge_h=edge[h], amplitude=1e-9 * a.amplitude,
+                                turn=a.turn, band_scale=a.band_scale))
     L = ["| fabric | h (cm) | faces | DC per start | median DC | folds | frames | principal "
          "strain p5 / p95 (%) |", "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     for name in a.fabrics or fabrics.names():
