@@ -46,12 +46,11 @@ def loop_probe(two):
     return n
 
 
-def check_loop_probe(ran, kernel, mesh, largest, expected=2):
-    """Raise LoopCapError, naming the fix, unless a launch's ``loop_probe`` returned 2 (or a
-    loop that counts its iterations ran ``expected`` of them).
+def check_loop_probe(ran, kernel, mesh, largest):
+    """Raise LoopCapError, naming the fix, unless a launch's ``loop_probe`` returned 2.
     ``kernel``: what was cut short; ``mesh``: its size in words; ``largest``: the largest
     sheet resolution that runs on this driver."""
-    if int(round(float(ran))) != expected:
+    if int(round(float(ran))) != 2:
         raise LoopCapError(
             f"{kernel} stopped early on --arch {arch()}: the driver ended its loops (Mesa's "
             f"llvmpipe / lavapipe runs at most {LOOP_CAP} loop iterations a shader invocation), "
@@ -180,13 +179,9 @@ def init(arch="cpu", precision=None, debug=False, first_run_fast=False):
     fp = ti.f64 if precision == "f64" else ti.f32
     _use_plain_debug_info()
     fast, reason = choose_compile_mode(arch, precision, first_run_fast)
-    # cpu_block_dim_adaptive off: with it, Taichi 1.7.4 gives a parallel loop whose length is
-    # known only at run time (every loop here) tasks of at least 512 indices, so a loop over
-    # fewer than 1024 chunks (cloth/dynamics.py ``chunks``) ran on one core; without it a
-    # task is 32 indices (``default_cpu_block_dim``).
     ti.init(arch=getattr(ti, ARCHES[arch]), default_fp=fp, log_level=ti.ERROR,
             debug=debug, offline_cache=True, offline_cache_max_size_of_files=CACHE_BYTES,
-            advanced_optimization=not fast, cpu_block_dim_adaptive=False)
+            advanced_optimization=not fast)
     _state.update(arch=arch, precision=precision, fast=fast, reason=reason)
 
 

@@ -81,19 +81,14 @@ MESH_ARRAYS = ("vert_mass", "vert_pinned", "vert_pin_target", "face_verts", "fac
 #   state   the model's positions and velocities;
 #   elems   per-element kinematics where the step starts (``update_kinematics``);
 #   cg      the Newton step's per-vertex vectors, its block-diagonal preconditioner and the
-#           step's results (``scalars``; ``progress`` and ``run``: the phase kernels' CG
-#           state and coefficients, ``_iterations``);
-#   g       the elements' per-corner terms and each vertex's list of corners (``corner_lists``:
-#           see ``gather_vectors``);
+#           step's results (``scalars``);
 #   blocks  a system_matrix.BlockMatrix's values and slots (``system_matrix``).
 MeshPack = ti.types.argpack(**{name: A for name in MESH_ARRAYS}, stitch=A)
 StatePack = ti.types.argpack(x=A, v=A)
 ElementPack = ti.types.argpack(face_fu=A, face_fv=A, face_E=A, face_wa=A, face_wb=A,
                                edge_grad=A, edge_theta=A)
 SolvePack = ti.types.argpack(force=A, dv=A, rhs=A, res=A, z=A, p=A, Ap=A, precond=A,
-                             scalars=A, progress=A, run=A)
-GatherPack = ti.types.argpack(corner=A, corner_m=A, hcorner=A, hcorner_m=A, vc_ptr=A,
-                              vc_idx=A, vh_ptr=A, vh_idx=A)
+                             scalars=A)
 BlockPack = ti.types.argpack(val=A, diag=A, face_slot=A, edge_slot=A, stitch_slot=A,
                              bend_slot=A)
 
@@ -107,27 +102,6 @@ BlockPack = ti.types.argpack(val=A, diag=A, face_slot=A, edge_slot=A, stitch_slo
 (C_H, C_G, C_KW, C_KF, C_KS, C_KB, C_ALPHA, C_BETA, C_KST, C_TOL, C_MAX_ITERS, C_NV, C_NF,
  C_NE, C_NST) = (0, 1, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16)   # C_G: 3 components
 N_COEF = 17
-# A step runs in parallel phases (``ImplicitEuler.in_phases``) from this many vertices on a
-# CPU; below it in one serial launch, whose single launch costs less than sharing the work.
-# ITERATIONS_A_LAUNCH: CG iterations in one phase launch (the host checks the stop after each).
-# Measured on the 2-core CPU: docs/speed/parallel.md.
-PHASES_FROM_VERTICES = 2000
-ITERATIONS_A_LAUNCH = 8
-
-
-def corner_lists(elements, n_verts):
-    """Each vertex's corners as rows (ptr, idx) for ``gather_vectors``: idx[ptr[i]:ptr[i+1]]
-    are the slots e * w + n (w corners an element) where element e holds vertex i at corner
-    n, in element order (the order a serial loop over the elements adds them in). Entries
-    of -1 (no vertex) are skipped."""
-    flat = np.asarray(elements).ravel()
-    slots = np.flatnonzero(flat >= 0)
-    verts = flat[slots]
-    order = np.argsort(verts, kind="stable")
-    ptr = np.concatenate([[0], np.cumsum(np.bincount(verts, minlength=n_verts))])
-    return ptr, slots[order]
-
-
 Constants = ti.types.struct(h=float, g=ti.types.vector(3, float), kw=float, kf=float, ks=float,
                             kb=float, alpha=float, beta=float, kst=float, tol=float,
                             max_iters=ti.i32, nv=ti.i32, nf=ti.i32, ne=ti.i32, nst=ti.i32)
@@ -176,9 +150,9 @@ class ImplicitEuler:
             np.asarray(stitches, np.int32).reshape(-1, 2)
         self.last_cg_iters = 0
         self.last_cg_residual = 0.0
-        # Whether a step runs in phases (``in_phases``): None chooses by arch and size; True
-        # or False forces it (tests).
-        self.phases = None
+        # The CG loop on the host, a launch per iteration, where one long launch fails
+        # (backend.HOST_LOOP_AL: Vulkan, Metal; see ``_linearise``). Settable, for tests.
+        self.host_loop = backend.arch() in backend.HOST_LOOP_AL
         # Every work array is allocated once, here, sized from the model's capacities (the
         # model never grows in place: the simulator builds a new model and new solvers). They
         # are kernel arguments, so a new solver compiles nothing.
@@ -193,16 +167,6 @@ class ImplicitEuler:
         self.edge_grad = ti.ndarray(ti.types.matrix(4, 3, float), E)
         self.edge_theta = ti.ndarray(float, E)
         self.scalars = ti.ndarray(float, 4)
-        self.progress = ti.ndarray(float, 4)
-        self.run = ti.ndarray(float, N_COEF)
-        # Per-corner terms (3 a face, 4 a hinge) and each vertex's corners (``gather_vectors``).
-        H = 4 * E if model.bending == "hinge" else 1
-        self.corner = vec(3 * F)
-        self.corner_m = ti.ndarray(ti.types.matrix(3, 3, float), 3 * F)
-        self.hcorner = vec(H)
-        self.hcorner_m = ti.ndarray(ti.types.matrix(3, 3, float), H)
-        self.vc_ptr, self.vc_idx = ti.ndarray(ti.i32, V + 1), ti.ndarray(ti.i32, 3 * F)
-        self.vh_ptr, self.vh_idx = ti.ndarray(ti.i32, V + 1), ti.ndarray(ti.i32, H)
         self.stitch_cap = max(len(self.stitches_np), 1)
         self.stitch = ti.ndarray(ti.types.vector(2, ti.i32), self.stitch_cap)
         # The kernels' scalars (``C_*``; written before each launch) and argpacks; the
@@ -216,17 +180,13 @@ class ImplicitEuler:
                                   edge_theta=self.edge_theta)
         self._cg = SolvePack(force=self.force, dv=self.dv, rhs=self.rhs, res=self.res,
                              z=self.z, p=self.p, Ap=self.Ap, precond=self.precond,
-                             scalars=self.scalars, progress=self.progress,
-                             run=self.run)
-        self._g = GatherPack(corner=self.corner, corner_m=self.corner_m, hcorner=self.hcorner,
-                             hcorner_m=self.hcorner_m, vc_ptr=self.vc_ptr, vc_idx=self.vc_idx,
-                             vh_ptr=self.vh_ptr, vh_idx=self.vh_idx)
+                             scalars=self.scalars)
         self.on_mesh_changed()
 
     # -- allocation ---------------------------------------------------------------------------
     def on_mesh_changed(self):
-        """Call after the model's arrays were refilled (remeshing): forget the warm start,
-        upload the (remapped) stitch pairs and list each vertex's element corners."""
+        """Call after the model's arrays were refilled (remeshing): forget the warm start and
+        upload the (remapped) stitch pairs."""
         if len(self.stitches_np) > self.stitch_cap:
             raise ValueError(f"{len(self.stitches_np)} stitches exceed the {self.stitch_cap} "
                              "this solver was built for: build a new ImplicitEuler")
@@ -234,25 +194,6 @@ class ImplicitEuler:
         self.stitch.from_numpy(np.resize(self.stitches_np, (self.stitch_cap, 2)).astype(np.int32)
                                if len(self.stitches_np) else np.zeros((1, 2), np.int32))
         self.n_stitches = len(self.stitches_np)
-        m = self.model
-        faces = m.face_verts.to_numpy()[: m.n_faces]
-        for (ptr, idx), elements in (((self.vc_ptr, self.vc_idx), faces),
-                                     ((self.vh_ptr, self.vh_idx), self._hinge_stencils())):
-            p, i = corner_lists(elements, m.n_verts)
-            ptr.from_numpy(np.resize(p, ptr.shape[0]).astype(np.int32))
-            if len(i):
-                idx.from_numpy(np.resize(i, idx.shape[0]).astype(np.int32))
-
-    def _hinge_stencils(self):
-        """(hinges, 4) vertices x0 x1 x2 x3 of every bending stencil (``edge_vertex``), -1
-        where an edge has no second face (it bends nothing): none under isotropic bending."""
-        m = self.model
-        if self.n_hinges == 0:
-            return np.zeros((0, 4), np.int32)
-        ev, eo = m.edge_verts.to_numpy()[: m.n_edges], m.edge_opp.to_numpy()[: m.n_edges]
-        st = np.concatenate([ev, eo], axis=1)
-        st[m.edge_faces.to_numpy()[: m.n_edges, 1] < 0] = -1
-        return st
 
     def warm_start(self):
         """The last step's velocity change per vertex (n_verts, 3): where the next step's CG
@@ -300,42 +241,45 @@ class ImplicitEuler:
     def step(self, h):
         """Advance model.state by one backward-Euler step of ``h`` seconds."""
         self.model.mark_step_start()
-        if self.in_phases():
-            return self._step_in_phases(h)
+        if self.host_loop:
+            return self._step_host_loop(h)
         rel, iters = _step(self._constants(h), self._mesh(), self._state(), self._elems,
-                           self._cg, self._g)
+                           self._cg)
         self.last_cg_iters = int(iters)
         self.last_cg_residual = float(rel)
         return self.last_cg_iters
 
-    def in_phases(self):
-        """Whether a step runs in parallel phases (``_begin``, ``_iterations``, ``_advance``)
-        rather than in one serial launch: on Vulkan and Metal always, on a CPU from
-        ``PHASES_FROM_VERTICES`` vertices. ``phases`` (None, True, False) overrides it."""
-        if self.phases is not None:
-            return self.phases
-        return (backend.arch() in backend.HOST_LOOP_AL
-                or self.model.n_verts >= PHASES_FROM_VERTICES)
-
-    def _step_in_phases(self, h):
-        """``step`` with the CG loop's control on the host; the same arithmetic as the
-        one-launch kernel, each loop on every core."""
-        coef, mesh, state = self._constants(h), self._mesh(), self._state()
-        ran = _begin(coef, mesh, state, self._elems, self._cg, self._g)[2]
-        # One thread sums over every vertex: a driver that caps a thread's loops (lavapipe)
-        # would end the sum early and the step would be silently wrong.
-        backend.check_loop_probe(ran, "the dynamics' CG sums", f"{self.model.n_verts} "
-                                 "vertices", 255, expected=self.model.n_verts)
+    def _step_host_loop(self, h):
+        """``step`` with the CG loop on the host, one launch per iteration (Vulkan, Metal:
+        see ``_linearise``). The same arithmetic as the one-launch kernel."""
         s = self.settings
-        while True:
-            rz, bnorm, iters, stalled = (float(v) for v in _iterations(
-                ITERATIONS_A_LAUNCH, coef, mesh, self._elems, self._cg, self._g))
-            rel = float(np.sqrt(abs(rz) / max(bnorm, 1e-300)))
-            if iters >= s.cg_max_iters or rel <= s.cg_tol or stalled:
+        coef, mesh, state = self._constants(h), self._mesh(), self._state()
+        self._check_loops(_linearise(2, coef, mesh, state, self._elems, self._cg), "linearise")
+        rz, bnorm, ran = _start(2, coef, mesh, state, self._elems, self._cg)
+        self._check_loops(ran, "start")
+        rel = float(np.sqrt(abs(rz) / max(bnorm, 1e-300)))
+        iters = 0
+        while iters < s.cg_max_iters and rel > s.cg_tol:
+            rz_new, stalled, ran = _iteration(2, rz, coef, mesh, self._elems, self._cg)
+            self._check_loops(ran, "CG iteration")
+            if stalled:
                 break
-        _advance(coef, mesh, state, self._cg)
-        self.last_cg_iters, self.last_cg_residual = int(iters), rel
-        return self.last_cg_iters
+            rz = rz_new
+            rel = float(np.sqrt(abs(rz) / max(bnorm, 1e-300)))
+            iters += 1
+        self._check_loops(_advance(2, coef, mesh, state, self._cg), "advance")
+        self.last_cg_iters, self.last_cg_residual = iters, rel
+        return iters
+
+    def _check_loops(self, ran, phase):
+        """Raise backend.LoopCapError unless the launch's ``loop_probe`` ran in full: a driver
+        that caps loops (lavapipe) ends every loop of the launch once the cap is hit, and the
+        step would be silently wrong (measured with a probe since removed, `git log --
+        benchmarks/loop_cap.py`: linearise runs ~50
+        loop iterations a vertex, so it is cut short from ~1300 vertices, a CG iteration ~26
+        a vertex)."""
+        backend.check_loop_probe(ran, f"dynamics kernel {phase}",
+                                 f"{self.model.n_verts} vertices", 35)
 
     def energy(self):
         """Elastic energy (membrane + bending + stitches) of the current positions, J."""
@@ -343,8 +287,7 @@ class ImplicitEuler:
 
     def forces(self):
         """Elastic forces (no gravity, no damping) at the current positions, (V, 3) numpy."""
-        _elastic_forces(self._constants(), self._mesh(), self._state(), self._elems, self._cg,
-                        self._g)
+        _elastic_forces(self._constants(), self._mesh(), self._state(), self._elems, self._cg)
         return self.force.to_numpy()[: self.model.n_verts].astype(np.float64)
 
     def force_jacobian_product(self, p, exact=True):
@@ -356,7 +299,7 @@ class ImplicitEuler:
         full[: m.n_verts] = p
         self.p.from_numpy(full.astype(self.p.to_numpy().dtype))
         _jacobian_product(1 if exact else 0, self._constants(), self._mesh(), self._state(),
-                          self._elems, self._cg, self._g)
+                          self._elems, self._cg)
         return -self.Ap.to_numpy()[: m.n_verts].astype(np.float64)
 
     def system_matrix(self, h, B):
@@ -430,33 +373,6 @@ def face_block(f, n, q, c, elems: T):
         ti.Matrix.identity(float, 3)
 
 
-# Parallel loops run in chunks (``for k in range(chunks(n))``, then ``for i in
-# range(chunk_start(k), chunk_end(k, n))``):
-# Taichi's CPU back end calls a parallel loop's body once per index through a function
-# pointer, reloading every array's address each time (measured at 16k triangles, one
-# thread: a CG iteration took 2.2x the serial loop's time), while a chunk's inner loop keeps
-# them in registers. On a GPU a chunk is one element (one thread each).
-def chunk_size():
-    """Elements a parallel loop's body handles: 8 on a CPU, 1 on a GPU (compile time)."""
-    return 8 if backend.arch() == "cpu" else 1
-
-
-@ti.func
-def chunks(n):
-    """How many chunks cover n elements."""
-    return (n + ti.static(chunk_size()) - 1) // ti.static(chunk_size())
-
-
-@ti.func
-def chunk_start(k):
-    return k * ti.static(chunk_size())
-
-
-@ti.func
-def chunk_end(k, n):
-    return ti.min((k + 1) * ti.static(chunk_size()), n)
-
-
 # -- element kinematics -----------------------------------------------------------------------
 @ti.func
 def face_weights(f, mesh: T):
@@ -526,215 +442,147 @@ def edge_vertex(e, n, mesh: T):
 
 
 @ti.func
-def count(coef: T, which):
-    """A count from ``coef`` (``C_NV``, ``C_NF``, ``C_NE``, ``C_NST``)."""
-    return ti.cast(coef[which], ti.i32)
-
-
-# Every loop below may run in parallel: a kernel that calls these funcs at its top level (the
-# phase kernels) runs each loop on every core, the one-launch ``_step`` runs them in its one
-# thread. Each parallel loop is a loop over chunks (``chunks``) that reads the constants
-# into the chunk's own locals: a kernel's top-level locals live in Taichi's global
-# temporaries, and reading them in every iteration cost a parallel loop 25 % per element (one
-# thread) in a measured test.
-@ti.func
-def update_kinematics(coef: T, mesh: T, state: T, elems: T):
-    for ch in range(chunks(count(coef, C_NF))):
-        c = constants(coef)
-        for f in range(chunk_start(ch), chunk_end(ch, c.nf)):
-            update_face(f, mesh, state, elems)
-    for ch in range(chunks(count(coef, C_NE))):
-        c = constants(coef)
-        for e in range(chunk_start(ch), chunk_end(ch, c.ne)):
-            update_edge(e, mesh, state, elems)
+def update_kinematics(c, mesh: T, state: T, elems: T):
+    for f in range(c.nf):
+        update_face(f, mesh, state, elems)
+    for e in range(c.ne):
+        update_edge(e, mesh, state, elems)
 
 
 @ti.func
-def bend_row(src: T, i, mesh: T):
-    """Row i of Q src, Q the isotropic bending matrix (cloth/bending.py; its rows are empty
-    when the model uses the hinge energy). Q's rows sum to zero, so the row applies to
-    src_k - src_i: exact for a translated cloth, and without the round-off of large positions
-    (1e-16 |x| |Q| per entry)."""
-    acc = ti.Vector([0.0, 0.0, 0.0])
-    for k in range(mesh.bend_ptr[i], mesh.bend_ptr[i + 1]):
-        acc += mesh.bend_val[k] * (src[mesh.bend_col[k]] - src[i])
-    return acc
-
-
-# -- scatter by gathering ---------------------------------------------------------------------
-# An element's contribution to its vertices is written to the element's own corner slots
-# (``corner`` for faces, 3 a face; ``hcorner`` for hinges, 4 an edge), and each vertex then
-# sums its corners (``gather_vectors``, the vertex's corners listed in element order by
-# ``corner_lists``). No two threads write one place, so the loops run in parallel without
-# atomics, and a vertex adds its terms in the order a serial loop over the elements would:
-# the answer does not depend on the thread count or the schedule.
-@ti.func
-def gather_vectors(i, acc, g: T):
-    for k in range(g.vc_ptr[i], g.vc_ptr[i + 1]):
-        acc += g.corner[g.vc_idx[k]]
-    for k in range(g.vh_ptr[i], g.vh_ptr[i + 1]):
-        acc += g.hcorner[g.vh_idx[k]]
-    return acc
-
-
-@ti.func
-def gather_blocks(i, acc, g: T):
-    for k in range(g.vc_ptr[i], g.vc_ptr[i + 1]):
-        acc += g.corner_m[g.vc_idx[k]]
-    for k in range(g.vh_ptr[i], g.vh_ptr[i + 1]):
-        acc += g.hcorner_m[g.vh_idx[k]]
-    return acc
-
-
-@ti.func
-def add_stitch_springs(src: T, dst: T, scale, coef: T, mesh: T):
-    """dst += scale * kst (src_a - src_b) at a, and the opposite at b: one thread, as seams
-    share vertices (a few hundred pairs at most)."""
-    ti.loop_config(serialize=True)
-    for s in range(count(coef, C_NST)):
-        kst = coef[C_KST]
-        a, b = mesh.stitch[s][0], mesh.stitch[s][1]
-        d = src[a] - src[b]
-        dst[a] += scale * kst * d
-        dst[b] -= scale * kst * d
-
-
-@ti.func
-def step_scale(coef: T):
-    """h (beta + h): the stiffness's factor in the step's matrix."""
-    return coef[C_H] * (coef[C_BETA] + coef[C_H])
+def bend_apply(src: T, dst: T, scale, mesh: T):
+    """dst += scale * Q src, Q the isotropic bending matrix (cloth/bending.py; its rows are
+    empty when the model uses the hinge energy). Row by row: no atomics. Q's rows sum to
+    zero, so row i applies to src_k - src_i: exact for a translated cloth, and without the
+    round-off of large positions (1e-16 |x| |Q| per entry)."""
+    for i in range(mesh.bend_ptr.shape[0] - 1):
+        acc = ti.Vector([0.0, 0.0, 0.0])
+        for k in range(mesh.bend_ptr[i], mesh.bend_ptr[i + 1]):
+            acc += mesh.bend_val[k] * (src[mesh.bend_col[k]] - src[i])
+        dst[i] += scale * acc
 
 
 # -- forces -----------------------------------------------------------------------------------
 @ti.func
-def add_elastic_forces(force: T, coef: T, mesh: T, state: T, elems: T, g: T):
-    for ch in range(chunks(count(coef, C_NF))):
-        c = constants(coef)
-        for f in range(chunk_start(ch), chunk_end(ch, c.nf)):
-            A = mesh.face_rest_area[f]
-            fu, fv, E = elems.face_fu[f], elems.face_fv[f], elems.face_E[f]
-            wa, wb = elems.face_wa[f], elems.face_wb[f]
-            for n in ti.static(range(3)):
-                grad = A * (c.kw * E[0] * wa[n] * fu + c.kf * E[1] * wb[n] * fv
-                            + 2.0 * c.ks * E[2] * (wa[n] * fv + wb[n] * fu))
-                g.corner[3 * f + n] = -grad
-    for ch in range(chunks(count(coef, C_NE))):
-        c = constants(coef)
-        for e in range(chunk_start(ch), chunk_end(ch, c.ne)):
-            if mesh.edge_faces[e][1] >= 0:
-                w = c.kb * mesh.edge_bend_weight[e] * (elems.edge_theta[e] -
-                                                       mesh.edge_rest_angle[e])
-                G = elems.edge_grad[e]
-                for n in ti.static(range(4)):
-                    g.hcorner[4 * e + n] = -w * ti.Vector([G[n, 0], G[n, 1], G[n, 2]])
-    for ch in range(chunks(count(coef, C_NV))):
-        c = constants(coef)
-        for i in range(chunk_start(ch), chunk_end(ch, c.nv)):
-            force[i] = gather_vectors(i, force[i], g) - c.kb * bend_row(state.x, i, mesh)
-    add_stitch_springs(state.x, force, -1.0, coef, mesh)
+def add_elastic_forces(force: T, c, mesh: T, state: T, elems: T):
+    for f in range(c.nf):
+        tri = mesh.face_verts[f]
+        A = mesh.face_rest_area[f]
+        fu, fv, E = elems.face_fu[f], elems.face_fv[f], elems.face_E[f]
+        wa, wb = elems.face_wa[f], elems.face_wb[f]
+        for n in ti.static(range(3)):
+            grad = A * (c.kw * E[0] * wa[n] * fu + c.kf * E[1] * wb[n] * fv
+                        + 2.0 * c.ks * E[2] * (wa[n] * fv + wb[n] * fu))
+            force[tri[n]] -= grad
+    for e in range(c.ne):
+        if mesh.edge_faces[e][1] >= 0:
+            w = c.kb * mesh.edge_bend_weight[e] * (elems.edge_theta[e] -
+                                                   mesh.edge_rest_angle[e])
+            G = elems.edge_grad[e]
+            for n in ti.static(range(4)):
+                vid = edge_vertex(e, n, mesh)
+                force[vid] -= w * ti.Vector([G[n, 0], G[n, 1], G[n, 2]])
+    bend_apply(state.x, force, -c.kb, mesh)
+    for s in range(c.nst):
+        a, b = mesh.stitch[s][0], mesh.stitch[s][1]
+        d = state.x[a] - state.x[b]
+        force[a] -= c.kst * d
+        force[b] += c.kst * d
 
 
 @ti.func
-def add_K_product(src: T, dst: T, scale, coef: T, exact: ti.i32, mesh: T, elems: T, g: T):
+def add_K_product(src: T, dst: T, scale, c, exact: ti.i32, mesh: T, elems: T):
     """dst += scale * K src, with K = -df/dx (PSD-projected unless ``exact``)."""
-    for ch in range(chunks(count(coef, C_NF))):
-        c = constants(coef)
-        for f in range(chunk_start(ch), chunk_end(ch, c.nf)):
-            tri = mesh.face_verts[f]
-            A = mesh.face_rest_area[f]
-            fu, fv, E = elems.face_fu[f], elems.face_fv[f], elems.face_E[f]
-            wa, wb = elems.face_wa[f], elems.face_wb[f]
-            dfu = wa[0] * src[tri[0]] + wa[1] * src[tri[1]] + wa[2] * src[tri[2]]
-            dfv = wb[0] * src[tri[0]] + wb[1] * src[tri[1]] + wb[2] * src[tri[2]]
-            dE0, dE1 = fu.dot(dfu), fv.dot(dfv)
-            dE2 = 0.5 * (fu.dot(dfv) + fv.dot(dfu))
-            # Curvature terms: kept where they are non-negative (stretch in tension) unless
-            # exact.
-            E0, E1, E2 = E[0], E[1], E[2]
-            if exact == 0:
-                E0, E1, E2 = ti.max(E0, 0.0), ti.max(E1, 0.0), 0.0
-            for n in ti.static(range(3)):
-                out = c.kw * (dE0 * wa[n] * fu + E0 * wa[n] * dfu) \
-                    + c.kf * (dE1 * wb[n] * fv + E1 * wb[n] * dfv) \
-                    + 2.0 * c.ks * (dE2 * (wa[n] * fv + wb[n] * fu)
-                                    + E2 * (wa[n] * dfv + wb[n] * dfu))
-                g.corner[3 * f + n] = scale * A * out
-    for ch in range(chunks(count(coef, C_NE))):
-        c = constants(coef)
-        for e in range(chunk_start(ch), chunk_end(ch, c.ne)):
-            if mesh.edge_faces[e][1] >= 0:
-                k = c.kb * mesh.edge_bend_weight[e]
-                G = elems.edge_grad[e]
-                dtheta = 0.0
-                for n in ti.static(range(4)):
-                    dtheta += ti.Vector([G[n, 0], G[n, 1], G[n, 2]]).dot(
-                        src[edge_vertex(e, n, mesh)])
-                for n in ti.static(range(4)):
-                    g.hcorner[4 * e + n] = scale * k * dtheta * \
-                        ti.Vector([G[n, 0], G[n, 1], G[n, 2]])
-    for ch in range(chunks(count(coef, C_NV))):
-        c = constants(coef)
-        for i in range(chunk_start(ch), chunk_end(ch, c.nv)):
-            dst[i] = gather_vectors(i, dst[i], g) + scale * c.kb * bend_row(src, i, mesh)
-    add_stitch_springs(src, dst, scale, coef, mesh)
+    for f in range(c.nf):
+        tri = mesh.face_verts[f]
+        A = mesh.face_rest_area[f]
+        fu, fv, E = elems.face_fu[f], elems.face_fv[f], elems.face_E[f]
+        wa, wb = elems.face_wa[f], elems.face_wb[f]
+        dfu = wa[0] * src[tri[0]] + wa[1] * src[tri[1]] + wa[2] * src[tri[2]]
+        dfv = wb[0] * src[tri[0]] + wb[1] * src[tri[1]] + wb[2] * src[tri[2]]
+        dE0, dE1 = fu.dot(dfu), fv.dot(dfv)
+        dE2 = 0.5 * (fu.dot(dfv) + fv.dot(dfu))
+        # Curvature terms: kept where they are non-negative (stretch in tension) unless exact.
+        E0, E1, E2 = E[0], E[1], E[2]
+        if exact == 0:
+            E0, E1, E2 = ti.max(E0, 0.0), ti.max(E1, 0.0), 0.0
+        for n in ti.static(range(3)):
+            out = c.kw * (dE0 * wa[n] * fu + E0 * wa[n] * dfu) \
+                + c.kf * (dE1 * wb[n] * fv + E1 * wb[n] * dfv) \
+                + 2.0 * c.ks * (dE2 * (wa[n] * fv + wb[n] * fu)
+                                + E2 * (wa[n] * dfv + wb[n] * dfu))
+            dst[tri[n]] += scale * A * out
+    for e in range(c.ne):
+        if mesh.edge_faces[e][1] >= 0:
+            k = c.kb * mesh.edge_bend_weight[e]
+            G = elems.edge_grad[e]
+            dtheta = 0.0
+            for n in ti.static(range(4)):
+                dtheta += ti.Vector([G[n, 0], G[n, 1], G[n, 2]]).dot(
+                    src[edge_vertex(e, n, mesh)])
+            for n in ti.static(range(4)):
+                dst[edge_vertex(e, n, mesh)] += scale * k * dtheta * \
+                    ti.Vector([G[n, 0], G[n, 1], G[n, 2]])
+    bend_apply(src, dst, scale * c.kb, mesh)
+    for s in range(c.nst):
+        a, b = mesh.stitch[s][0], mesh.stitch[s][1]
+        d = src[a] - src[b]
+        dst[a] += scale * c.kst * d
+        dst[b] -= scale * c.kst * d
 
 
 @ti.func
-def add_K_diagonal(precond: T, scale, coef: T, mesh: T, elems: T, g: T):
+def add_K_diagonal(precond: T, scale, c, mesh: T, elems: T):
     """precond += scale * (3x3 diagonal blocks of the PSD K)."""
-    for ch in range(chunks(count(coef, C_NF))):
-        c = constants(coef)
-        for f in range(chunk_start(ch), chunk_end(ch, c.nf)):
-            A = mesh.face_rest_area[f]
-            for n in ti.static(range(3)):
-                g.corner_m[3 * f + n] = scale * A * face_block(f, n, n, c, elems)
-    for ch in range(chunks(count(coef, C_NE))):
-        c = constants(coef)
-        for e in range(chunk_start(ch), chunk_end(ch, c.ne)):
-            if mesh.edge_faces[e][1] >= 0:
-                k = c.kb * mesh.edge_bend_weight[e]
-                G = elems.edge_grad[e]
-                for n in ti.static(range(4)):
-                    gn = ti.Vector([G[n, 0], G[n, 1], G[n, 2]])
-                    g.hcorner_m[4 * e + n] = scale * k * gn.outer_product(gn)
-    for ch in range(chunks(count(coef, C_NV))):
-        c = constants(coef)
-        for i in range(chunk_start(ch), chunk_end(ch, c.nv)):
-            acc = gather_blocks(i, precond[i], g)
-            if mesh.bend_ptr[i + 1] > mesh.bend_ptr[i]:   # the row's diagonal entry comes first
-                acc += scale * c.kb * mesh.bend_val[mesh.bend_ptr[i]] * \
-                    ti.Matrix.identity(float, 3)
-            precond[i] = acc
-    ti.loop_config(serialize=True)
-    for s in range(count(coef, C_NST)):
+    for f in range(c.nf):
+        tri = mesh.face_verts[f]
+        A = mesh.face_rest_area[f]
+        for n in ti.static(range(3)):
+            precond[tri[n]] += scale * A * face_block(f, n, n, c, elems)
+    for e in range(c.ne):
+        if mesh.edge_faces[e][1] >= 0:
+            k = c.kb * mesh.edge_bend_weight[e]
+            G = elems.edge_grad[e]
+            for n in ti.static(range(4)):
+                g = ti.Vector([G[n, 0], G[n, 1], G[n, 2]])
+                precond[edge_vertex(e, n, mesh)] += scale * k * g.outer_product(g)
+    for i in range(mesh.bend_ptr.shape[0] - 1):
+        if mesh.bend_ptr[i + 1] > mesh.bend_ptr[i]:   # the row's diagonal entry comes first
+            precond[i] += scale * c.kb * mesh.bend_val[mesh.bend_ptr[i]] * \
+                ti.Matrix.identity(float, 3)
+    for s in range(c.nst):
         I = ti.Matrix.identity(float, 3)
-        precond[mesh.stitch[s][0]] += scale * coef[C_KST] * I
-        precond[mesh.stitch[s][1]] += scale * coef[C_KST] * I
+        precond[mesh.stitch[s][0]] += scale * c.kst * I
+        precond[mesh.stitch[s][1]] += scale * c.kst * I
 
 
 # -- kernels ----------------------------------------------------------------------------------
+# The kernels without a serial loop read the constants at their top: Taichi hands them to the
+# parallel loops that follow through its global temporaries.
 @ti.kernel
 def _elastic_forces(coef: A, mesh: MeshPack, state: StatePack, elems: ElementPack,
-                    cg: SolvePack, g: GatherPack):
-    for i in range(count(coef, C_NV)):
+                    cg: SolvePack):
+    c = constants(coef)
+    for i in range(c.nv):
         cg.force[i] = ti.Vector([0.0, 0.0, 0.0])
-    update_kinematics(coef, mesh, state, elems)
-    add_elastic_forces(cg.force, coef, mesh, state, elems, g)
+    update_kinematics(c, mesh, state, elems)
+    add_elastic_forces(cg.force, c, mesh, state, elems)
 
 
 @ti.kernel
 def _jacobian_product(exact: ti.i32, coef: A, mesh: MeshPack, state: StatePack,
-                      elems: ElementPack, cg: SolvePack, g: GatherPack):
-    for i in range(count(coef, C_NV)):
+                      elems: ElementPack, cg: SolvePack):
+    c = constants(coef)
+    for i in range(c.nv):
         cg.Ap[i] = ti.Vector([0.0, 0.0, 0.0])
-    update_kinematics(coef, mesh, state, elems)
-    add_K_product(cg.p, cg.Ap, 1.0, coef, exact, mesh, elems, g)
+    update_kinematics(c, mesh, state, elems)
+    add_K_product(cg.p, cg.Ap, 1.0, c, exact, mesh, elems)
 
 
 @ti.kernel
 def _energy(coef: A, mesh: MeshPack, state: StatePack, elems: ElementPack) -> float:
-    update_kinematics(coef, mesh, state, elems)
     c = constants(coef)
+    update_kinematics(c, mesh, state, elems)
     total = 0.0
     for f in range(c.nf):
         E = elems.face_E[f]
@@ -758,113 +606,94 @@ def _energy(coef: A, mesh: MeshPack, state: StatePack, elems: ElementPack) -> fl
 
 
 @ti.func
-def free_residual(coef: T, mesh: T, cg: T):
+def free_residual(c, mesh: T, cg: T):
     """res = rhs - Ap on the free rows and 0 on the pinned ones: CG's starting residual."""
-    for ch in range(chunks(count(coef, C_NV))):
-        for i in range(chunk_start(ch), chunk_end(ch, count(coef, C_NV))):
-            cg.res[i] = cg.rhs[i] - cg.Ap[i]
-            if mesh.vert_pinned[i] != 0:
-                cg.res[i] = ti.Vector([0.0, 0.0, 0.0])
+    for i in range(c.nv):
+        cg.res[i] = cg.rhs[i] - cg.Ap[i]
+        if mesh.vert_pinned[i] != 0:
+            cg.res[i] = ti.Vector([0.0, 0.0, 0.0])
 
 
 @ti.func
-def apply_A(src: T, dst: T, coef: T, mesh: T, elems: T, g: T):
+def apply_A(src: T, dst: T, c, mesh: T, elems: T):
     """dst = A src with A = (1 + h alpha) M + h (beta + h) K, pinned rows filtered."""
-    for ch in range(chunks(count(coef, C_NV))):
-        c = constants(coef)
-        for i in range(chunk_start(ch), chunk_end(ch, c.nv)):
-            dst[i] = (1.0 + c.h * c.alpha) * mesh.vert_mass[i] * src[i]
-    add_K_product(src, dst, step_scale(coef), coef, 0, mesh, elems, g)
-    for ch in range(chunks(count(coef, C_NV))):
-        for i in range(chunk_start(ch), chunk_end(ch, count(coef, C_NV))):
-            if mesh.vert_pinned[i] != 0:
-                dst[i] = ti.Vector([0.0, 0.0, 0.0])
+    for i in range(c.nv):
+        dst[i] = (1.0 + c.h * c.alpha) * mesh.vert_mass[i] * src[i]
+    add_K_product(src, dst, c.h * (c.beta + c.h), c, 0, mesh, elems)
+    for i in range(c.nv):
+        if mesh.vert_pinned[i] != 0:
+            dst[i] = ti.Vector([0.0, 0.0, 0.0])
 
 
 @ti.func
-def linearise(coef: T, mesh: T, state: T, elems: T, cg: T, g: T):
+def linearise(c, mesh: T, state: T, elems: T, cg: T):
     """Forces and element quantities at the start of the step, the diagonal blocks of A
     (in ``cg.precond``) and the right-hand side h (f - alpha M v) - h (beta + h) K v."""
-    for ch in range(chunks(count(coef, C_NV))):
-        c = constants(coef)
-        for i in range(chunk_start(ch), chunk_end(ch, c.nv)):
-            cg.force[i] = mesh.vert_mass[i] * c.g
-            cg.precond[i] = (1.0 + c.h * c.alpha) * mesh.vert_mass[i] * \
-                ti.Matrix.identity(float, 3)
-    update_kinematics(coef, mesh, state, elems)
-    add_elastic_forces(cg.force, coef, mesh, state, elems, g)
-    add_K_diagonal(cg.precond, step_scale(coef), coef, mesh, elems, g)
-    for ch in range(chunks(count(coef, C_NV))):
-        c = constants(coef)
-        for i in range(chunk_start(ch), chunk_end(ch, c.nv)):
-            cg.rhs[i] = c.h * (cg.force[i] - c.alpha * mesh.vert_mass[i] * state.v[i])
-    add_K_product(state.v, cg.rhs, -step_scale(coef), coef, 0, mesh, elems, g)
+    for i in range(c.nv):
+        cg.force[i] = mesh.vert_mass[i] * c.g
+        cg.precond[i] = (1.0 + c.h * c.alpha) * mesh.vert_mass[i] * ti.Matrix.identity(float, 3)
+    update_kinematics(c, mesh, state, elems)
+    add_elastic_forces(cg.force, c, mesh, state, elems)
+    add_K_diagonal(cg.precond, c.h * (c.beta + c.h), c, mesh, elems)
+    for i in range(c.nv):
+        cg.rhs[i] = c.h * (cg.force[i] - c.alpha * mesh.vert_mass[i] * state.v[i])
+    add_K_product(state.v, cg.rhs, -c.h * (c.beta + c.h), c, 0, mesh, elems)
 
 
-# The step's phases, shared by the one-launch kernel and the phase kernels. Sums are taken by
-# one thread (``serialize``) in vertex order, so the result does not depend on the number of
-# threads either.
+# The step's phases, shared by the one-launch kernel and the host-loop kernels.
 @ti.func
-def cg_start(coef: T, mesh: T, state: T, elems: T, cg: T, g: T):
-    """After ``linearise``: prescribe the pinned dv and start PCG: returns (r.z, b.P b)
-    (CG's scale: the free rows only) and how many vertices the sums ran over."""
+def cg_begin(c, mesh: T, state: T, elems: T, cg: T):
+    """Linearise, prescribe the pinned dv, and start PCG: returns (r.z, b.P b) (CG's scale:
+    the free rows only)."""
+    linearise(c, mesh, state, elems, cg)
+    return cg_start(c, mesh, state, elems, cg)
+
+
+@ti.func
+def cg_start(c, mesh: T, state: T, elems: T, cg: T):
+    """After ``linearise``: prescribe the pinned dv and start PCG."""
     # Pinned vertices: the dv that lands them on their target at the end of the step.
     # Free vertices start CG from the last step's dv (warm start: near rest, successive
     # velocity changes are alike); on_mesh_changed zeroes it after a remesh.
-    for ch in range(chunks(count(coef, C_NV))):
-        c = constants(coef)
-        for i in range(chunk_start(ch), chunk_end(ch, c.nv)):
-            if mesh.vert_pinned[i] != 0:
-                cg.dv[i] = (mesh.vert_pin_target[i] - state.x[i]) / c.h - state.v[i]
-            cg.precond[i] = cg.precond[i].inverse()
+    for i in range(c.nv):
+        if mesh.vert_pinned[i] != 0:
+            cg.dv[i] = (mesh.vert_pin_target[i] - state.x[i]) / c.h - state.v[i]
+        cg.precond[i] = cg.precond[i].inverse()
     # r = b - A dv over the free vertices (pinned dv enters through the coupling).
-    apply_A(cg.dv, cg.Ap, coef, mesh, elems, g)
-    free_residual(coef, mesh, cg)
-    for ch in range(chunks(count(coef, C_NV))):
-        for i in range(chunk_start(ch), chunk_end(ch, count(coef, C_NV))):
-            cg.z[i] = cg.precond[i] @ cg.res[i]
-            cg.p[i] = cg.z[i]
+    apply_A(cg.dv, cg.Ap, c, mesh, elems)
+    free_residual(c, mesh, cg)
     rz = 0.0
     bnorm = 0.0
-    ran = 0         # how many of the sum's iterations ran (a capped driver ends loops early)
-    ti.loop_config(serialize=True)
-    for i in range(count(coef, C_NV)):
+    for i in range(c.nv):
+        cg.z[i] = cg.precond[i] @ cg.res[i]
+        cg.p[i] = cg.z[i]
         rz += cg.res[i].dot(cg.z[i])
         if mesh.vert_pinned[i] == 0:
             bnorm += cg.rhs[i].dot(cg.precond[i] @ cg.rhs[i])
-        ran += 1
-    return ti.Vector([rz, bnorm, ran])
+    return ti.Vector([rz, bnorm])
 
 
 @ti.func
-def cg_iteration(rz, coef: T, mesh: T, elems: T, cg: T, g: T):
+def cg_iteration(rz, c, mesh: T, elems: T, cg: T):
     """One preconditioned CG iteration on the free vertices: returns (new r.z, 1 if it
-    stalled on p.A p <= 0 and changed nothing but p)."""
-    apply_A(cg.p, cg.Ap, coef, mesh, elems, g)
+    stalled on p.A p <= 0 and changed nothing)."""
+    apply_A(cg.p, cg.Ap, c, mesh, elems)
     pAp = 0.0
-    ti.loop_config(serialize=True)
-    for i in range(count(coef, C_NV)):
+    for i in range(c.nv):
         pAp += cg.p[i].dot(cg.Ap[i])
     rz_new = rz
     stalled = 1.0
-    step = 0.0
-    n_update = 0            # the update's loops run over no vertex once CG stalled
     if pAp > 0.0:
         stalled = 0.0
         step = rz / pAp
         rz_new = 0.0
-        n_update = count(coef, C_NV)
-    for ch in range(chunks(n_update)):
-        for i in range(chunk_start(ch), chunk_end(ch, n_update)):
+        for i in range(c.nv):
             cg.dv[i] += step * cg.p[i]
             cg.res[i] -= step * cg.Ap[i]
             cg.z[i] = cg.precond[i] @ cg.res[i]
-    ti.loop_config(serialize=True)
-    for i in range(n_update):
-        rz_new += cg.res[i].dot(cg.z[i])
-    beta_cg = rz_new / rz
-    for ch in range(chunks(n_update)):
-        for i in range(chunk_start(ch), chunk_end(ch, n_update)):
+            rz_new += cg.res[i].dot(cg.z[i])
+        beta_cg = rz_new / rz
+        for i in range(c.nv):
             cg.p[i] = cg.z[i] + beta_cg * cg.p[i]
             if mesh.vert_pinned[i] != 0:
                 cg.p[i] = ti.Vector([0.0, 0.0, 0.0])
@@ -872,15 +701,13 @@ def cg_iteration(rz, coef: T, mesh: T, elems: T, cg: T, g: T):
 
 
 @ti.func
-def advance(coef: T, mesh: T, state: T, cg: T):
+def advance(c, mesh: T, state: T, cg: T):
     """v += dv, x += h v; pins exactly on target."""
-    for ch in range(chunks(count(coef, C_NV))):
-        h = coef[C_H]
-        for i in range(chunk_start(ch), chunk_end(ch, count(coef, C_NV))):
-            state.v[i] += cg.dv[i]
-            state.x[i] += h * state.v[i]
-            if mesh.vert_pinned[i] != 0:
-                state.x[i] = mesh.vert_pin_target[i]
+    for i in range(c.nv):
+        state.v[i] += cg.dv[i]
+        state.x[i] += c.h * state.v[i]
+        if mesh.vert_pinned[i] != 0:
+            state.x[i] = mesh.vert_pin_target[i]
 
 
 @ti.func
@@ -890,72 +717,85 @@ def relative(rz, bnorm):
 
 @ti.kernel
 def _step(coef: A, mesh: MeshPack, state: StatePack, elems: ElementPack,
-          cg: SolvePack, g: GatherPack) -> ti.types.vector(2, float):
+          cg: SolvePack) -> ti.types.vector(2, float):
     """(relative residual, CG iterations), also left in scalars[0] and scalars[1]."""
-    # The whole step in one serial launch: below ``PHASES_FROM_VERTICES`` a launch per phase
-    # costs more than the work it would share between cores.
+    # The whole step runs in one serial kernel: on a 2-core CPU, launching a kernel per CG
+    # phase costs more than the work below ~50k triangles (docs/method.md §4, cost notes).
     # Returning both numbers costs less than reading them back (~0.05 vs ~0.17 ms).
     ti.loop_config(serialize=True)
     for _ in range(1):
-        linearise(coef, mesh, state, elems, cg, g)
-        rb = cg_start(coef, mesh, state, elems, cg, g)
+        c = constants(coef)
+        rb = cg_begin(c, mesh, state, elems, cg)
         rz, bnorm = rb[0], rb[1]
         iters = 0
         stalled = 0.0
         rel = relative(rz, bnorm)
-        max_iters, tol = count(coef, C_MAX_ITERS), coef[C_TOL]
-        while iters < max_iters and rel > tol and stalled == 0.0:
-            out = cg_iteration(rz, coef, mesh, elems, cg, g)
+        while iters < c.max_iters and rel > c.tol and stalled == 0.0:
+            out = cg_iteration(rz, c, mesh, elems, cg)
             stalled = out[1]
             if stalled == 0.0:
                 rz = out[0]
                 rel = relative(rz, bnorm)
                 iters += 1
         cg.scalars[0] = rel
-        advance(coef, mesh, state, cg)
+        advance(c, mesh, state, cg)
         cg.scalars[1] = iters
     return ti.Vector([cg.scalars[0], cg.scalars[1]])
 
 
-# The same step in phases whose loops run on every core (or GPU thread), with the CG loop's
-# control on the host, ``ITERATIONS_A_LAUNCH`` iterations a launch (a launch with these
-# argpacks costs ~0.2 ms on the host). The phases are what Vulkan and Metal run at any size
-# (one long serial launch fails there: Debian's lavapipe computed dv but never wrote v and x
-# once the one-launch step ran 14 CG iterations or more).
+# The same step as three kinds of launch with the CG loop on the host, for Vulkan and Metal
+# (backend.HOST_LOOP_AL). Measured on lavapipe (Debian's software Vulkan), f32, hanging res 20:
+# the one-launch step computed dv but never wrote v and x once it ran 14 CG iterations or more
+# (13 were fine; KE stayed exactly 0 and the cloth never fell), like the strain solver's
+# one-launch solve, which crashed that driver.
+# Two launches where the one-launch step has cg_begin: Vulkan and Metal bind at most ~31
+# arrays per kernel (measured on lavapipe: with 32 loose ndarray arguments one was silently
+# dropped, 33 crashed). What counts is the arrays a kernel uses, not the pack members it is
+# given (measured: a 40-member pack of which 31 are used runs right, 32 used does not, with
+# one loose array besides); _linearise uses 27 (with ``coef``), _start 29, _iteration 25.
+# Each launch ends with ``backend.loop_probe`` and returns it (``ImplicitEuler._check_loops``).
 @ti.kernel
-def _begin(coef: A, mesh: MeshPack, state: StatePack, elems: ElementPack, cg: SolvePack,
-           g: GatherPack) -> ti.types.vector(3, float):
-    linearise(coef, mesh, state, elems, cg, g)
-    rb = cg_start(coef, mesh, state, elems, cg, g)
-    cg.progress[0], cg.progress[1], cg.progress[2], cg.progress[3] = rb[0], rb[1], 0.0, 0.0
-    return rb
-
-
-@ti.kernel
-def _iterations(iterations: ti.template(), coef: A, mesh: MeshPack, elems: ElementPack,
-                cg: SolvePack, g: GatherPack) -> ti.types.vector(4, float):
-    """Up to ``iterations`` CG iterations, stopping where the one-launch loop stops;
-    ``cg.progress`` holds (r.z, b.P b, iterations, stalled), as ``_begin`` set them, and is
-    returned. Each iteration runs on ``cg.run``: ``coef``, with every count 0 once CG has
-    stopped, so that the iteration's loops are empty (a loop under an ``if`` would not run
-    in parallel)."""
-    for _ in ti.static(range(iterations)):
-        go = cg.progress[2] < coef[C_MAX_ITERS] and cg.progress[3] == 0.0 and \
-            relative(cg.progress[0], cg.progress[1]) > coef[C_TOL]
-        ti.loop_config(serialize=True)
-        for k in range(N_COEF):
-            cg.run[k] = coef[k]
-            if not go and k >= C_NV:
-                cg.run[k] = 0.0
-        out = cg_iteration(cg.progress[0], cg.run, mesh, elems, cg, g)
-        if go:
-            cg.progress[3] = out[1]
-            if out[1] == 0.0:
-                cg.progress[0] = out[0]
-                cg.progress[2] += 1.0
-    return ti.Vector([cg.progress[0], cg.progress[1], cg.progress[2], cg.progress[3]])
+def _linearise(two: int, coef: A, mesh: MeshPack, state: StatePack, elems: ElementPack,
+               cg: SolvePack) -> float:
+    ti.loop_config(serialize=True)
+    ran = 0.0
+    for _ in range(1):
+        c = constants(coef)
+        linearise(c, mesh, state, elems, cg)
+        ran = backend.loop_probe(two)
+    return ran
 
 
 @ti.kernel
-def _advance(coef: A, mesh: MeshPack, state: StatePack, cg: SolvePack):
-    advance(coef, mesh, state, cg)
+def _start(two: int, coef: A, mesh: MeshPack, state: StatePack, elems: ElementPack,
+           cg: SolvePack) -> ti.types.vector(3, float):
+    ti.loop_config(serialize=True)
+    out = ti.Vector([0.0, 0.0, 0.0])
+    for _ in range(1):
+        c = constants(coef)
+        rb = cg_start(c, mesh, state, elems, cg)
+        out = ti.Vector([rb[0], rb[1], backend.loop_probe(two)])
+    return out
+
+
+@ti.kernel
+def _iteration(two: int, rz: float, coef: A, mesh: MeshPack, elems: ElementPack,
+               cg: SolvePack) -> ti.types.vector(3, float):
+    ti.loop_config(serialize=True)
+    out = ti.Vector([0.0, 0.0, 0.0])
+    for _ in range(1):
+        c = constants(coef)
+        it = cg_iteration(rz, c, mesh, elems, cg)
+        out = ti.Vector([it[0], it[1], backend.loop_probe(two)])
+    return out
+
+
+@ti.kernel
+def _advance(two: int, coef: A, mesh: MeshPack, state: StatePack, cg: SolvePack) -> float:
+    ti.loop_config(serialize=True)
+    ran = 0.0
+    for _ in range(1):
+        c = constants(coef)
+        advance(c, mesh, state, cg)
+        ran = backend.loop_probe(two)
+    return ran

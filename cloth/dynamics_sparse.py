@@ -26,8 +26,8 @@ import time
 import numpy as np
 import taichi as ti
 
-from .dynamics import (A, T, DynamicsSettings, ElementPack, GatherPack, ImplicitEuler,
-                       MeshPack, SolvePack, StatePack, apply_A, constants, edge_vertex, face_block, free_residual,
+from .dynamics import (A, T, DynamicsSettings, ElementPack, ImplicitEuler, MeshPack, SolvePack,
+                       StatePack, apply_A, constants, edge_vertex, face_block, free_residual,
                        linearise)
 from .model import ClothModel
 
@@ -78,7 +78,7 @@ class SparseImplicitEuler(ImplicitEuler):
         coef, mesh, state = self._constants(h), self._mesh(), self._state()
         # Warm start only helps the iterative solver; a direct solve starts from dv_free = 0.
         n_free = int(_prepare(0 if direct else 1, coef, mesh, state, self._elems, self._cg,
-                              self._g, self.free_index))
+                              self.free_index))
         t1 = time.perf_counter()
         T["prepare"] = 1e3 * (t1 - t0)
         n = 3 * n_free
@@ -184,13 +184,13 @@ class SparseImplicitEuler(ImplicitEuler):
 # -- kernels ----------------------------------------------------------------------------------
 @ti.kernel
 def _prepare(warm: ti.i32, coef: A, mesh: MeshPack, state: StatePack, elems: ElementPack,
-             cg: SolvePack, g: GatherPack, free_index: A) -> ti.i32:
+             cg: SolvePack, free_index: A) -> ti.i32:
     """Forces, rhs, prescribed pinned dv, residual r = b - A dv0 in ``res`` (free rows),
     the compact free-vertex index and the diagonal blocks of A in ``precond``."""
     ti.loop_config(serialize=True)
     for _ in range(1):
         c = constants(coef)
-        linearise(coef, mesh, state, elems, cg, g)
+        linearise(c, mesh, state, elems, cg)
         n_free = 0
         for i in range(c.nv):
             if mesh.vert_pinned[i] != 0:
@@ -201,8 +201,8 @@ def _prepare(warm: ti.i32, coef: A, mesh: MeshPack, state: StatePack, elems: Ele
                     cg.dv[i] = ti.Vector([0.0, 0.0, 0.0])
                 free_index[i] = n_free
                 n_free += 1
-        apply_A(cg.dv, cg.Ap, coef, mesh, elems, g)
-        free_residual(coef, mesh, cg)
+        apply_A(cg.dv, cg.Ap, c, mesh, elems)
+        free_residual(c, mesh, cg)
         cg.scalars[2] = n_free
     return ti.cast(cg.scalars[2], ti.i32)
 
