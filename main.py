@@ -96,7 +96,7 @@ def parse_args(argv):
                    "cloth shows which constraint binds")
     p.add_argument("--tour", action="store_true",
                    help="guided demo: the paper's experiment with svd, warp-weft and mapping "
-                   "in turn, pausing at rest with the teaching view and a caption per step "
+                   "in turn, then mapping in a knit and a woven fabric, pausing at rest with the teaching view and a caption per step "
                    "(a window; headless: PNGs and video.mp4 in --out, default out/tour)")
     p.add_argument("--method", help="strain limiting: svd, warp-weft, mapping or none")
     p.add_argument("--warp", type=band, help="warp strain band MIN,MAX (paper: vertical)")

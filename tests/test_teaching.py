@@ -203,6 +203,25 @@ def test_tour_captions_quote_the_state(sims):
     assert f["warp"] > 1.0 + 1e-3 and 1.0 < f["ratio"] <= np.sqrt(2) + 0.01
 
 
+def test_tour_ends_on_two_fabrics_and_their_captions_say_what_binds():
+    """The tour's last stages restart the sheet under mapping in a knit and a woven; a fabric
+    pause quotes its derived bands and the strains, and says whether the limits act."""
+    from ui.tour import FABRICS, STAGES, STEPS, Step, caption, stage_steps, step_name
+    assert STAGES[-2:] == [("mapping", f) for f in FABRICS] and len(set(FABRICS)) == 2
+    assert [s.fabric for s in STEPS[-2:]] == list(FABRICS)
+    assert all(len(stage_steps(stage)) >= 1 for stage in STAGES)
+    assert step_name(7, STEPS[-2]) == f"step_07_mapping_{FABRICS[0]}.png"
+    f = {"t": 5.0, "ke": 1e-7, "own": 1e-6, "n": 1152, "warp": 0.12, "weft": 0.03,
+         "bands": {"warp": [-0.57, 0.57], "weft": [-0.57, 0.57], "bias": [-2.8, 3.3]},
+         "ratio": 0.21, "bound": 0, "counts": {}}
+    text = caption(Step("mapping", "binding", "denim"), f)
+    assert text.startswith("mapping at t = ") and "fabric denim" in text
+    assert "warp +-0.57 %" in text and "Binding: none" in text and "21 % of its warp" in text
+    f.update(bound=4, counts={"weft via A max": 3, "warp via A max": 1}, ratio=0.9)
+    text = caption(Step("mapping", "binding", "cotton-jersey"), f)
+    assert "Binding: weft via A max on 3, warp via A max on 1 of 1152" in text
+
+
 def test_closed_form_principal_stretches_equal_numpys_svd():
     """metrics.principal_stretches (closed form, per frame in the teaching view) against
     numpy's SVD: the same stretches, the same directions up to sign, F = U diag(eta) V^T;

@@ -674,8 +674,8 @@ class TourApp(App):
     def __init__(self, state, settle, **kw):
         from . import tour
         self.tour = tour
-        self.plan = [p for m in tour.METHODS for p in
-                     [("settle", m)] + [("pause", step) for step in tour.STEPS if step.method == m]]
+        self.plan = [p for stage in tour.STAGES for p in
+                     [("settle", stage)] + [("pause", step) for step in tour.stage_steps(stage)]]
         self.settle, self.phase, self.held = settle, -1, 0
         self.caption, self.facts = "", None
         super().__init__(state, **kw)
@@ -688,11 +688,11 @@ class TourApp(App):
         kind, what = self.plan[self.phase]
         self.held = 0
         if kind == "settle":
-            st.switch_method(what)
-            st.reset()
+            self.tour.start_stage(st, what)
             st.resume()
             st.color, st.overlays = "binding", {"plot"}
-            self.caption = (f"{what}: the sheet settles from the start; each triangle is a "
+            label = f"{what[0]}, fabric {what[1]}" if what[1] else what[0]
+            self.caption = (f"{label}: the sheet settles from the start; each triangle is a "
                             "point in strain space, coloured by the constraint that binds it.")
         else:
             st.pause()

@@ -3,7 +3,10 @@ hanging from its two top corners, warp vertical, warp band +-1 %, weft +-5 %) wi
 warp-weft and mapping in turn. For each method the sheet settles from the start (the
 strain-space plot shows the cloud moving onto the method's boundary), then the tour pauses
 at rest on two views with a caption: which constraint binds, and the principal axes over
-the threads. Captions carry the numbers measured at that moment.
+the threads. Then the same sheet under mapping in two measured fabrics (``FABRICS``, a knit
+and a woven, cloth/fabrics.py: material and derived bands), one pause each: where the knit's
+limits bind and how far inside its band the woven's own membrane holds it. Captions carry the
+numbers measured at that moment.
 
 In a window the tour waits at each pause for "next" (key ``t`` or the caption's button);
 headless (or ``--headless``) it writes ``OUT/frames/frame_NNNN.png`` (the whole sequence,
@@ -35,9 +38,31 @@ CAPTION_BOX = (0.0, 0.855, 1.0, 1.0)
 class Step:
     method: str
     view: str              # "binding": binding map + plot; "axes": principal axes + plot
+    fabric: str = None     # a fabric record (cloth/fabrics.py) the sheet is restarted in
 
 
-STEPS = [Step(m, v) for m in METHODS for v in ("binding", "axes")]
+FABRICS = ("cotton-jersey", "denim")     # a knit and a woven: the comparison's two fabrics
+# the stages the sheet settles in, each (method, fabric or None), and the pauses after each
+STAGES = [(m, None) for m in METHODS] + [("mapping", f) for f in FABRICS]
+STEPS = ([Step(m, v) for m in METHODS for v in ("binding", "axes")]
+         + [Step("mapping", "binding", f) for f in FABRICS])
+
+
+def stage_steps(stage):
+    return [s for s in STEPS if (s.method, s.fabric) == stage]
+
+
+def start_stage(st, stage):
+    """The app state ``st`` restarted for ``stage``: the method, and the fabric if any."""
+    method, fabric = stage
+    st.switch_method(method)
+    if fabric:
+        st.set_fabric(fabric)
+    st.reset()
+
+
+def step_name(k, step):
+    return f"step_{k:02d}_{step.method}_{step.fabric or step.view}.png"
 
 
 def facts(sim):
@@ -56,8 +81,10 @@ def facts(sim):
     angle = np.degrees(np.arccos(np.clip(cos, 0.0, 1.0)))
     bound = idx >= 0
     own = sim.own_violation()
-    warp = sim.bands()["warp"]
-    return {"n": m.n_faces, "t": sim.time, "bound": int(bound.sum()), "counts": counts,
+    bands = sim.bands()
+    warp = bands["warp"]
+    return {"bands": {k: [100 * float(e) for e in v] for k, v in bands.items()},
+            "n": m.n_faces, "t": sim.time, "bound": int(bound.sum()), "counts": counts,
             "warp": 100 * float(st["warp"].max()), "weft": 100 * float(st["weft"].max()),
             "bias_lo": 100 * float(st["bias"].min()), "bias_hi": 100 * float(st["bias"].max()),
             "p1": 100 * float(st["principal_max"].max()),
@@ -69,14 +96,31 @@ def facts(sim):
 
 def _counts(f):
     return ", ".join(f"{name} on {k}" for name, k in
-                     sorted(f["counts"].items(), key=lambda t: -t[1]))
+                     sorted(f["counts"].items(), key=lambda t: -t[1])) or "none"
+
+
+def fabric_caption(step, f):
+    """A fabric pause's caption body: the derived bands, the strains reached, what binds."""
+    b = f["bands"]
+    body = (f"fabric {step.fabric} (cloth/fabrics.py: material and bands from its data; warp "
+            f"+-{b['warp'][1]:.3g} %, weft +-{b['weft'][1]:.3g} %). Thread strains reach warp "
+            f"{f['warp']:+.2f} %, weft {f['weft']:+.2f} %. Binding: {_counts(f)}")
+    if f["bound"]:
+        body += (f" of {f['n']} triangles: the limits hold the sheet where the pins pull it "
+                 "(the plot: the cloud reaches its box).")
+    else:
+        body += (f": its own membrane holds the sheet at {100 * f['ratio']:.0f} % of its warp "
+                 "band, and the limits never act (the plot: a dot in its box).")
+    return body
 
 
 def caption(step, f):
     """The caption of a pause (``f``: ``facts`` at that moment)."""
     head = (f"{step.method} at t = {f['t']:.1f} s (kinetic energy {f['ke']:.1e} J; own "
             f"constraints held to {f['own']:.1e}). ")
-    if step.method == "svd" and step.view == "binding":
+    if step.fabric:
+        body = fabric_caption(step, f)
+    elif step.method == "svd" and step.view == "binding":
         body = ("svd bounds the principal stretches whatever their direction: eta1 - 1 in the "
                 "warp band (+-1 %), eta2 - 1 in the weft band (+-5 %). Binding: "
                 f"{_counts(f)} of {f['n']} triangles; in the principal plane (left) they sit "
@@ -215,17 +259,18 @@ class TourRecorder:
             for p in glob.glob(os.path.join(self.out, sub, "*.png")):
                 os.remove(p)
         fps = st.settings.sim.fps
-        captions = ["# Loom tour: the paper's Table 1 with the three methods\n",
-                    provenance() + "\n"]
-        total = len(METHODS) * self.settle
+        captions = ["# Loom tour: the paper's Table 1 with the three methods, and two "
+                    "fabrics\n", provenance() + "\n"]
+        total = len(STAGES) * self.settle
         progress = None if self.quiet else Progress(total)
         done, k = 0, 0
         verdicts = []         # (method, ok, message): the scene's final check after settling
         with imageio.get_writer(os.path.join(self.out, "video.mp4"), fps=fps,
                                 macro_block_size=8, quality=7) as writer:
-            for method in METHODS:
-                st.switch_method(method)
-                st.reset()
+            for stage in STAGES:
+                method, fabric = stage
+                label = f"{method}, {fabric}" if fabric else method
+                start_stage(st, stage)
                 st.color, st.overlays = "binding", {"plot"}
                 self.teach.on = set(st.overlays)
                 r = self.renderer
@@ -237,26 +282,26 @@ class TourRecorder:
                         st.sim.step_frame()
                         done += 1
                         if progress:
-                            progress.update(done, f"{method}: settling")
+                            progress.update(done, f"{label}: settling")
                     if f % SETTLE_EVERY == 0:
-                        text = (f"{method}: the sheet settles from the start (t = "
+                        text = (f"{label}: the sheet settles from the start (t = "
                                 f"{st.sim.time:.2f} s); each triangle is a point in strain "
                                 "space, coloured by the constraint that binds it.")
-                        self._emit(self._draw(text, f"{method}  settling"), writer)
-                verdicts.append((method,) + st.sim.setup.check_final(st.sim))
+                        self._emit(self._draw(text, f"{label}  settling"), writer)
+                verdicts.append((label,) + st.sim.setup.check_final(st.sim))
                 fa = facts(st.sim)
-                for step in [one for one in STEPS if one.method == method]:
+                for step in stage_steps(stage):
                     k += 1
                     _apply(st, step)
                     self.teach.on = set(st.overlays)
                     text = caption(step, fa)
                     img = self._draw(text, f"step {k}/{len(STEPS)}")
-                    imageio.imwrite(os.path.join(
-                        self.out, "steps", f"step_{k:02d}_{method}_{step.view}.png"), img)
+                    name = step_name(k, step)
+                    imageio.imwrite(os.path.join(self.out, "steps", name), img)
                     self._emit(img, writer, repeat=int(HOLD_S * fps))
-                    name = f"step_{k:02d}_{method}_{step.view}.png"
-                    captions.append(f"{k}. **{method}, {step.view}**: {text}\n\n"
-                                    f"   ![{method}, {step.view}](steps/{name})\n")
+                    title = f"{method}, {step.fabric or step.view}"
+                    captions.append(f"{k}. **{title}**: {text}\n\n"
+                                    f"   ![{title}](steps/{name})\n")
         if progress:
             progress.close()
         with open(os.path.join(self.out, "captions.md"), "w") as fh:
