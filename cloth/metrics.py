@@ -14,8 +14,13 @@ import numpy as np
 def deformation_gradients(x, faces, Dm_inv):
     """F = Ds Dm^-1 per face, (F, 3, 2)."""
     x = np.asarray(x, dtype=np.float64)
-    Ds = np.stack([x[faces[:, 1]] - x[faces[:, 0]], x[faces[:, 2]] - x[faces[:, 0]]], axis=2)
-    return Ds @ Dm_inv
+    return _times_2x2(x[faces[:, 1]] - x[faces[:, 0]], x[faces[:, 2]] - x[faces[:, 0]], Dm_inv)
+
+
+def _times_2x2(c0, c1, M):
+    """[c0 c1] M per face, (F, 3, 2), for columns c0, c1 (F, 3) and M (F, 2, 2): written out,
+    as numpy's batched matmul of small matrices is several times slower."""
+    return c0[:, :, None] * M[:, None, 0, :] + c1[:, :, None] * M[:, None, 1, :]
 
 
 def material_Dm_inv(uv, faces):
@@ -23,13 +28,15 @@ def material_Dm_inv(uv, faces):
     return np.linalg.inv(Dm)
 
 
-def face_strains(x, uv, faces, grain):
+def face_strains(x, uv, faces, grain, Dm_inv=None):
     """Per-face strains as a dict of (F,) arrays: warp, weft, bias, principal_max,
-    principal_min."""
-    F = deformation_gradients(x, faces, material_Dm_inv(uv, faces))
-    Fg = F @ grain                              # columns: F e_warp, F e_weft
+    principal_min. ``Dm_inv``: the faces' ``material_Dm_inv`` when the caller keeps it (a
+    model does: ``ClothModel.material_Dm_inv``)."""
+    F = deformation_gradients(x, faces, material_Dm_inv(uv, faces) if Dm_inv is None
+                              else Dm_inv)
+    Fg = _times_2x2(F[:, :, 0], F[:, :, 1], grain)     # columns: F e_warp, F e_weft
     wu, wv = Fg[:, :, 0], Fg[:, :, 1]
-    eta = np.linalg.svd(F, compute_uv=False)    # (F, 2), descending
+    eta = singular_values(F)
     return {
         "warp": np.linalg.norm(wu, axis=1) - 1.0,
         "weft": np.linalg.norm(wv, axis=1) - 1.0,
@@ -206,6 +213,26 @@ CONSTRAINT_NAMES = {
 }
 
 
+def _stretches(F):
+    """(eta, (a, b, d)) for F (n, 3, 2): the singular values, descending, and the entries of
+    C = F^T F = [[a, b], [b, d]]."""
+    f0, f1 = F[:, :, 0], F[:, :, 1]
+    a, b, d = (np.einsum("ni,ni->n", f0, f0), np.einsum("ni,ni->n", f0, f1),
+               np.einsum("ni,ni->n", f1, f1))
+    r = np.hypot(0.5 * (a - d), b)
+    # m - r by m^2 - r^2 = det C over m + r: no cancellation when the smaller stretch is small.
+    lam1 = 0.5 * (a + d) + r
+    lam2 = np.where(lam1 > 0, (a * d - b * b) / np.where(lam1 > 0, lam1, 1.0), 0.0)
+    return np.sqrt(np.maximum(np.stack([lam1, lam2], axis=1), 0.0)), (a, b, d)
+
+
+def singular_values(F):
+    """eta (n, 2), the singular values of each F (n, 3, 2), descending: ``principal_stretches``
+    without the directions (every frame's metrics, through ``face_strains``: numpy's batched
+    SVD took 10 ms a frame at 16k faces)."""
+    return _stretches(np.asarray(F, np.float64))[0]
+
+
 def principal_stretches(F):
     """Thin SVD of F (n, 3, 2): ``eta`` (n, 2) descending, ``V`` (n, 2, 2) with columns the
     principal directions in material space, ``U`` (n, 3, 2) with columns their world images
@@ -217,14 +244,7 @@ def principal_stretches(F):
     F V / eta (where eta = 0, U's column is 0). The signs of V's and U's columns may differ
     from numpy's SVD (tests/test_teaching.py compares them up to sign)."""
     F = np.asarray(F, np.float64)
-    C = np.swapaxes(F, 1, 2) @ F
-    a, b, d = C[:, 0, 0], C[:, 0, 1], C[:, 1, 1]
-    m, h = 0.5 * (a + d), 0.5 * (a - d)
-    r = np.hypot(h, b)
-    # m - r by m^2 - r^2 = det C over m + r: no cancellation when the smaller stretch is small.
-    lam1 = m + r
-    lam2 = np.where(lam1 > 0, (a * d - b * b) / np.where(lam1 > 0, lam1, 1.0), 0.0)
-    eta = np.sqrt(np.maximum(np.stack([lam1, lam2], axis=1), 0.0))
+    eta, (a, b, d) = _stretches(F)
     th = 0.5 * np.arctan2(2.0 * b, a - d)
     c, s = np.cos(th), np.sin(th)
     V = np.stack([np.stack([c, -s], axis=1), np.stack([s, c], axis=1)], axis=1)   # (n, 2, 2)

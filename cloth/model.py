@@ -375,7 +375,7 @@ class ClothModel:
         self._filled = (nv, nf, ne, nq)
         self.state.n = nv
         self.state.step_start_valid = False
-        self._np_cache = dict(faces=faces.copy(), uv=uv.copy(), area=area,
+        self._np_cache = dict(faces=faces.copy(), uv=uv.copy(), area=area, Dm_inv=Dm_inv,
                               pinned=mesh.pinned.copy(),
                               grain=grain, edges=ev, edge_faces=ef, edge_opp=eo, mass=mass,
                               bend_rows=np.repeat(np.arange(nv), np.diff(bend_ptr)),
@@ -401,6 +401,11 @@ class ClothModel:
     @property
     def rest_area(self):
         return self._np_cache["area"]
+
+    @property
+    def material_Dm_inv(self):
+        """(F, 2, 2) inverse edge matrices in material space (``metrics.material_Dm_inv``)."""
+        return self._np_cache["Dm_inv"]
 
     @property
     def pinned(self):

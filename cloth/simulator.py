@@ -732,7 +732,7 @@ class Simulator:
     # -- metrics ------------------------------------------------------------------------------
     def face_strains(self):
         m = self.model
-        return metrics.face_strains(m.positions(), m.uv, m.faces, m.grain)
+        return metrics.face_strains(m.positions(), m.uv, m.faces, m.grain, m.material_Dm_inv)
 
     def own_violation(self):
         """Per face, how far the current method's own constraints are violated (strain, 0 when
@@ -770,7 +770,7 @@ class Simulator:
         """metrics_row's columns after the timings."""
         m = self.model
         x, v = m.positions(), m.velocities()
-        st = metrics.face_strains(x, m.uv, m.faces, m.grain)
+        st = metrics.face_strains(x, m.uv, m.faces, m.grain, m.material_Dm_inv)
         area = m.rest_area
         row = {}
         row["kinetic_energy"] = metrics.kinetic_energy(v, m.mass)
