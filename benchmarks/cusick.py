@@ -3,17 +3,20 @@ disk of cloth 30 cm across held between two disks 18 cm across, left to hang.
 
     python -m benchmarks.cusick --out /tmp/cusick                    # every fabric, h = 1 cm
     python -m benchmarks.cusick --h 0.01 0.005 --starts 3 --out DIR  # mesh convergence
+    python -m benchmarks.cusick --h 0.01 --edge-h 0.01               # a uniform mesh
 
 The specimen is a Delaunay triangulation of a hexagonal lattice of spacing h inside the disk
 (near-equilateral triangles: Loom's bending reads soft on stretched ones, docs/fabrics.md),
-with rings of vertices on the rim and on the support's edge. Every vertex within the support
-(r <= 9 cm) is pinned, so the faces there are held flat: the clamp of the drapemeter's two
-disks. Material and bands: the fabric's (cloth/fabrics.py, ``apply_fabric``), method
-``--method`` (mapping). Each start moves every free vertex by up to ``k`` nm vertically
-(k = 0, 1, 2, ...: a drape's folds may be chaotic; docs/fabrics.md found these are not),
-and a run stops once the RMS speed stays below 1 mm/s for 10 frames (not before 1.5 s) or
-after ``--seconds``. Drape coefficient, from the shadow (the draped cloth projected on the
-horizontal plane, rasterised at 0.5 mm):
+with rings of vertices on the rim and on the support's edge; within 2.5 cm of that edge (the
+skirt's bending boundary layer) the spacing is ``--edge-h``, h/2 unless given (uniform 1 cm
+triangles read the drape coefficient 0.03-0.045 low there, docs/fabrics.md). Every vertex
+within the support (r <= 9 cm) is pinned, so the faces there are held flat: the clamp of the
+drapemeter's two disks. Material and bands: the fabric's (cloth/fabrics.py,
+``apply_fabric``), method ``--method`` (mapping). Each start moves every free vertex by up to
+``k`` nm vertically (k = 0, 1, 2, ...; ``--amplitude``: docs/fabrics.md found 1 nm starts read
+the same, 0.1 mm starts not), and a run stops once the RMS speed stays below 1 mm/s for 10
+frames (not before 1.5 s) or after ``--seconds``. Drape coefficient, from the shadow (the
+draped cloth projected on the horizontal plane, rasterised at 0.5 mm):
 DC = (A_shadow - A_support) / (A_specimen - A_support); the median over the starts is the
 reading, with the folds (local maxima of the rim's radius around the circle).
 """
@@ -188,7 +191,7 @@ def main():
                         help=f"a factor on the fabric's {k} stiffness (default 1)")
     ap.add_argument("--edge-h", type=float, nargs="*", default=None,
                     help="triangle size within 2.5 cm of the support's edge, one per --h "
-                         "(default: each --h)")
+                         "(default: half each --h; give the --h values for a uniform mesh)")
     ap.add_argument("--amplitude", type=float, default=1.0,
                     help="a start's largest vertical displacement per start index, nm")
     ap.add_argument("--turn", type=float, default=0.0, help="the mesh's lattice turned, deg")
@@ -197,7 +200,7 @@ def main():
                     "the bias band")
     ap.add_argument("--out", default=None)
     a = ap.parse_args()
-    edge = dict(zip(a.h, a.edge_h or a.h))
+    edge = dict(zip(a.h, a.edge_h or [h / 2 for h in a.h]))
     scale = dict(membrane=a.membrane_scale, shear=a.shear_scale, bend=a.bend_scale)
     from cloth import backend, fabrics
     backend.init("cpu", "f64")
