@@ -177,7 +177,7 @@ def claim_lines(m5, w5, w3, alike=0.10):
     ]
 
 
-def chance_lines(seeds, energy, dihedral):
+def chance_lines(seeds, energy, dihedral, faces):
     """The page's statistics: each setting's runs summarised, the claim decided on the chest
     curvature energy (``decide``) and, as a check, on the chest's mean |dihedral|."""
     lines = ["", f"## Chance and the verdict ({seeds} runs a setting)", "",
@@ -201,8 +201,10 @@ def chance_lines(seeds, energy, dihedral):
               "warp-weft +-5 % / +-3 %; lower is smoother):", ""] + why
     check, why_d = decide(*dihedral.values())
     lines += ["", "The same on the chest's mean |dihedral|:", ""] + why_d
-    lines += ["", f"**Verdict: {verdict}** (on the chest curvature energy; the mean |dihedral| "
-              f"says {check})."]
+    lines += ["", f"**Verdict on this {faces}-triangle shirt: {verdict}** (on the chest "
+              f"curvature energy; the mean |dihedral| says {check}). Its wrinkles are a few "
+              "triangles wide, so the verdict is this mesh's: a remeshed or finer shirt may "
+              "resolve wrinkles this one cannot."]
     return lines
 
 
@@ -320,7 +322,7 @@ def table2(args):
     if not complete:
         lines += ["", "A run of some setting failed (below): the claim is not judged."]
     elif seeds >= 3:
-        lines += chance_lines(seeds, spread, dihedral)
+        lines += chance_lines(seeds, spread, dihedral, rows[0]["faces"])
     else:
         lines += [""] + claim_lines(*(r["chest_curvature_energy"] for r in rows))
     lines += failed_lines(sweep, results)
