@@ -299,3 +299,14 @@ def test_cusick_strain_summary_of_a_flat_and_a_stretched_specimen():
     s = cusick.strain_summary(x * [1.01, 1.0, 1.01], uv, faces, 0.02)
     assert s["eps_lo"] == pytest.approx(0.01) and s["eps_hi"] == pytest.approx(0.01)
     assert s["area"] == pytest.approx(0.0201)
+
+
+def test_cusick_picture_of_a_flat_specimen(tmp_path):
+    # benchmarks/cusick_pictures.py draws a run's side and top views into a PNG.
+    from benchmarks import cusick, cusick_pictures
+    uv, faces = cusick.disk_mesh(0.03)
+    x = np.c_[uv[:, 0], np.full(len(uv), cusick.HEIGHT), uv[:, 1]]
+    path = str(tmp_path / "flat.png")
+    cusick_pictures.draw(path, dict(x=x, DC=1.0, folds=0), faces, "flat")
+    with open(path, "rb") as fh:
+        assert fh.read(8) == b"\x89PNG\r\n\x1a\n"
