@@ -30,6 +30,9 @@
 - Progress: one line on stderr, runs done (of which cached), failed, left and the time to go.
 - A worker checks that its code is the client's (the same fingerprint) before it runs
   anything, so a worker started from another checkout reports an error instead of a result.
+- ``Run(..., own_process=True)``: the worker runs that one run in a fresh Python process of
+  its own and returns its result (a run that needs what a worker's process cannot give
+  it, e.g. f32 kernels: Taichi fixes the float type once per process).
 """
 import hashlib
 import importlib
@@ -37,6 +40,7 @@ import inspect
 import json
 import os
 import re
+import subprocess
 import sys
 import time
 import traceback
@@ -60,6 +64,7 @@ class Run:
     args: list
     label: str
     scene: tuple = None
+    own_process: bool = False
     key: str = field(default=None, repr=False)
 
 
@@ -79,6 +84,16 @@ def code_fingerprint(root=ROOT, dirs=CODE_DIRS):
                     h.update(fh.read())
                 h.update(b"\0")
     return h.hexdigest()
+
+
+def module_hash(module):
+    """sha256 of a module's source file: an argument that puts a benchmark's own code (its
+    meshes, its measures: outside ``CODE_DIRS``) into a run's cache key."""
+    if module == "__main__":
+        raise ValueError("module_hash needs the module's own name, not __main__")
+    path = importlib.import_module(module).__file__
+    with open(path, "rb") as fh:
+        return hashlib.sha256(fh.read()).hexdigest()
 
 
 def _function(path):
@@ -134,9 +149,10 @@ def cached_entries(folder, code=None):
 _worker = {"code": None}
 
 
-def _execute(fn, args, code):
-    """A task: run ``fn(*args)`` in this worker process. A run that raises returns
-    {"error": the traceback's end}; the result gets ``wall_s`` and the worker's address."""
+def _execute(fn, args, code, own_process=False):
+    """A task: run ``fn(*args)`` in this worker process (``own_process``: in a new process of
+    its own, ``in_own_process``). A run that raises returns {"error": the traceback's end};
+    the result gets ``wall_s`` and the worker's address."""
     if ROOT not in sys.path:
         sys.path.insert(0, ROOT)
     # Read by ti.init, which the run's first backend.init calls in this process.
@@ -150,13 +166,30 @@ def _execute(fn, args, code):
                          "start it from a checkout of the same commit", "worker": where}
     t0 = time.time()
     try:
-        result = dict(_function(fn)(*args))
+        result = dict(in_own_process(fn, args) if own_process else _function(fn)(*args))
     except Exception:                       # the run's own failure: reported, not retried
         return {"error": traceback.format_exc()[-2000:], "worker": where,
                 "wall_s": time.time() - t0}
     result["wall_s"] = time.time() - t0
     result["worker"] = where
     return result
+
+
+def in_own_process(fn, args):
+    """``fn(*args)`` in a fresh Python process (``python -m benchmarks.sweep FN OUT``, the
+    arguments as JSON on its stdin, the result as JSON in the file OUT)."""
+    import tempfile
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        p for p in (ROOT, os.environ.get("PYTHONPATH", "")) if p))
+    with tempfile.TemporaryDirectory() as tmp:
+        out = os.path.join(tmp, "result.json")
+        p = subprocess.run([sys.executable, "-m", "benchmarks.sweep", fn, out], cwd=ROOT,
+                           env=env, input=json.dumps(args), capture_output=True, text=True)
+        if p.returncode != 0 or not os.path.exists(out):
+            raise RuntimeError(f"the run's own process exited with {p.returncode}:\n"
+                               + p.stderr[-1500:])
+        with open(out) as fh:
+            return json.load(fh)
 
 
 def _where():
@@ -270,8 +303,8 @@ def _submit_all(client, runs, todo, results, folder, code, retries, progress):
         # One key prefix for every run: the runs form one task group, which the scheduler
         # queues and hands out as workers free up (a key per label would be a group per run,
         # each sent at once to a worker that may be busy with a long run).
-        f = client.submit(_execute, run.fn, run.args, code, key=f"loom-run-{run.key[:32]}",
-                          pure=False, retries=retries)
+        f = client.submit(_execute, run.fn, run.args, code, run.own_process,
+                          key=f"loom-run-{run.key[:32]}", pure=False, retries=retries)
         futures[f] = i
     for f in as_completed(futures):
         i, run = futures[f], runs[futures[f]]
@@ -314,3 +347,11 @@ def failed_lines(runs, results):
         last = [l for l in res["error"].strip().splitlines() if l.strip()][-1:] or ["?"]
         lines.append(f"- {run.label}: `{last[0].strip()[:300]}`")
     return lines
+
+
+if __name__ == "__main__":
+    # A run in its own process (``in_own_process``): FN OUT, the arguments on stdin.
+    os.environ.setdefault("TI_CPU_MAX_NUM_THREADS", str(THREADS))
+    _result = dict(_function(sys.argv[1])(*json.load(sys.stdin)))
+    with open(sys.argv[2], "w") as _fh:
+        json.dump(_result, _fh, default=_plain)

@@ -223,6 +223,20 @@ def test_cache_key_follows_what_decides_a_run():
     assert len(sw.code_fingerprint()) == 64
 
 
+def echo_pid(value):
+    """A run for ``in_own_process``: its argument back, with the process it ran in."""
+    return {"value": value, "pid": os.getpid()}
+
+
+def test_a_run_in_its_own_process_returns_its_result():
+    """``Run(own_process=True)`` (an f32 stability case): the run goes to a new Python process
+    and its JSON comes back; a run that fails there raises with the child's error."""
+    out = sw.in_own_process("tests.test_sweeps:echo_pid", [[1.5, "a"]])
+    assert out["value"] == [1.5, "a"] and out["pid"] != os.getpid()
+    with pytest.raises(RuntimeError, match="TypeError"):
+        sw.in_own_process("tests.test_sweeps:echo_pid", [1, 2])
+
+
 def test_no_hand_made_pool_left_in_benchmarks():
     """Every benchmark that runs more than one configuration goes through the runner."""
     bench = os.path.join(ROOT, "benchmarks")
