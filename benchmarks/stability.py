@@ -3,7 +3,10 @@
     python -m benchmarks.stability --out docs/speed              # every case
     python -m benchmarks.stability --fast --out results/stability  # the fast subset (CI runs it)
 
-Writes ``stability.md`` (a pass/fail table with the numbers) and ``stability.json``.
+Writes ``stability.md`` (a pass/fail table with the numbers) and ``stability.json``. Each case
+is a run of a sweep (``benchmarks.sweep``: a local cluster, one worker process per core, or
+``--scheduler tcp://HOST:PORT``; runs cached in --out/stability_runs/, --fresh runs them
+again); an f32 case runs in a process of its own (Taichi fixes the float type per process).
 
 Criteria, checked after every frame:
   finite      positions and velocities stay finite (the simulator raises otherwise);
@@ -21,9 +24,9 @@ Criteria, checked after every frame:
               moves from a start rounded at f32's resolution.
 """
 import argparse
+import inspect
 import json
 import os
-import subprocess
 import sys
 import time
 from dataclasses import dataclass, field
@@ -35,7 +38,6 @@ from benchmarks.harness import command, configure, header, nudge_start, write_js
 
 GRAVITY_DROP = 2.0      # m: the pins' height above the ground in every scene used here
 SETTLE = 15             # frames over which ``ke_end_max`` averages
-SNAPSHOTS = ("_final", "_compare")    # (x, uv, faces) a case keeps: at the end, at compare_frame
 # f32 against f64 is judged at frame F32_FRAME, before the hanging sheet buckles out of its
 # plane (frames 3-4); later, any difference is amplified. The f32 run passes when it is as
 # close to the f64 run as either
@@ -336,12 +338,13 @@ def snapshot(sim):
     return (m.positions(), m.uv.copy(), m.faces.copy())
 
 
-def write_report(results, out, cmd, seconds):
+def write_report(results, out, cmd, seconds, failed=()):
     clean = [{k: v for k, v in r.items() if not k.startswith("_")} for r in results]
     write_json(out, "stability", {"results": clean}, cmd, seconds)
     n_pass = sum(r["passed"] for r in results)
     lines = ["# Stability suite", "", header(cmd, seconds), "",
-             "Other jobs may share the cores, so the seconds column is noisy.",
+             "Other jobs may share the cores, and the cases run one per core (a sweep's "
+             "workers, one Taichi thread each: docs/sweeps.md), so the seconds column is noisy.",
              "", f"**{n_pass} of {len(results)} cases pass.** Criteria (see "
              "`benchmarks/stability.py`): finite state; kinetic-energy peak under the bound "
              "(default: the energy of the cloth falling 2 m); where pins stop, a mean "
@@ -368,57 +371,64 @@ def write_report(results, out, cmd, seconds):
                      f"{f('violation_end')} | {lim if lim is not None else '-'} | "
                      f"{f('penetration')} | {f('f64_distance')} | {r['seconds']:.1f} | "
                      f"{r['note']} |")
+    lines += list(failed)
     with open(os.path.join(out, "stability.md"), "w") as fh:
         fh.write("\n".join(lines) + "\n")
+
+
+def case_spec(case):
+    """What decides a case's run, as text for the sweep's cache key: its fields (a prepare
+    function by its source) and the source and constants of the code that runs it here."""
+    fields = {k: (inspect.getsource(v) if callable(v) else v) for k, v in vars(case).items()}
+    code = [inspect.getsource(f) for f in (run_case, snapshot, _tunnelled, _total_mass)]
+    return json.dumps([fields, code, SPHERE, F32_RESOLUTION, SETTLE, GRAVITY_DROP],
+                      sort_keys=True, default=str)
+
+
+def run_named(name, spec=None):
+    """One case, by name, in a sweep's worker (``spec``: ``case_spec``, for the cache key
+    only): ``run_case``'s numbers, with the snapshot at ``compare_frame`` (the f32 comparison)
+    as lists; judged by the caller."""
+    from cloth import backend
+    case = next(c for c in cases() if c.name == name)
+    backend.init("cpu", case.precision)
+    r = run_case(case)
+    r.pop("_final", None)
+    return r
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=os.path.join("results", "stability"))
     ap.add_argument("--fast", action="store_true", help="only the fast cases")
-    ap.add_argument("--only-precision", choices=("f32",), help=argparse.SUPPRESS)
+    from benchmarks.sweep import Run, add_arguments, failed_lines, run_sweep
+    add_arguments(ap)
     args = ap.parse_args(argv)
     argv = sys.argv[1:] if argv is None else argv
-    from cloth import backend
     selected = [c for c in cases() if c.fast or not args.fast]
-    if args.only_precision:
-        # Child process: Taichi fixes the float type per process.
-        backend.init("cpu", args.only_precision)
-        res = run_cases([c for c in selected if c.precision == args.only_precision],
-                        log=lambda m: None)     # the parent judges them against f64
-        np.savez(os.path.join(args.out, "_f32_final.npz"),
-                 **{f"{i}{key}_{k}": a for i, r in enumerate(res) for key in SNAPSHOTS
-                    if key in r for k, a in zip("xuf", r[key])})
-        with open(os.path.join(args.out, "_f32.json"), "w") as fh:
-            json.dump([{k: v for k, v in r.items() if not k.startswith("_")} for r in res], fh)
-        return 0
     t0 = time.perf_counter()
-    backend.init("cpu", "f64")
-    results = run_cases([c for c in selected if c.precision == "f64"])
-    if any(c.precision == "f32" for c in selected):
-        os.makedirs(args.out, exist_ok=True)
-        proc = subprocess.run([sys.executable, "-m", "benchmarks.stability", "--only-precision",
-                               "f32", "--out", args.out] + (["--fast"] if args.fast else []),
-                              text=True)
-        path = os.path.join(args.out, "_f32.json")
-        if proc.returncode == 0 and os.path.exists(path):
-            child = json.load(open(path))
-            finals = np.load(os.path.join(args.out, "_f32_final.npz"))
-            for i, r in enumerate(child):
-                for key in SNAPSHOTS:
-                    if f"{i}{key}_x" in finals:
-                        r[key] = tuple(finals[f"{i}{key}_{k}"] for k in "xuf")
-            results += child
-            os.remove(path)
-            os.remove(os.path.join(args.out, "_f32_final.npz"))
+    sweep = [Run("benchmarks.stability:run_named", [c.name, case_spec(c)], c.name,
+                 scene=(c.scene, c.overrides), own_process=c.precision != "f64")
+             for c in selected]
+    got = run_sweep(sweep, os.path.join(args.out, "stability_runs"), args.scheduler,
+                    args.workers, args.fresh, name="stability")
+    results = []
+    for c, r in zip(selected, got):
+        if "error" in r:
+            last = [l for l in r["error"].strip().splitlines() if l.strip()][-1:] or ["?"]
+            r = {"case": c.name, "frames": c.frames, "precision": c.precision, "note": c.note,
+                 "finite": False, "seconds": 0.0, "error": last[0].strip()[:300]}
         else:
-            results += [{"case": c.name, "frames": c.frames, "precision": c.precision,
-                         "note": c.note, "finite": False, "seconds": 0.0, "passed": False,
-                         "why": f"the f32 child process failed (exit {proc.returncode})"}
-                        for c in selected if c.precision == "f32"]
+            r.pop("wall_s", None)
+            r.pop("worker", None)
+            if "_compare" in r:
+                r["_compare"] = tuple(np.asarray(a) for a in r["_compare"])
+        r["passed"], r["why"] = judge(c, r)
+        results.append(r)
     compare_precisions(results, selected)
     seconds = time.perf_counter() - t0
-    write_report(results, args.out, command("benchmarks.stability", argv), seconds)
+    write_report(results, args.out, command("benchmarks.stability", argv), seconds,
+                 failed_lines(sweep, got))
     print(f"wrote {args.out}/stability.md: {sum(r['passed'] for r in results)} of "
           f"{len(results)} cases pass")
     return 0 if all(r["passed"] for r in results) else 1
