@@ -19,6 +19,10 @@ frames (not before 1.5 s) or after ``--seconds``. Drape coefficient, from the sh
 draped cloth projected on the horizontal plane, rasterised at 0.5 mm):
 DC = (A_shadow - A_support) / (A_specimen - A_support); the median over the starts is the
 reading, with the folds (local maxima of the rim's radius around the circle).
+
+Each (fabric, h, start) is a run of a sweep (``benchmarks.sweep``: a local cluster, one worker
+process per core, or ``--scheduler tcp://HOST:PORT``; cached in --out/cusick_runs/ or, without
+--out, results/cusick_runs/; --fresh runs them again).
 """
 import argparse
 import os
@@ -177,6 +181,19 @@ def run(fabric, h=0.01, start=0, method="mapping", seconds=4.0, log=print, compr
     return out
 
 
+def drape(fabric, h, start, method, seconds, compression, scale, edge_h, amplitude, turn,
+          band_scale, source=None):
+    """``run`` in a sweep's worker, without the final positions (``source``: this module's
+    source hash, ``module_hash``, for the cache key only)."""
+    from cloth import backend
+    backend.init("cpu", "f64")
+    out = run(fabric, h, start, method, seconds, log=lambda m: None, compression=compression,
+              scale=scale, edge_h=edge_h, amplitude=amplitude, turn=turn,
+              band_scale=tuple(band_scale))
+    out.pop("x")
+    return out
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--fabrics", nargs="*", default=None)
@@ -199,23 +216,30 @@ def main():
                     metavar=("THREADS", "BIAS"), help="factors on the warp and weft bands and on "
                     "the bias band")
     ap.add_argument("--out", default=None)
+    from benchmarks.sweep import add_arguments
+    add_arguments(ap)
     a = ap.parse_args()
     edge = dict(zip(a.h, a.edge_h or [h / 2 for h in a.h]))
     scale = dict(membrane=a.membrane_scale, shear=a.shear_scale, bend=a.bend_scale)
-    from cloth import backend, fabrics
-    backend.init("cpu", "f64")
-    rows = []
-    for name in a.fabrics or fabrics.names():
-        for h in a.h:
-            for s in range(a.starts):
-                rows.append(run(name, h, s, a.method, a.seconds, compression=a.compression,
-                                scale=scale, edge_h=edge[h], amplitude=1e-9 * a.amplitude,
-                                turn=a.turn, band_scale=a.band_scale))
+    from cloth import fabrics
+    from benchmarks.sweep import Run, failed_lines, module_hash, run_sweep
+    plan = [(name, h, s) for name in a.fabrics or fabrics.names() for h in a.h
+            for s in range(a.starts)]
+    source = module_hash("benchmarks.cusick")
+    sweep = [Run("benchmarks.cusick:drape",
+                 [name, h, s, a.method, a.seconds, a.compression, scale, edge[h],
+                  1e-9 * a.amplitude, a.turn, list(a.band_scale), source],
+                 f"{name} h={100 * h:g} cm start {s}") for name, h, s in plan]
+    results = run_sweep(sweep, os.path.join(a.out or "results", "cusick_runs"), a.scheduler,
+                        a.workers, a.fresh, name="cusick")
+    rows = [r for r in results if "error" not in r]
     L = ["| fabric | h (cm) | faces | DC per start | median DC | folds | frames | principal "
          "strain p5 / p95 (%) |", "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     for name in a.fabrics or fabrics.names():
         for h in a.h:
             rs = [r for r in rows if r["fabric"] == name and r["h"] == h]
+            if not rs:
+                continue
             at = f" ({100 * edge[h]:g} at the edge)" if edge[h] < h else ""
             L.append(f"| {name} | {100 * h:g}{at} | {rs[0]['faces']} | "
                      + ", ".join(f"{r['DC']:.3f}" for r in rs)
@@ -223,6 +247,7 @@ def main():
                      + ", ".join(str(r["folds"]) for r in rs) + " | "
                      + ", ".join(str(r["frames"]) for r in rs) + " | "
                      + f"{100 * rs[0]['eps_lo']:.2f} / {100 * rs[0]['eps_hi']:.2f} |")
+    L += failed_lines(sweep, results)
     print("\n".join(L))
     if a.out:
         os.makedirs(a.out, exist_ok=True)
