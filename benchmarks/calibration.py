@@ -5,9 +5,13 @@ tensile moduli, at any resolution and with any triangulation?
     python -m benchmarks.calibration --quick --out /tmp/cal   # h = 1 and 2 cm only
 
 Writes ``calibration.md`` (tables of B_eff / B and k_eff / k), ``calibration.json``,
-``calibration.png`` and ``ledge.png``. Three static experiments, each against a reference computed here (nothing
-hard-coded): the back-to-back cantilevers and the hanging strip below, and the lab's own
-cantilever on a ledge at widths 2-16 cm (``ledge``, #35).
+``calibration.png`` and ``ledge.png``. Every case (a cantilever pair, a ledge at every width,
+a strip) is a run of a sweep (``benchmarks.sweep``: a local cluster, one worker process per
+core, or ``--scheduler tcp://HOST:PORT``; cached in --out/calibration_runs/, --fresh runs
+them again); a worker keeps one ``Rig`` for all its runs. Three static experiments, each
+against a reference computed here (nothing hard-coded): the back-to-back cantilevers and the
+hanging strip below, and the lab's own cantilever on a ledge at widths 2-16 cm (``ledge``,
+#35).
 
 Cantilever (flexural rigidity B = ``material.k_bend``, N m). Two cantilevers back to back: a
 strip 2 L long (L = 20 cm, 8 cm wide) is held only along its middle line of vertices and both
@@ -450,51 +454,96 @@ DEFLECTIONS = (1.0, 8.0)        # G = q L^3 / B: chord 7 deg (small), 41.5 deg (
 LOCKING_SHEAR = (50.0, 1e3, 1e4)   # N/m
 
 
-def run(quick=False, log=print):
-    rig = Rig(capacity=3000)
-    hinge = Rig(capacity=3000, bending="hinge")
-    rows = []
+def plan(quick=False):
+    """The sweep's runs in the page's order: (kind, keyword arguments) for ``case``."""
     sizes = (0.01, 0.02) if quick else SIZES
-    for pattern in PATTERNS:
-        for h in sizes:
-            for direction in DIRECTIONS:
-                for G in DEFLECTIONS:
-                    t = time.perf_counter()
-                    r = cantilever(rig, G, h, pattern, direction)
-                    r["ratio_hinge"] = cantilever(hinge, G, h, pattern, direction)["ratio"]
-                    log(f"cantilever {pattern:11s} h={h:<6} {direction:4s} G={G:<4} "
-                        f"B_eff/B={r['ratio']:.3f} (hinge {r['ratio_hinge']:.3f}; "
-                        f"{time.perf_counter() - t:.1f} s)")
-                    rows.append(r)
+    out = [("cantilever", dict(G=G, h=h, pattern=p, direction=d))
+           for p in PATTERNS for h in sizes for d in DIRECTIONS for G in DEFLECTIONS]
     # A triangulation without mesh lines: one direction says all.
-    for h in sizes:
-        for G in DEFLECTIONS:
-            r = cantilever(rig, G, h, IRREGULAR, "warp")
-            r["ratio_hinge"] = cantilever(hinge, G, h, IRREGULAR, "warp")["ratio"]
-            log(f"cantilever {IRREGULAR:11s} h={h:<6} G={G:<4} B_eff/B={r['ratio']:.3f} "
-                f"(hinge {r['ratio_hinge']:.3f})")
-            rows.append(r)
+    out += [("cantilever", dict(G=G, h=h, pattern=IRREGULAR, direction="warp"))
+            for h in sizes for G in DEFLECTIONS]
     # Membrane locking: large deflection on the bias, against the shear modulus.
-    for pattern in PATTERNS:
-        for h in (0.01, 0.02):
-            for direction in ("bias", "bias-"):
-                for k_shear in LOCKING_SHEAR:
-                    r = cantilever(rig, DEFLECTIONS[-1], h, pattern, direction,
-                                   material=make_material(k_shear=k_shear))
-                    r.update(kind="locking", k_shear=k_shear)
-                    log(f"locking    {pattern:11s} h={h:<6} {direction:4s} k_shear={k_shear:g}"
-                        f" B_eff/B={r['ratio']:.3f}")
-                    rows.append(r)
-    rows += ledge_sweep(rig, sizes, log)
-    for pattern in PATTERNS:
-        for h in sizes:
-            for direction in ("warp", "weft"):
-                t = time.perf_counter()
-                r = hanging_strip(rig, h, pattern, direction)
-                log(f"strip      {pattern:11s} h={h:<6} {direction:4s} k_eff/k={r['ratio']:.4f}"
-                    f" ({time.perf_counter() - t:.1f} s)")
-                rows.append(r)
-    return rows
+    out += [("locking", dict(G=DEFLECTIONS[-1], h=h, pattern=p, direction=d, k_shear=k))
+            for p in PATTERNS for h in (0.01, 0.02) for d in ("bias", "bias-")
+            for k in LOCKING_SHEAR]
+    out += [("ledge", dict(G=G, h=h, pattern=p, direction=d))
+            for p, h, d, G in ledge_cases(sizes)]
+    out += [("strip", dict(h=h, pattern=p, direction=d))
+            for p in PATTERNS for h in sizes for d in ("warp", "weft")]
+    return out
+
+
+_RIGS = {}
+
+
+def _rig(capacity, bending="isotropic"):
+    """This process's Rig of that size and bending (built at its first use)."""
+    if (capacity, bending) not in _RIGS:
+        _RIGS[capacity, bending] = Rig(capacity=capacity, bending=bending)
+    return _RIGS[capacity, bending]
+
+
+def case(kind, kw, source=None):
+    """One run of the sweep (in a worker; ``source``: this module's hash, ``module_hash``,
+    for the cache key only): {"rows": the rows it adds to the page}. A cantilever is solved
+    with the isotropic energy and again with the hinge energy (``ratio_hinge``); a ledge at
+    every width of ``WIDTHS``; ``orthotropic``: ``orthotropic_sweep``'s cases of one ratio,
+    deflection and width."""
+    from cloth import backend
+    backend.init("cpu", "f64")
+    kw = dict(kw)
+    if kind == "orthotropic":
+        rig = _rig(700)
+        ratio, G, w = kw["ratio"], kw["G"], kw["width"]
+        rows = [ledge_orthotropic(rig, ratio, G=G, h=kw["h"], pattern=p, direction=d, width=w)
+                for p in PATTERNS for d in ("warp", "weft", "bias", "bias-")]
+        for gdeg in (0.0, 90.0, 45.0, -45.0, 30.0):
+            r = ledge_orthotropic(rig, ratio, G=G, h=kw["h"], pattern=IRREGULAR,
+                                  direction="warp", width=w, grain=np.radians(gdeg))
+            r["direction"] = f"{gdeg:g} deg"
+            rows.append(r)
+        return {"rows": rows}
+    rig = _rig(3000)
+    if kind == "cantilever":
+        r = cantilever(rig, **kw)
+        r["ratio_hinge"] = cantilever(_rig(3000, "hinge"), **kw)["ratio"]
+        return {"rows": [r]}
+    if kind == "locking":
+        k_shear = kw.pop("k_shear")
+        r = cantilever(rig, material=make_material(k_shear=k_shear), **kw)
+        r.update(kind="locking", k_shear=k_shear)
+        return {"rows": [r]}
+    if kind == "ledge":
+        return {"rows": [ledge(rig, width=w, **kw) for w in WIDTHS]}
+    if kind == "strip":
+        return {"rows": [hanging_strip(rig, **kw)]}
+    raise ValueError(f"unknown calibration run {kind!r}")
+
+
+def _label(kind, kw):
+    return f"{kind} " + " ".join(f"{k}={v}" for k, v in kw.items())
+
+
+def run(quick=False, log=print, out=None, scheduler=None, workers=None, fresh=False):
+    """Every case of ``plan`` as a sweep (cached in ``out``/calibration_runs); the rows."""
+    from benchmarks.sweep import Run, module_hash, run_sweep
+    jobs = plan(quick)
+    source = module_hash("benchmarks.calibration")
+    sweep = [Run("benchmarks.calibration:case", [kind, kw, source], _label(kind, kw))
+             for kind, kw in jobs]
+    results = run_sweep(sweep, os.path.join(out or os.path.join(ROOT, "results"),
+                                            "calibration_runs"),
+                        scheduler, workers, fresh, name="calibration")
+    rows = []
+    for run_, res in zip(sweep, results):
+        if "error" in res:
+            log(f"{run_.label}: failed")
+            continue
+        for r in res["rows"]:
+            if "shape" in r:
+                r["shape"] = np.asarray(r["shape"])
+            rows.append(r)
+    return rows, sweep, results
 
 
 # ---- the lab's cantilever on a ledge (#35, ASTM D1388) ----------------------------------
@@ -592,25 +641,30 @@ def ledge_orthotropic(rig, ratio, G=1.0, h=0.01, pattern="regular", direction="w
 ORTHO_RATIOS = (3.0, 4.0, 10.0)
 
 
-def orthotropic_sweep(rig, ratios=ORTHO_RATIOS, widths=(0.025, 0.04), h=0.01, log=print):
+def orthotropic_sweep(ratios=ORTHO_RATIOS, widths=(0.025, 0.04), h=0.01, log=print,
+                      scheduler=None, workers=None, fresh=False, out=None):
     """``ledge_orthotropic`` over B_warp / B_weft, widths, both deflections, the three grid
     patterns cut along warp, weft and bias, and one Delaunay mesh with the grain turned by
-    0, 90, 45, -45 and 30 deg (``--orthotropic``; docs/fabrics.md)."""
+    0, 90, 45, -45 and 30 deg (``--orthotropic``; docs/fabrics.md): a run per ratio,
+    deflection and width (``case``)."""
+    from benchmarks.sweep import Run, module_hash, run_sweep
+    jobs = [dict(ratio=ratio, G=G, width=w, h=h) for ratio in ratios for G in DEFLECTIONS
+            for w in widths]
+    source = module_hash("benchmarks.calibration")
+    sweep = [Run("benchmarks.calibration:case", ["orthotropic", kw, source],
+                 _label("orthotropic", kw)) for kw in jobs]
+    results = run_sweep(sweep, os.path.join(out or os.path.join(ROOT, "results"),
+                                            "calibration_runs"),
+                        scheduler, workers, fresh, name="orthotropic")
     rows = []
-    for ratio in ratios:
-        for G in DEFLECTIONS:
-            for w in widths:
-                for p in PATTERNS:
-                    for d in ("warp", "weft", "bias", "bias-"):
-                        rows.append(ledge_orthotropic(rig, ratio, G=G, h=h, pattern=p,
-                                                      direction=d, width=w))
-                for gdeg in (0.0, 90.0, 45.0, -45.0, 30.0):
-                    r = ledge_orthotropic(rig, ratio, G=G, h=h, pattern=IRREGULAR,
-                                          direction="warp", width=w, grain=np.radians(gdeg))
-                    r["direction"] = f"{gdeg:g} deg"
-                    rows.append(r)
-                log(f"orthotropic ratio {ratio:g} G {G:g} width {100 * w:g} cm: " + " ".join(
-                    f"{r['ratio']:.3f}" for r in rows[-17:]))
+    for kw, res in zip(jobs, results):
+        if "error" in res:
+            log(f"orthotropic ratio {kw['ratio']:g} G {kw['G']:g} width {100 * kw['width']:g} "
+                f"cm: failed: {res['error'].strip().splitlines()[-1]}")
+            continue
+        rows += res["rows"]
+        log(f"orthotropic ratio {kw['ratio']:g} G {kw['G']:g} width {100 * kw['width']:g} cm: "
+            + " ".join(f"{r['ratio']:.3f}" for r in res["rows"]))
     return rows
 
 
@@ -647,17 +701,6 @@ def ledge_cases(sizes):
             for direction in (("warp",) if pattern == IRREGULAR else DIRECTIONS):
                 for G in DEFLECTIONS:
                     yield pattern, h, direction, G
-
-
-def ledge_sweep(rig, sizes=SIZES, log=print):
-    rows = []
-    for pattern, h, direction, G in ledge_cases(sizes):
-        t = time.perf_counter()
-        got = [ledge(rig, G, h, pattern, direction, width=w) for w in WIDTHS]
-        rows += got
-        log(f"ledge      {pattern:11s} h={h:<6} {direction:5s} G={G:<4} B_eff/B " +
-            " ".join(f"{r['ratio']:.3f}" for r in got) + f" ({time.perf_counter() - t:.1f} s)")
-    return rows
 
 
 def _ledge_group(rows):
@@ -760,8 +803,9 @@ def ledge_plot(rows, path):
     plt.close(fig)
 
 
-def report(rows, out, seconds, command):
-    """calibration.md, calibration.json, calibration.png and ledge.png in ``out``."""
+def report(rows, out, seconds, command, failed=()):
+    """calibration.md, calibration.json, calibration.png and ledge.png in ``out`` (``failed``:
+    the lines listing failed runs, ``sweep.failed_lines``)."""
     from benchmarks.harness import header, write_json
     os.makedirs(out, exist_ok=True)
     write_json(out, "calibration", {"rows": [{k: v for k, v in r.items() if k != "shape"}
@@ -871,6 +915,7 @@ def report(rows, out, seconds, command):
                  f"{r['strain_linear']:.5f} | {r['ratio']:.4f} | {r['ratio_linear']:.4f} |")
     L.append("")
     L.append("![B_eff / B and k_eff / k](calibration.png)\n")
+    L += list(failed)
     with open(os.path.join(out, "calibration.md"), "w") as fh:
         fh.write("\n".join(L))
     plot(cant, strip, os.path.join(out, "calibration.png"))
@@ -941,20 +986,22 @@ def main():
     ap.add_argument("--orthotropic", action="store_true",
                     help="only the orthotropic ledge sweep (#52): print its tables "
                          "(docs/fabrics.md; ~3 min)")
+    from benchmarks.sweep import add_arguments, failed_lines
+    add_arguments(ap)
     a = ap.parse_args()
-    from cloth import backend
-    backend.init("cpu", "f64")
     t0 = time.perf_counter()
     if a.orthotropic:
         import sys
-        rows = orthotropic_sweep(Rig(capacity=700), log=lambda m: print(m, file=sys.stderr))
+        rows = orthotropic_sweep(log=lambda m: print(m, file=sys.stderr), scheduler=a.scheduler,
+                                 workers=a.workers, fresh=a.fresh, out=a.out)
         print("\n".join(orthotropic_lines(rows)))
         print(f"\n({time.perf_counter() - t0:.0f} s)", file=sys.stderr)
         return
-    rows = run(quick=a.quick)
+    rows, sweep, results = run(quick=a.quick, out=a.out, scheduler=a.scheduler,
+                               workers=a.workers, fresh=a.fresh)
     from benchmarks.harness import command
     cmd = command("benchmarks.calibration")
-    report(rows, a.out, time.perf_counter() - t0, cmd)
+    report(rows, a.out, time.perf_counter() - t0, cmd, failed_lines(sweep, results))
     print(f"wrote {os.path.join(a.out, 'calibration.md')}")
 
 
