@@ -140,7 +140,9 @@ def decide(m5, w5, w3, alpha=ALPHA):
     if against or p["m5 ~ w3"] < alpha:
         why = (f"{', '.join(against)} is significant the other way" if against else
                "mapping at 5 % differs significantly from warp-weft at 3 %")
-        return "refuted", lines + [f"Refuted: {why} (p < {alpha})."]
+        held = [n for n in below if p[n] < alpha and below[n]]
+        part = (f" What does hold: {' and '.join(held)} (p < {alpha})." if held else "")
+        return "refuted", lines + [f"Refuted: {why} (p < {alpha}).{part}"]
     if all(p[n] < alpha and below[n] for n in below):
         return "confirmed", lines + [
             f"Confirmed: both tighter settings smooth the chest (p < {alpha}) and mapping at 5 % "
@@ -203,9 +205,8 @@ def chance_lines(seeds, energy, dihedral, shirt):
     check, why_d = decide(*dihedral.values())
     lines += ["", "The same on the chest's mean |dihedral|:", ""] + why_d
     lines += ["", f"**Verdict on this shirt ({shirt}): {verdict}** (on the chest "
-              f"curvature energy; the mean |dihedral| says {check}). Its wrinkles are a few "
-              "triangles wide, so the verdict is this mesh's: a finer mesh may resolve "
-              "wrinkles this one cannot."]
+              f"curvature energy; the mean |dihedral| says {check}). The verdict is this mesh's: "
+              "a finer mesh may resolve wrinkles this one cannot."]
     return lines
 
 
