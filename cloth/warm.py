@@ -20,7 +20,6 @@ to ``loom_warm.log`` in the cache folder.
 Never started under pytest (PYTEST_CURRENT_TEST set), when LOOM_FAST_COMPILE is given, or with
 LOOM_BACKGROUND_COMPILE=0.
 """
-import argparse
 import json
 import os
 import subprocess

@@ -62,7 +62,7 @@ def _fmt(v):
 
 
 def _table(name, defaults):
-    rows = [f"| key | default | unit | meaning |", "|---|---|---|---|"]
+    rows = ["| key | default | unit | meaning |", "|---|---|---|---|"]
     for key, value in defaults.items():
         meta = SCHEMA.get(name, {}).get(key, Key())
         what = meta.doc + (" (" + " \\| ".join(meta.choices) + ")" if meta.choices else "")
