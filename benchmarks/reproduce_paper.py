@@ -10,7 +10,9 @@ methods x two band settings (vertical +-1 % / horizontal +-5 %, and swapped); th
 vertically. Writes ``table1.md`` (strain distributions, violations, wrinkle measures, size,
 time), ``table1.json`` and ``table1.png`` (shaded and warp-strain images from one camera).
 Table 2: the T-shirt at rest under three settings (``benchmarks/table2.py``): ``table2.md``,
-``table2.json``, ``table2.png``.
+``table2.json``, ``table2.png``. Each table's runs are a sweep (``benchmarks.sweep``: a local
+cluster, one worker process per core, or ``--scheduler tcp://HOST:PORT``; cached in
+--out/table1_runs/ or table2_runs/); the pictures are drawn here from the runs' final meshes.
 """
 import argparse
 import os
@@ -21,39 +23,91 @@ from benchmarks.paper_common import (BANDS, METHODS, label, measure,  # noqa: F4
                                      render_pair, settle)
 
 
-def table1(args):
+def table1_overrides(res, frames, band_name, method, remesh=False):
+    ov = {"cloth": {"resolution": res}, "sim": {"frames": frames},
+          "strain": dict(method=method, **BANDS[band_name])}
+    if remesh:
+        ov["remesh"] = {"enabled": True}
+    return ov
+
+
+def table1_run(res, frames, band_name, method, remesh=False):
+    """One cell of Table 1 (in a sweep's worker): the hanging cloth settled, its measures and
+    its final mesh (positions; with remeshing also the mesh's own uv, faces, grain and pins)
+    for the picture."""
+    from cloth import backend
+    backend.init("cpu", "f64")
+    import scenes
+    sim, ms, late_viol = settle(scenes.get("hanging"),
+                                [table1_overrides(res, frames, band_name, method, remesh)],
+                                frames)
+    r = measure(sim)
+    m = sim.model
+    r.update(method=method, bands=band_name, ms_per_frame=ms, late_violation=late_viol,
+             faces=int(m.n_faces), x=m.positions().tolist())
+    if remesh:
+        r.update(uv=m.uv.tolist(), tri=m.faces.tolist(), grain=m.grain.tolist(),
+                 pinned=m.pinned.tolist())
+    return r
+
+
+def table1_picture(renderer, res, frames, r, remesh=False):
+    """The shaded and warp-strain pair of a run's final state: a Simulator built here on the
+    run's mesh (remeshed: the mesh it returned), its positions set, not stepped."""
     import numpy as np
     import scenes
+    from cloth.model import MeshArrays
+    from cloth.simulator import Simulator
+    from scenes.common import resolve
     module = scenes.get("hanging")
+    cfg = resolve(module.DEFAULTS, [table1_overrides(res, frames, r["bands"], r["method"])])
+    setup = module.build(cfg)
+    x = np.asarray(r["x"])
+    if remesh:
+        setup.mesh = MeshArrays(uv=np.asarray(r["uv"]), x=x, faces=np.asarray(r["tri"]),
+                                pinned=np.asarray(r["pinned"], bool),
+                                grain=np.asarray(r["grain"]))
+    sim = Simulator(setup, cfg)
+    sim.model.set_positions(x)
+    return render_pair(renderer, sim)
+
+
+def table1(args):
+    import numpy as np
+    from benchmarks.sweep import Run, failed_lines, run_sweep
     res = 13 if args.quick else args.resolution
     frames = 40 if args.quick else args.frames
+    plan = [(res, frames, band_name, method, bool(args.remesh))
+            for band_name in BANDS for method in METHODS]
+    sweep = [Run("benchmarks.reproduce_paper:table1_run", list(p), f"{p[2]} {p[3]}",
+                 scene=("hanging", table1_overrides(*p))) for p in plan]
+    results = run_sweep(sweep, os.path.join(args.out, "table1_runs"), args.scheduler,
+                        args.workers, args.fresh, name="table1")
     renderer = None
     if not args.no_images:
         from ui.render import ClothRenderer, open_window
         window = open_window("table1", (400, 400), show_window=False)
         renderer = ClothRenderer(window, {"position": [0.0, 1.4, 2.9], "lookat": [0.0, 1.42, 0.0]})
     rows, tiles = [], {}
-    for band_name, band in BANDS.items():
-        for method in METHODS:
-            ov = {"cloth": {"resolution": res}, "sim": {"frames": frames},
-                  "strain": dict(method=method, **band)}
-            if args.remesh:
-                ov["remesh"] = {"enabled": True}
-            sim, ms, late_viol = settle(module, [ov], frames)
-            r = measure(sim)
-            r.update(method=method, bands=band_name, ms_per_frame=ms, late_violation=late_viol,
-                     faces=sim.model.n_faces)
-            rows.append(r)
-            print(f"{band_name} {method:9s} warp max {r['warp_max']:.4f} weft max "
-                  f"{r['weft_max']:.4f} viol {r['own_violation_max']:.2e} "
-                  f"{ms:.1f} ms/frame", flush=True)
-            if renderer is not None:
-                tiles[(band_name, method)] = label(render_pair(renderer, sim),
-                                                   f"{method}  {band_name}")
+    for r in results:
+        if "error" in r:
+            continue
+        if renderer is not None:
+            tiles[(r["bands"], r["method"])] = label(
+                table1_picture(renderer, res, frames, r, args.remesh),
+                f"{r['method']}  {r['bands']}")
+        for k in ("x", "uv", "tri", "grain", "pinned", "wall_s", "worker"):
+            r.pop(k, None)
+        rows.append(r)
+        print(f"{r['bands']} {r['method']:9s} warp max {r['warp_max']:.4f} weft max "
+              f"{r['weft_max']:.4f} viol {r['own_violation_max']:.2e} "
+              f"{r['ms_per_frame']:.1f} ms/frame", flush=True)
+    if not rows:
+        raise SystemExit("table1: every run failed: " + results[0]["error"][-600:])
     os.makedirs(args.out, exist_ok=True)
     write_table1_md(rows, os.path.join(args.out, "table1.md"), res, frames, args.remesh,
-                    args.cmd, time.time() - args.t0)
-    if tiles:
+                    args.cmd, time.time() - args.t0, failed_lines(sweep, results))
+    if len(tiles) == len(plan):
         import imageio.v2 as imageio
         grid = np.concatenate([np.concatenate([tiles[(b, m)] for m in METHODS], axis=1)
                                for b in BANDS], axis=0)
@@ -61,7 +115,8 @@ def table1(args):
     return rows
 
 
-def write_table1_md(rows, path, res, frames, remeshed=False, cmd=None, seconds=None):
+def write_table1_md(rows, path, res, frames, remeshed=False, cmd=None, seconds=None,
+                    failed=()):
     from benchmarks.harness import header, write_json
     cmd = cmd or "python -m benchmarks.reproduce_paper --table 1"
     write_json(os.path.dirname(path) or ".", "table1", {"rows": rows}, cmd, seconds)
@@ -87,6 +142,7 @@ def write_table1_md(rows, path, res, frames, remeshed=False, cmd=None, seconds=N
             v = r[key]
             cells.append(f"{v:.4g}" if isinstance(v, float) else str(v))
         lines.append("| " + " | ".join(cells) + " |")
+    lines += list(failed)
     with open(path, "w") as fh:
         fh.write("\n".join(lines) + "\n")
 
@@ -105,7 +161,7 @@ def main(argv=None):
                     help="Table 2: runs per setting; runs after the first start from positions "
                          "perturbed by 1 micrometre, to show how much the measures move by chance")
     from benchmarks.sweep import add_arguments
-    add_arguments(ap)           # Table 2's runs are a sweep (docs/sweeps.md)
+    add_arguments(ap)           # each table's runs are a sweep (docs/sweeps.md)
     args = ap.parse_args(argv)
     args.out = args.out or os.path.join("results", f"table{args.table}")
     from benchmarks.harness import command
