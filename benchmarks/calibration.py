@@ -524,16 +524,20 @@ def _label(kind, kw):
     return f"{kind} " + " ".join(f"{k}={v}" for k, v in kw.items())
 
 
-def run(quick=False, log=print, out=None, scheduler=None, workers=None, fresh=False):
-    """Every case of ``plan`` as a sweep (cached in ``out``/calibration_runs); the rows."""
+def _sweep(jobs, name, out=None, scheduler=None, workers=None, fresh=False):
+    """(the Runs, their results) of ``case`` over ``jobs`` [(kind, kw)], cached in
+    ``out``/calibration_runs (default results/)."""
     from benchmarks.sweep import Run, module_hash, run_sweep
-    jobs = plan(quick)
     source = module_hash("benchmarks.calibration")
     sweep = [Run("benchmarks.calibration:case", [kind, kw, source], _label(kind, kw))
              for kind, kw in jobs]
-    results = run_sweep(sweep, os.path.join(out or os.path.join(ROOT, "results"),
-                                            "calibration_runs"),
-                        scheduler, workers, fresh, name="calibration")
+    folder = os.path.join(out or os.path.join(ROOT, "results"), "calibration_runs")
+    return sweep, run_sweep(sweep, folder, scheduler, workers, fresh, name=name)
+
+
+def run(quick=False, log=print, out=None, scheduler=None, workers=None, fresh=False):
+    """Every case of ``plan`` as a sweep (``_sweep``); (the rows, the Runs, their results)."""
+    sweep, results = _sweep(plan(quick), "calibration", out, scheduler, workers, fresh)
     rows = []
     for run_, res in zip(sweep, results):
         if "error" in res:
@@ -647,15 +651,10 @@ def orthotropic_sweep(ratios=ORTHO_RATIOS, widths=(0.025, 0.04), h=0.01, log=pri
     patterns cut along warp, weft and bias, and one Delaunay mesh with the grain turned by
     0, 90, 45, -45 and 30 deg (``--orthotropic``; docs/fabrics.md): a run per ratio,
     deflection and width (``case``)."""
-    from benchmarks.sweep import Run, module_hash, run_sweep
     jobs = [dict(ratio=ratio, G=G, width=w, h=h) for ratio in ratios for G in DEFLECTIONS
             for w in widths]
-    source = module_hash("benchmarks.calibration")
-    sweep = [Run("benchmarks.calibration:case", ["orthotropic", kw, source],
-                 _label("orthotropic", kw)) for kw in jobs]
-    results = run_sweep(sweep, os.path.join(out or os.path.join(ROOT, "results"),
-                                            "calibration_runs"),
-                        scheduler, workers, fresh, name="orthotropic")
+    _, results = _sweep([("orthotropic", kw) for kw in jobs], "orthotropic", out, scheduler,
+                        workers, fresh)
     rows = []
     for kw, res in zip(jobs, results):
         if "error" in res:
