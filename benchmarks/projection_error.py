@@ -16,9 +16,13 @@ contacts and tshirt's seams are constraints of the same projection. The page's t
 per method and setting, the largest and the RMS vertex distance to the reference, how far its
 objective (x - x_hat)^T W (x - x_hat) / 2 lies above the reference's, the violation, AL rounds,
 Newton steps and the one projection's time (rough: a single call on a shared machine; each
-setting is timed on its second call from the same state, so without its compile).
+setting is timed on its second call from the same state, so without its compile). Each
+(scene, method) is a run of a sweep (``benchmarks.sweep``: a local cluster, one worker process
+per core, or ``--scheduler tcp://HOST:PORT``; cached in --out/projection_error_runs/, --fresh
+runs them again): the ms are of one Taichi thread, beside another run on the other core.
 """
 import argparse
+import os
 import time
 
 import numpy as np
@@ -40,6 +44,13 @@ SCENES = {"hanging": (9, 10, None), "drape": (13, 6, None), "pull": (9, 10, None
           "tshirt": (None, 8, ["mapping"])}
 
 
+def _overrides(method, resolution):
+    over = {"strain": {"method": method}}
+    if resolution:
+        over["cloth"] = {"resolution": resolution}
+    return over
+
+
 def objective(x, x_hat, W):
     """The projection's objective (x - x_hat)^T W (x - x_hat) / 2: the exact projection is the
     feasible point where it is least, so its excess is motion a solve takes out needlessly."""
@@ -47,20 +58,21 @@ def objective(x, x_hat, W):
     return 0.5 * e @ (W @ e)
 
 
-def measure(scene, method, resolution, frames):
+def measure(scene, method, resolution, frames, reference=None, settings=None):
     """Rows (setting, largest distance, RMS distance, objective's excess, typical edge,
-    violation, rounds, Newton steps, ms) of one method on one scene's saved state."""
+    violation, rounds, Newton steps, ms) of one method on one scene's saved state, for the
+    ``settings`` (default ``SETTINGS``) against ``reference`` (default ``REFERENCE``)."""
+    reference = REFERENCE if reference is None else reference
+    settings = SETTINGS if settings is None else settings
     from cloth.simulator import Simulator
-    over = {"strain": {"method": method}}
-    if resolution:
-        over["cloth"] = {"resolution": resolution}
+    over = _overrides(method, resolution)
     _, cfg, setup = configure(scene, over)
     base = Simulator(setup, cfg)
     for _ in range(frames):
         base.step_frame()
     state = base.substep_state()     # positions, velocities, the strain solve's state
     results = {}
-    for name, strain in [("reference", REFERENCE)] + list(SETTINGS.items()):
+    for name, strain in [("reference", reference)] + list(settings.items()):
         _, cfg, setup = configure(scene, [over, {"strain": strain}])
         sim = Simulator(setup, cfg)
         sim.time = base.time             # the saved state's clock (scripted pins follow it)
@@ -76,7 +88,7 @@ def measure(scene, method, resolution, frames):
         lim = sim.strain
         if name == "reference":
             if not lim.last_converged or lim.last_fallback:
-                raise SystemExit(f"{scene} {method}: the reference did not converge "
+                raise RuntimeError(f"{scene} {method}: the reference did not converge "
                                  f"({lim.last_iterations} rounds, fallback "
                                  f"{lim.last_fallback}): no distance to measure")
         else:
@@ -92,6 +104,13 @@ def measure(scene, method, resolution, frames):
             for name, (xs, f, viol, rounds, newton, ms) in results.items()]
 
 
+def run(scene, method, resolution, frames, reference, settings):
+    """``measure`` in a sweep's worker: {"rows": its rows}."""
+    from cloth import backend
+    backend.init("cpu", "f64")
+    return {"rows": measure(scene, method, resolution, frames, reference, settings)}
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", default="docs/speed", help="folder for projection_error.md/.json")
@@ -103,25 +122,33 @@ def main(argv=None):
                     help="frames before the measured substep (default: per scene)")
     ap.add_argument("--methods", nargs="+", default=None, choices=METHODS,
                     help="default: all three (tshirt: its own, mapping)")
+    from benchmarks.sweep import Run, add_arguments, failed_lines, run_sweep
+    add_arguments(ap)
     args = ap.parse_args(argv)
-    from cloth import backend
-    backend.init("cpu", "f64")
     cmd = command("benchmarks.projection_error", argv)
     t0 = time.time()
-    sections, data = [], []
+    plan = []
     for scene in args.scenes:
         res, frames, methods = SCENES[scene]
         resolution = None if res is None else (args.resolution or res)
         frames = args.frames or frames
-        methods = args.methods or methods or list(METHODS)
+        for method in args.methods or methods or list(METHODS):
+            plan.append((scene, method, resolution, frames))
+    sweep = [Run("benchmarks.projection_error:run", [*p, REFERENCE, SETTINGS],
+                 f"{p[0]} {p[1]}", scene=(p[0], _overrides(p[1], p[2]))) for p in plan]
+    results = run_sweep(sweep, os.path.join(args.out, "projection_error_runs"),
+                        args.scheduler, args.workers, args.fresh, name="projection_error")
+    sections, data = [], []
+    for scene in args.scenes:
+        mine = [(p, r) for p, r in zip(plan, results) if p[0] == scene]
+        resolution, frames = mine[0][0][2], mine[0][0][3]
         size = f"resolution {resolution}" if resolution else "its own mesh"
         L = [f"## {scene}, {size}, the projection of the first substep after frame {frames}",
              "", "| method | setting | distance to exact (mm) | of an edge | RMS (mm) | "
              "objective above exact | violation | rounds | Newton steps | ms (one solve) |",
              "|---|---|---|---|---|---|---|---|---|---|"]
-        for method in methods:
-            for name, dist, rms, gap, edge, viol, rounds, newton, ms in measure(
-                    scene, method, resolution, frames):
+        for (_, method, _, _), r in mine:
+            for name, dist, rms, gap, edge, viol, rounds, newton, ms in r.get("rows", []):
                 L.append(f"| {method} | {name} | {1e3 * dist:.3f} | {100 * dist / edge:.2f} % | "
                          f"{1e3 * rms:.3f} | {100 * gap:.2g} % | {viol:.1e} | {rounds} | "
                          f"{newton} | {ms:.0f} |")
@@ -131,6 +158,7 @@ def main(argv=None):
                                  rounds=rounds, newton=newton, ms=ms))
                 print(L[-1], flush=True)
         sections += L + [""]
+    sections += failed_lines(sweep, results)
     seconds = time.time() - t0
     page = ["# One substep's projection against the exact projection", "",
             header(cmd, seconds), "",
@@ -145,7 +173,6 @@ def main(argv=None):
             "reference's: the exact projection takes out of the motion the least the limits "
             "allow, so an excess is damping the solve adds (an answer a little outside the "
             "limits can sit a little below it).", ""] + sections
-    import os
     os.makedirs(args.out, exist_ok=True)
     with open(os.path.join(args.out, "projection_error.md"), "w") as fh:
         fh.write("\n".join(page))
