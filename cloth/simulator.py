@@ -115,6 +115,7 @@ class Simulator:
         self._untried = {"dynamics", "self_collision", "collision"}
         self._contact_push = 0.0       # m: the last obstacle pass's largest push
         self._remeshed = False         # the frame's remesh was applied
+        self.remeshes_applied = 0      # remeshes applied so far (others deferred or empty)
         self._row = None               # (frame, the metrics row the "metrics" stage measured)
         self.frame_ms = 0.0            # the last frame's wall time, every stage included
         # The frame, flat: every piece of work a frame does is one of these, timed on its own
@@ -318,6 +319,7 @@ class Simulator:
         if not self._apply_remesh(stats, params):
             return
         stats["applied"] = self._remeshed = self._remeshed_once = True
+        self.remeshes_applied += 1
         if len(stitches):
             self.dynamics.stitches_np = stats["vertex_map"][stitches].astype(np.int32)
         # The dynamics' last velocity change, carried to the new vertices like v: its CG
