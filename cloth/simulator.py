@@ -44,6 +44,10 @@ from .config import ConfigError
 from .settings import Settings
 from .strain.solver import StrainLimiter              # stage "strain_limit" (cloth/strain/)
 
+# m/s: a remesh carries the projection's last velocity of a vertex at least this fast (a
+# landing), and forgets the slower ones (``Simulator._remesh``).
+CARRY_SPEED = 1.0
+
 
 # Projection and obstacle pass alternate at most this often in a substep: the garment on its
 # dress form needed 4-5 in its landing frames, and stopped at 3 those frames ended at 3.7-4.7
@@ -336,12 +340,20 @@ class Simulator:
         self.dynamics.set_warm_start(dv)
         if self.strain is not None and new_face_data:   # only with remesh.warm_multipliers
             self.strain.set_face_state(new_face_data)
-        # The cloth's motion carried to the new vertices (kept through the re-projection that
-        # follows: ``_remesh_reproject``).
+        # The cloth's motion carried to the new vertices, handed to the solver after the
+        # re-projection that follows (``_remesh_reproject``).
         self._carried_motion = None
         if motion is not None:
-            self._carried_motion = (remesh.transfer_vertex_data(motion[0], stats), motion[1])
-            self.strain.set_last_velocity(*self._carried_motion)
+            v_last = remesh.transfer_vertex_data(motion[0], stats)
+            # Only fast motion is carried (``CARRY_SPEED``: a landing's). Slower vertices start
+            # the next projection where they were, which damps them: a remesh sets off small
+            # motion (a flip or a collapse on a curved sheet changes its shape), and carried
+            # at every speed, or from 0.4 m/s, that motion was kept going: a hanging sheet
+            # remeshed every frame never settled (warp-weft V5H1 at resolution 31, Table 1
+            # remeshed: kinetic energy 2e-3 to 1e-2 J over 150 frames at 3.1k faces, where
+            # it rests at 2e-7 J and 2.1k faces with this rule).
+            v_last[np.linalg.norm(v_last, axis=1) < CARRY_SPEED] = 0.0
+            self._carried_motion = (v_last, motion[1])
         if self._held is not None:
             self._find_held_again()
 
@@ -356,17 +368,23 @@ class Simulator:
         self._remeshed = False
         with_contacts = self.collider is not None and bool(self.collider.obstacles)
         if with_contacts or self.strain.own_violation_max() > self.strain.tol:
+            # It starts where the cloth is (the remesh left no last velocity): it corrects
+            # positions already at the end of the substep. Started moved on at the carried
+            # velocities, each remesh pushed the cloth on by v h and the correction became
+            # motion: a hanging sheet (warp-weft, V5H1, Table 1 remeshed) never settled
+            # (kinetic energy 2e-3 to 1e-2 J against 2e-7, remeshed every frame, 3.1k faces
+            # against 2.1k).
             self._project_limits(self.h, self.time)
             self.remesh_stats["reprojected"] = True
-            # Its correction is the remesh's, not the cloth's motion: the next projection
-            # moves on at the motion carried from before the remesh, not at this correction
-            # (carried on, the correction kept the remeshed mapping sheet moving: refined to
-            # 426 faces where it settles at 188, and three of 300 frames stalled for 100
-            # rounds; tests/test_strain_scenes.py).
-            if self._carried_motion is not None:
-                self.strain.set_last_velocity(*self._carried_motion)
-            else:
-                self.strain.forget_last_velocity()
+        # The next projection moves on at the motion carried from before the remesh, not at
+        # the re-projection's correction, which is the remesh's, not the cloth's motion
+        # (carried on, the correction kept the remeshed mapping sheet moving: refined to 426
+        # faces where it settles at 188, and three of 300 frames stalled for 100 rounds;
+        # tests/test_strain_scenes.py).
+        if self._carried_motion is not None:
+            self.strain.set_last_velocity(*self._carried_motion)
+        else:
+            self.strain.forget_last_velocity()
 
     def _defer_unmade(self, mesh, Mv, frozen, edges, params):
         """Defer this frame's remesh without making it when it would start from few
