@@ -14,13 +14,13 @@ import numpy as np
 def deformation_gradients(x, faces, Dm_inv):
     """F = Ds Dm^-1 per face, (F, 3, 2)."""
     x = np.asarray(x, dtype=np.float64)
-    return _times_2x2(x[faces[:, 1]] - x[faces[:, 0]], x[faces[:, 2]] - x[faces[:, 0]], Dm_inv)
+    return columns_times(x[faces[:, 1]] - x[faces[:, 0]], x[faces[:, 2]] - x[faces[:, 0]], Dm_inv)
 
 
-def _times_2x2(c0, c1, M):
-    """[c0 c1] M per face, (F, 3, 2), for columns c0, c1 (F, 3) and M (F, 2, 2): written out,
+def columns_times(c0, c1, B):
+    """[c0 c1] B for stacks: columns c0, c1 (N, k) and B (N, 2, 2); (N, k, 2). Written out,
     as numpy's batched matmul of small matrices is several times slower."""
-    return c0[:, :, None] * M[:, None, 0, :] + c1[:, :, None] * M[:, None, 1, :]
+    return c0[:, :, None] * B[:, None, 0, :] + c1[:, :, None] * B[:, None, 1, :]
 
 
 def material_Dm_inv(uv, faces):
@@ -34,7 +34,7 @@ def face_strains(x, uv, faces, grain, Dm_inv=None):
     model does: ``ClothModel.material_Dm_inv``)."""
     F = deformation_gradients(x, faces, material_Dm_inv(uv, faces) if Dm_inv is None
                               else Dm_inv)
-    Fg = _times_2x2(F[:, :, 0], F[:, :, 1], grain)     # columns: F e_warp, F e_weft
+    Fg = columns_times(F[:, :, 0], F[:, :, 1], grain)  # columns: F e_warp, F e_weft
     wu, wv = Fg[:, :, 0], Fg[:, :, 1]
     eta = singular_values(F)
     return {

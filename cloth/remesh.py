@@ -30,6 +30,7 @@ import numpy as np
 
 from cloth.model import MeshArrays, ModelError, build_edges, dihedral_angles, \
     signed_material_areas
+from cloth import metrics
 from cloth.remesh_params import RemeshParams  # noqa: F401 (re-exported)
 
 # A triangle counts as degenerate when twice its area is below this fraction of its longest
@@ -95,12 +96,7 @@ def _inv2(A):
     return inv / det[:, None, None]
 
 
-def _times(c0, c1, B):
-    """[c0 c1] B for stacks: columns c0, c1 (N, k) and B (N, 2, 2); (N, k, 2)."""
-    out = np.empty(c0.shape + (2,))
-    for c in (0, 1):
-        out[:, :, c] = c0 * B[:, 0, c][:, None] + c1 * B[:, 1, c][:, None]
-    return out
+_times = metrics.columns_times
 
 
 def face_sizing(mesh, params, obstacle_distance=None, edges=None):

@@ -369,11 +369,8 @@ class Simulator:
         with_contacts = self.collider is not None and bool(self.collider.obstacles)
         if with_contacts or self.strain.own_violation_max() > self.strain.tol:
             # It starts where the cloth is (the remesh left no last velocity): it corrects
-            # positions already at the end of the substep. Started moved on at the carried
-            # velocities, each remesh pushed the cloth on by v h and the correction became
-            # motion: a hanging sheet (warp-weft, V5H1, Table 1 remeshed) never settled
-            # (kinetic energy 2e-3 to 1e-2 J against 2e-7, remeshed every frame, 3.1k faces
-            # against 2.1k).
+            # positions already at the end of the substep, so the carried motion is handed
+            # over only after it.
             self._project_limits(self.h, self.time)
             self.remesh_stats["reprojected"] = True
         # The next projection moves on at the motion carried from before the remesh, not at

@@ -555,9 +555,7 @@ class StrainLimiter:
         on, which holds a landing sheet in the air (its kinetic energy fell from 0.122 J to
         0.006 J in the frame after the remesh that refined it)."""
         self._sync_mesh()
-        full = self._ws.v_last.to_numpy()
-        full[:self.model.n_verts] = np.asarray(v_last, np.float64)
-        self._ws.v_last.from_numpy(full)
+        ndarrays.put_rows(self._ws.v_last, np.asarray(v_last, np.float64))
         self._v_last_valid = bool(valid)
 
     def forget_last_velocity(self):
