@@ -6,8 +6,9 @@ Host-side numpy/Python: ``remesh(mesh, params)`` returns a new ``MeshArrays``. O
    "too long" when ``du^T M du > 1``. ``M`` sums four criteria, each written so that the
    quantity it bounds changes by at most its ``refine_*`` limit across one edge:
    curvature (turning of the normal), velocity gradient, compression (buckling to come) and,
-   when an obstacle is given, proximity. Face metrics are averaged to vertices (weighted by
-   material area) and their eigenvalues clamped by ``size_min``/``size_max`` and ``aspect_min``.
+   when an obstacle is given, proximity. Each face's metric has its eigenvalues clamped by
+   ``size_min``/``size_max`` and ``aspect_min``; the clamped metrics are averaged to the
+   vertices (weighted by material area).
 2. Operations, each one local, checked, and either applied whole or not at all:
    split edges too long in the metric (longest first), flip to the anisotropic Delaunay
    triangulation, collapse edges whose removal makes no edge too long and inverts nothing,
@@ -169,8 +170,17 @@ def _vertex_mean(face_T, area, faces, n_verts):
 
 
 def vertex_sizing(face_M, area, faces, n_verts, params):
-    """Area-weighted average of face metrics at vertices, eigenvalues clamped. (V, 2, 2)."""
-    return clamp_metric(_vertex_mean(face_M, area, faces, n_verts), params)
+    """Each face's metric clamped (``clamp_metric``), then the area-weighted average of the
+    clamped metrics at the vertices. (V, 2, 2).
+
+    Clamped first, as ARCSim does: a mean of metrics whose eigenvalues lie within the bounds
+    and the aspect limit lies within them too, and one sharply curved face (a crease whose
+    metric asks for far below ``size_min``) counts in its vertices' mean as a face at
+    ``size_min``, not as a metric that outweighs all of the vertex's other faces. Averaged
+    unclamped and clamped after, such a face set its three vertices' finest size to
+    ``size_min``: on the draped sheet (frame 30) that was the finest size of 78 % of the
+    vertices, against 18 % clamped first, and the metric asked for 3.3k faces against 3.0k."""
+    return _vertex_mean(clamp_metric(face_M, params), area, faces, n_verts)
 
 
 def clamp_metric(M, params):

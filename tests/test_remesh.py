@@ -93,6 +93,23 @@ def test_sizing_clamps(rng):
                                                   1 / p.size_min ** 2])
 
 
+def test_one_sharp_face_counts_as_size_min_in_its_vertices_mean():
+    # Each face's metric is clamped before the vertices average them: a crease in one face,
+    # asking for 1 mm, weighs in its vertices' means as size_min, not as 1e6 / m^2 that
+    # outweighs their coarse faces and sets them all to size_min.
+    p = RemeshParams(size_min=0.02, size_max=0.1)
+    m = sheet(11)
+    fM = np.tile(np.eye(2) / p.size_max ** 2, (len(m.faces), 1, 1))
+    fM[40] = np.eye(2) / 0.001 ** 2
+    area = signed_material_areas(m.uv, m.faces) / 2
+    Mv = vertex_sizing(fM, area, m.faces, len(m.uv), p)
+    for vert in m.faces[40]:
+        at = np.flatnonzero(np.any(m.faces == vert, axis=1))
+        w = area[at] / area[at].sum()
+        expect = w[at == 40].sum() / p.size_min ** 2 + w[at != 40].sum() / p.size_max ** 2
+        assert np.allclose(np.linalg.eigvalsh(Mv[vert]), expect)
+        assert expect < 0.5 / p.size_min ** 2            # well coarser than size_min
+
 def test_closed_form_eigen_matches_numpy(rng):
     A = rng.standard_normal((200, 2, 2))
     M = A @ np.transpose(A, (0, 2, 1))
