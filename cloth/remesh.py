@@ -12,12 +12,15 @@ Host-side numpy/Python: ``remesh(mesh, params)`` returns a new ``MeshArrays``. O
 2. Operations, each one local, checked, and either applied whole or not at all:
    split edges too long in the metric (longest first), flip to the anisotropic Delaunay
    triangulation, collapse edges whose removal makes no edge too long and inverts nothing,
-   flip again. Collapses keep a hysteresis margin below the split threshold, except for
-   edges too short to be half of a recent split (see ``_collapse_limit``).
+   flip again. A collapse merges one end of the edge into the other or, where that would
+   make too long an edge, both ends into a new vertex at the edge's midpoint (see
+   ``_collapse_phase``). Collapses keep a hysteresis margin below the split threshold,
+   except for edges too short to be half of a recent split (see ``_collapse_limit``).
 3. Transfer. A split puts the new vertex at the edge's material midpoint and gives it the
-   midpoint of x, v (exact linear interpolation in material space); flips and collapses never
-   move a vertex, so existing vertices keep uv, x, v, pins exactly. New faces inherit grain and
-   ``face_data`` rows from the face they were cut from.
+   midpoint of x, v (exact linear interpolation in material space); a collapse to the
+   midpoint makes its vertex the same way. Flips and collapses never move a vertex that
+   survives them, so existing vertices keep uv, x, v, pins exactly. New faces inherit grain
+   and ``face_data`` rows from the face they were cut from.
 
 The mutable mesh during the operations is plain Python lists (faces and a vertex -> faces
 index); numpy does everything that touches the whole mesh at once (sizing, candidate lists).
@@ -395,11 +398,10 @@ class _Work:
         return True
 
     # -- split -------------------------------------------------------------------------------
-    def split(self, a, b):
-        """Insert a vertex at the material midpoint of edge (a, b); each face beside the edge
-        becomes two. Always valid: the halves of a valid triangle are valid. Returns the new
-        vertex and the opposite vertices."""
-        fs = self.edge_faces(a, b)
+    def _midpoint_vertex(self, a, b, boundary):
+        """Append a vertex at the material midpoint of (a, b) with the means of the ends' x, v
+        and metric, unpinned (its pin target where it is); returns its index. Its parents go
+        to ``split_parents`` for ``transfer_vertex_data``."""
         m = len(self.uv)
         self.split_parents.append((a, b))
         mid = lambda arr: [0.5 * (s + t) for s, t in zip(arr[a], arr[b])]
@@ -412,8 +414,16 @@ class _Work:
         self.frozen.append(False)
         self.keep.append(False)
         self.alive.append(True)
-        self.bnd.append(len(fs) == 1)
+        self.bnd.append(boundary)
         self.vf.append(set())
+        return m
+
+    def split(self, a, b):
+        """Insert a vertex at the material midpoint of edge (a, b); each face beside the edge
+        becomes two. Always valid: the halves of a valid triangle are valid. Returns the new
+        vertex and the opposite vertices."""
+        fs = self.edge_faces(a, b)
+        m = self._midpoint_vertex(a, b, len(fs) == 1)
         opp = []
         for f in fs:
             p, q, r = self.around_edge(f, a, b)
@@ -537,6 +547,74 @@ class _Work:
         self.alive[a] = False
         self.n_collapse += 1
         self.touched.update(na)
+        return True
+
+
+    def collapse_to_midpoint(self, a, b):
+        """Replace both ends of edge (a, b) by one new vertex at its material midpoint (made as
+        a split makes one: ``_midpoint_vertex``), if neither end is pinned or frozen, the
+        boundary keeps its polygon (an interior edge, or a boundary edge whose ends both lie
+        where the boundary is straight), the mesh stays manifold, and no edge from the new
+        vertex is longer than ``_collapse_limit``, no triangle worse than aspect_min and none
+        inverted in material or world space.
+
+        Why besides ``collapse``: merging a into b moves every edge of a to b, so in a mesh of
+        edges L it makes edges up to 2 L (to the neighbour of a opposite b); the midpoint
+        makes them up to about 1.5 L. A mesh refined for a metric that then relaxes (a landing
+        refines, the sheet comes to rest) has edges of 0.5-0.7 in the relaxed metric, which
+        merges can never coarsen under the collapse limit and midpoint collapses can."""
+        if a == b or self.keep[a] or self.keep[b] or not (self.alive[a] and self.alive[b]):
+            return False
+        fs = self.edge_faces(a, b)
+        if not fs:
+            return False
+        if (self.bnd[a] or self.bnd[b]) and not (self.boundary_collapse_ok(a, b, fs)
+                                                 and self.boundary_collapse_ok(b, a, fs)):
+            return False
+        na, nb = self.neighbours(a), self.neighbours(b)
+        opp = {t for f in fs for t in self.faces[f]} - {a, b}
+        if na & nb != opp:
+            return False
+        ma, mb = self.M[a], self.M[b]
+        mm = [0.5 * (s + t) for s, t in zip(ma, mb)]
+        um = [0.5 * (s + t) for s, t in zip(self.uv[a], self.uv[b])]
+        limit = _collapse_limit(self.p, self.metric_len2(a, b))
+        for n in (na | nb) - {a, b}:
+            mn, du, dv = self.M[n], self.uv[n][0] - um[0], self.uv[n][1] - um[1]
+            if 0.5 * ((mn[0] + mm[0]) * du * du + 2 * (mn[1] + mm[1]) * du * dv
+                      + (mn[2] + mm[2]) * dv * dv) > limit:
+                return False
+        x = self.x
+        xm = [0.5 * (s + t) for s, t in zip(x[a], x[b])]
+        changed = []
+        for end in (a, b):
+            for f in self.vf[end] - fs:
+                _, q, r = self.rotate_to(self.faces[f], end)
+                pq, pr = self.uv[q], self.uv[r]
+                ax, ay, bx, by = pq[0] - um[0], pq[1] - um[1], pr[0] - um[0], pr[1] - um[1]
+                longest = max(ax * ax + ay * ay, bx * bx + by * by,
+                              (pr[0] - pq[0]) ** 2 + (pr[1] - pq[1]) ** 2)
+                if _cross2(ax, ay, bx, by) <= _AREA_REL_EPS * longest:
+                    return False
+                mf = [(mm[c] + self.M[q][c] + self.M[r][c]) / 3.0 for c in range(3)]
+                if self._quality_uv(mf, um, pq, pr) < self.p.aspect_min:
+                    return False
+                if _dot3(_normal(x[end], x[q], x[r]), _normal(xm, x[q], x[r])) <= 0:
+                    return False
+                changed.append((f, q, r))
+        m = self._midpoint_vertex(a, b, len(fs) == 1)
+        for f in fs:
+            for t in self.faces[f]:
+                self.vf[t].discard(f)
+            self.set_face(f, None)
+        for f, q, r in changed:
+            self.set_face(f, [m, q, r])
+            self.vf[m].add(f)
+        self.vf[a], self.vf[b] = set(), set()
+        self.alive[a] = self.alive[b] = False
+        self.n_collapse += 1
+        self.touched.update(na | nb | {m})
+        self.touched -= {a, b}
         return True
 
 
@@ -689,14 +767,63 @@ def _collapse_candidates(w, only=None):
     return list(zip(a[sel].tolist(), b[sel].tolist()))
 
 
+def _midpoint_candidates(w, only=None):
+    """Edges (a, b) worth collapsing to their midpoint, in sweep order (by the midpoint's u,
+    then v, then length): neither end kept, the edge shorter than the collapse limit, and every
+    edge from the midpoint to the ends' neighbours short enough (``_collapse_limit``, the
+    midpoint's metric the mean of the ends'), computed for all edges at once; the exact check
+    is redone per collapse. ``only``: optional vertex mask, an edge tried if either end is in."""
+    _, ev, _, eo, uv, Mv, keep = w.snapshot()
+    limit = (1.0 - w.p.collapse_margin) ** 2
+    own = _edge_len2(uv, Mv, ev[:, 0], ev[:, 1])
+    ok = (own <= limit) & ~keep[ev[:, 0]] & ~keep[ev[:, 1]]
+    if only is not None:
+        ok &= only[ev[:, 0]] | only[ev[:, 1]]
+    cand = np.flatnonzero(ok)
+    if len(cand) == 0:
+        return []
+    # Neighbours of each vertex (CSR over the directed edges), expanded over both ends.
+    src = np.concatenate([ev[:, 0], ev[:, 1]])
+    order = np.argsort(src, kind="stable")
+    dst = np.concatenate([ev[:, 1], ev[:, 0]])[order]
+    deg = np.bincount(src, minlength=len(uv))
+    start = np.cumsum(deg) - deg
+    ends = np.concatenate([ev[cand, 0], ev[cand, 1]])
+    owner = np.concatenate([np.arange(len(cand))] * 2)
+    reps = deg[ends]
+    first = np.cumsum(reps) - reps
+    pair = np.repeat(np.arange(len(ends)), reps)
+    n = dst[start[ends[pair]] + np.arange(reps.sum()) - first[pair]]
+    e = cand[owner[pair]]
+    a, b = ev[e, 0], ev[e, 1]
+    mid = 0.5 * (uv[a] + uv[b])
+    mm = 0.5 * (Mv[a] + Mv[b])
+    d = uv[n] - mid
+    m2 = 0.5 * (mm + Mv[n])
+    l2 = m2[:, 0] * d[:, 0] ** 2 + 2 * m2[:, 1] * d[:, 0] * d[:, 1] + m2[:, 2] * d[:, 1] ** 2
+    l2[(n == a) | (n == b)] = 0.0
+    worst = np.zeros(len(cand))
+    np.maximum.at(worst, owner[pair], l2)
+    sel = cand[worst <= _collapse_limit(w.p, own[cand])]
+    mid = 0.5 * (uv[ev[sel, 0]] + uv[ev[sel, 1]])
+    sel = sel[np.lexsort((own[sel], mid[:, 1], mid[:, 0]))]
+    return list(zip(ev[sel, 0].tolist(), ev[sel, 1].tolist()))
+
+
 def _collapse_phase(w):
     """Collapse rounds: the first tries every vertex, later ones only the vertices around
-    the collapses of the round before (nothing else changed)."""
+    the collapses of the round before (nothing else changed). In each round, merges of one
+    end into the other first (they keep a vertex where it is), then collapses to the midpoint
+    of the edges whose merges were all refused (``_Work.collapse_to_midpoint``)."""
     only = None
     for _ in range(w.p.collapse_rounds):
         w.touched = set()
         for a, b in _collapse_candidates(w, only):
             w.collapse(a, b)
+        if only is not None:
+            only = np.concatenate([only, np.zeros(len(w.uv) - len(only), bool)])
+        for a, b in _midpoint_candidates(w, only):
+            w.collapse_to_midpoint(a, b)
         if not w.touched:
             break
         only = np.zeros(len(w.uv), dtype=bool)

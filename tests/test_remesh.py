@@ -93,6 +93,7 @@ def test_sizing_clamps(rng):
                                                   1 / p.size_min ** 2])
 
 
+
 def test_one_sharp_face_counts_as_size_min_in_its_vertices_mean():
     # Each face's metric is clamped before the vertices average them: a crease in one face,
     # asking for 1 mm, weighs in its vertices' means as size_min, not as 1e6 / m^2 that
@@ -304,6 +305,64 @@ def test_collapse_refused_when_it_inverts_a_world_triangle():
     assert not w.collapse(12, 7)
 
 
+
+def test_collapse_to_midpoint_keeps_mesh_valid(rng):
+    m = sheet(9, pattern="alternating")
+    m.x[:, 2] = 0.002 * rng.standard_normal(len(m.x))
+    m.v = rng.standard_normal(m.x.shape)
+    m.pinned[[0, 5]] = True
+    area0, blen0 = signed_material_areas(m.uv, m.faces).sum(), boundary_length(m)
+    w = work_on(m, size=1.0)
+    corners = [0, 8, 72, 80]
+    for _ in range(200):
+        a = int(rng.integers(0, len(w.uv)))
+        if w.alive[a]:
+            b = int(rng.choice(sorted(w.neighbours(a))))
+            mid = len(w.uv)
+            xa, xb, va, vb = w.x[a], w.x[b], w.v[a], w.v[b]
+            if w.collapse_to_midpoint(a, b):
+                # The new vertex is made as a split makes one: the ends' means.
+                assert np.allclose(w.x[mid], 0.5 * (np.add(xa, xb)))
+                assert np.allclose(w.v[mid], 0.5 * (np.add(va, vb)))
+                assert not (w.alive[a] or w.alive[b])
+                check_valid(exported(w, m), area0, blen0)
+    assert w.n_collapse > 10
+    assert all(w.alive[c] for c in corners + [5])
+
+
+def test_collapse_to_midpoint_keeps_boundary_corners_and_pins():
+    m = sheet(5)                                  # vertex (i, j) = (u, v) * 4 is 5 i + j
+    w = work_on(m, size=1.0)
+    assert not w.collapse_to_midpoint(0, 1)       # a corner never goes
+    assert not w.collapse_to_midpoint(2, 7)       # a boundary vertex along an interior edge
+    assert w.collapse_to_midpoint(1, 2)           # along the straight boundary: allowed
+    assert w.uv[-1] == [0.0, 0.375] and w.bnd[-1]
+    m2 = sheet(5)
+    m2.pinned[6] = True
+    assert not work_on(m2, size=1.0).collapse_to_midpoint(6, 7)
+    assert work_on(sheet(5), size=1.0).collapse_to_midpoint(12, 7)
+
+
+def test_a_mesh_refined_for_a_finer_metric_coarsens_when_it_relaxes():
+    # A landing refines the sheet, then it comes to rest and the metric relaxes. Here a flat
+    # sheet refined as a uniform metric shrinks from 0.08 to 0.03 m, which then grows back to
+    # 0.045 m. Merging one end of an edge into the other makes edges of twice the mesh's, and
+    # the refined mesh (0.46 in the relaxed metric) stayed: 4,608 faces, 4.0 times the count
+    # of unit equilateral triangles the metric asks for. Collapses to the midpoint (1.5 times)
+    # within the 0.9 limit coarsen it; a mesh made by splits alone has about twice that count.
+    uv, faces = make_sheet(1.0, 1.0, 13, 13, pattern="alternating")
+    m = MeshArrays(uv=uv, x=np.c_[uv, np.zeros(len(uv))], faces=faces)
+    sizes = list(np.geomspace(0.08, 0.03, 15)) + [0.03] * 3 + \
+        list(np.geomspace(0.03, 0.045, 8)) + [0.045] * 3
+    for s in sizes:
+        m, _, st = remesh(m, RemeshParams(), sizing=np.tile(np.eye(2) / s ** 2, (len(m.uv), 1, 1)))
+    asked = 1.0 / (np.sqrt(3) / 4 * 0.045 ** 2)
+    check_valid(m)
+    length = np.linalg.norm(np.diff(m.uv[build_edges(m.faces)[0]], axis=1)[:, 0], axis=1) / 0.045
+    assert length.max() <= 1.0 + 1e-12
+    assert np.median(length) > 0.6, np.median(length)
+    assert len(m.faces) < 3.0 * asked, len(m.faces) / asked
+
 # -- whole remesh ----------------------------------------------------------------------------
 def test_random_rounds_keep_invariants(rng):
     m = sheet(13, pattern="alternating", x_fn=lambda uv: fold_x(uv, 0.8))
@@ -451,7 +510,7 @@ def test_collapse_margin_applies_to_all_but_short_edges():
     # sheet(5): spacing 0.25. Collapsing vertex 6 (0.25, 0.25) onto 7 (0.25, 0.5) creates
     # edges from 7 of at most |(0.25, 0.5)| = 0.559 (to vertex 0); the edge itself is 0.25.
     far, own = np.hypot(0.25, 0.5), 0.25
-    p = RemeshParams()                            # collapse_margin 0.2
+    p = RemeshParams(collapse_margin=0.2)
     # Uniform metric size s: in it the collapsed edge is own / s long, the new ones far / s.
     # s = 0.6: edge 0.42, not short (> (1 - 0.2) / 2 = 0.4): new edges of 0.93 exceed 0.8.
     assert own / 0.6 > 0.4 and 0.8 < far / 0.6 < 1.0
@@ -469,17 +528,18 @@ def test_split_halves_are_not_collapsed_back_until_the_metric_coarsens_by_the_ma
     # Edges of 0.25 in a metric of size 0.24 (length 1.04) are split; if the metric then
     # coarsens by less than the margin (size 0.28: old edges 0.89, halves 0.45), no half is
     # collapsed: each would re-create a 0.89 edge, past 1 - margin = 0.8.
+    p = RemeshParams(collapse_margin=0.2)
     m = sheet(5)
-    w = work_on(m, size=0.24)
+    w = work_on(m, p, size=0.24)
     mid, _ = w.split(6, 7)
     out = exported(w, m)
     new = int(np.flatnonzero(np.all(np.isclose(out.uv, w.uv[mid]), axis=1))[0])
     a = int(np.flatnonzero(np.all(np.isclose(out.uv, [0.25, 0.25]), axis=1))[0])
     b = int(np.flatnonzero(np.all(np.isclose(out.uv, [0.25, 0.5]), axis=1))[0])
-    w2 = work_on(out, size=0.28)
+    w2 = work_on(out, p, size=0.28)
     assert not w2.collapse(new, a) and not w2.collapse(new, b)
     # Coarsened by more than the margin (size 0.33: halves 0.38 are short), they go.
-    assert work_on(out, size=0.33).collapse(new, a)
+    assert work_on(out, p, size=0.33).collapse(new, a)
 
 
 def test_affine_fields_are_reproduced_exactly(rng):
