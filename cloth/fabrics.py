@@ -258,6 +258,29 @@ def automatic_bias(warp, weft):
     return lo, hi
 
 
+def shear_limits(strain):
+    """{method: the largest shear angle (deg) of the threads' cell that the method's bands
+    ``strain`` (warp, weft, bias) admit either way}: the threads unstretched and turned
+    towards (or away from) each other by gamma/2 each (w_u . w_v = +-sin gamma), so the
+    principal stretches are sqrt(1 +- sin gamma) along the bias. warp-weft bounds the
+    diagonal w_u + w_v by its bias band (the upper end one way, the lower end the other); svd
+    bounds eta1 by the warp band's upper end and eta2 by the weft band's lower end; mapping,
+    whose factors are 1/sqrt 2 at 45 deg, bounds both by sqrt 2 x the tighter thread band
+    (docs/method.md §3). The fabric's own shear at the limit load is
+    ``derive(...)['shear_deg']``."""
+    w, f = strain["warp"], strain["weft"]
+    b = strain.get("bias") or automatic_bias(w, f)
+    r2 = math.sqrt(2.0)
+    ends = {"warp-weft": (b[1], b[0]),
+            "svd": (w[1], f[0]),
+            "mapping": (r2 * min(w[1], f[1]), r2 * max(w[0], f[0]))}
+    out = {}
+    for m, (hi, lo) in ends.items():
+        s = min((1.0 + hi) ** 2 - 1.0, 1.0 - (1.0 + max(lo, -1.0)) ** 2, 1.0)
+        out[m] = math.degrees(math.asin(max(s, 0.0)))
+    return out
+
+
 def derive(fabric, limit_load=LIMIT_LOAD):
     """The rule of the module docstring applied to a ``Fabric`` (or a name): a dict with
     ``material`` (Loom's material keys, SI), ``strain`` (warp, weft, bias bands), ``shear_deg``
@@ -415,6 +438,15 @@ def table_lines(directory=None):
                  f"{d['crimp_modulus']['weft']:.4g} | {m['k_shear']:.4g} | {m['density']:.3g} | "
                  f"{1e6 * m['k_bend_warp']:.3g} / {1e6 * m['k_bend_weft']:.3g} | " +
                  " / ".join(f"{100 * c:.2f}" for c in bending_lengths(d)) + " |")
+    L += ["", "The shear each method's derived bands admit (`cloth.fabrics.shear_limits`: the threads' "
+          "cell sheared, the threads unstretched):", "",
+          "| fabric | shear at the limit load, from G and 2HG (deg) | largest shear admitted: "
+          "warp-weft / svd / mapping (deg) |", "| --- | --- | --- |"]
+    for p in paths(directory):
+        d = derive(load(p))
+        lim = shear_limits(d["strain"])
+        L.append(f"| {d['name']} | {d['shear_deg']:.3g} | "
+                 + " / ".join(f"{lim[m]:.3g}" for m in ("warp-weft", "svd", "mapping")) + " |")
     return L
 
 

@@ -150,6 +150,44 @@ def test_bias_band_contains_the_automatic_one_and_the_shear_is_capped():
         assert s["bias"][0] < 0 < s["bias"][1]
 
 
+def _sheared_cell(gamma):
+    """One right triangle of the threads' cell (warp = u, weft = v) sheared by gamma (rad):
+    each thread unstretched and turned by gamma / 2 towards the other."""
+    uv = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    c, s = math.cos(gamma / 2), math.sin(gamma / 2)
+    F = np.array([[c, s], [s, c]])
+    x = np.c_[uv @ F.T, np.zeros(3)]
+    return x, uv, np.array([[0, 1, 2]])
+
+
+@pytest.mark.parametrize("name", ["denim", "cotton-shirting", "cotton-jersey"])
+def test_shear_limits_are_where_each_methods_own_constraints_start_to_bind(name):
+    """cloth.fabrics.shear_limits against the methods' constraint values (cloth/metrics.py):
+    the cell sheared either way to 0.999 of the limit satisfies all of them, to 1.001 violates
+    one (warp-weft's bias band bounds one diagonal: its upper end binds one way, its lower
+    end the other)."""
+    from cloth import metrics
+    bands = fabrics.derive(name)["strain"]
+    lim = fabrics.shear_limits(bands)
+    grain = np.eye(2)[None]
+    for method, deg in lim.items():
+        assert 0 < deg < 90
+        for f, ok in ((0.999, True), (1.001, False)):
+            worst = -np.inf
+            for sign in (1, -1):                # the cell closed and opened (either diagonal)
+                x, uv, faces = _sheared_cell(sign * math.radians(f * deg))
+                g = metrics.own_constraint_values(method, x, faces,
+                                                  metrics.material_Dm_inv(uv, faces), grain,
+                                                  bands, iso=0.01)
+                worst = max(worst, g.max())
+            assert (worst <= 0) == ok, (name, method, f, worst)
+    # mapping admits sqrt 2 x what svd does where both are set by one thread band (small shear)
+    d = fabrics.derive("denim")
+    lim = fabrics.shear_limits(d["strain"])
+    assert lim["mapping"] / lim["svd"] == pytest.approx(math.sqrt(2), rel=0.01)
+    assert lim["warp-weft"] > 3 * lim["mapping"]
+
+
 def test_softer_in_shear_means_a_wider_bias_band(tmp_path):
     stiff = fabrics.derive(fabrics.load(write(tmp_path, GOOD)))
     soft = fabrics.derive(fabrics.load(write(tmp_path, GOOD.replace("G = 1.0", "G = 0.5"),
