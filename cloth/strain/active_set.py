@@ -28,10 +28,9 @@ their curvature. Those Gauss-Newton terms are replaced by the predicted set's; t
 import numpy as np
 
 # At most this many solves per Newton step while the predicted set keeps changing (the
-# kernels' limit, al.PDAS_SOLVES: the prototype needed 2-3; a step whose set has not settled
-# is still a descent direction for the line search, since each solve's matrix is positive
-# definite).
-from .al import PDAS_SOLVES as MAX_RESOLVES  # noqa: E402
+# prototype needed 2-3; a step whose set has not settled is still a descent direction for the
+# line search, since each solve's matrix is positive definite).
+MAX_RESOLVES = 6
 
 
 class LinearisedConstraints:

@@ -477,9 +477,12 @@ def newton_direction(method: ti.template(), pdas: ti.template(), K, nv, nf, ns, 
 
 
 # ---- the primal-dual active-set step (strain.solve = "exact", PCG) -----------------------
-# At most this many solves per Newton step while the predicted active set keeps changing
-# (active_set.MAX_RESOLVES, the host version's).
-PDAS_SOLVES = 6
+# At most this many solves per Newton step while the predicted active set keeps changing.
+# 1: none (the Newton step of the merit with the set active at x, margin 0). Measured on one
+# hanging state at resolution 25 (docs/speed/solve_cost.md): 6 solves took 933 / 325 / 301 ms
+# (mapping / warp-weft / svd), 1 took 82 / 104 / 52 ms, to the same objective within 0.2 %
+# and answers within 0.05-0.5 mm of each other (the stationarity stop is 0.33 mm).
+PDAS_SOLVES = 1
 # Each round's Newton loop runs to this fraction of the kkt tolerance before the multiplier
 # update (with the kkt tolerance itself the rounds ended after one step), and the penalty
 # grows only in a round whose violation did not fall below PDAS_STALL times the last
