@@ -1,6 +1,8 @@
 """The primal-dual active-set (PDAS) Newton step of the exact strain solve (settings
 ``strain.solve = "exact"``): here for the host loop of ``direct.py`` with exact linear solves
-(cloth with seams, Vulkan); ``al.pdas_resolves`` is the same step in the kernels with PCG.
+(cloth with seams, Vulkan). In the kernels (PCG) the exact solve takes the first of its
+solves only, the Newton step of the merit with the set active at x: the re-solves cost
+3-11x there for the same answer (docs/speed/solve_cost.md).
 
 Why: the default Newton model puts every constraint within ``active_margin`` (1e-2 strain) of
 its band into the Newton matrix. That keeps the line search from running into constraints the
