@@ -373,7 +373,7 @@ class Simulator:
             # over only after it.
             self._project_limits(self.h, self.time)
             self.remesh_stats["reprojected"] = True
-        # The next projection's start follows the motion carried from before the remesh, not
+        # The next projection moves on at the motion carried from before the remesh, not at
         # the re-projection's correction, which is the remesh's, not the cloth's motion
         # (carried on, the correction kept the remeshed mapping sheet moving: refined to 426
         # faces where it settles at 188, and three of 300 frames stalled for 100 rounds;

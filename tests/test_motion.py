@@ -15,11 +15,10 @@ SPHERE_TOP, EQUATOR = 0.85, 0.55      # the drape scene's sphere (m)
 ENSEMBLE = (1, 2, 3)                  # seeds of the 1 nm moves
 
 
-def _drop(seed, frames=12, material=None, **strain):
+def _drop(seed, frames=12, **strain):
     """The drape scene at resolution 13 (landing in frames 5-6), its start moved by ~1 nm
     (seed): the kinetic energy per frame and the lowest vertex at the end."""
-    _, cfg, setup = configure("drape", {"cloth": {"resolution": 13}, "strain": strain,
-                                        "material": material or {}})
+    _, cfg, setup = configure("drape", {"cloth": {"resolution": 13}, "strain": strain})
     sim = Simulator(setup, cfg)
     x = sim.model.positions()
     sim.model.set_positions(x + 1e-9 * np.random.default_rng(seed).standard_normal(x.shape))
@@ -45,23 +44,6 @@ def test_a_landing_keeps_its_motion_as_the_exact_solve_does(seed):
     ke_exact, low_exact = _drop(seed, solve="exact")
     assert low < EQUATOR - 0.05 and low_exact < EQUATOR - 0.05, (low, low_exact)
     assert 1 / 3 < kept(ke) / kept(ke_exact) < 3, (kept(ke), kept(ke_exact))
-
-
-@pytest.mark.slow
-@pytest.mark.xdist_group("exact_solve")
-@pytest.mark.parametrize("seed", ENSEMBLE)
-def test_a_stiff_plate_landing_on_the_sphere_stays_a_plate(seed):
-    """A plate (B = 5 N m: a bending length of ~1.5 m on a 1 m sheet) dropped on the sphere
-    rocks on its top and stays a plate; under the fast solve its lowest point at frame 30
-    lies within 5 cm of the exact solve's (measured on an AMD EPYC: fast 0.785-0.811 m,
-    exact 0.811-0.812 m; without limits 0.66 m). Started moved on at the last projection's
-    velocity, which takes the substep's forces out of the start, the fast solve let the
-    rim's landing motion run on without the bending that stops it, and the plate wrapped
-    the sphere like cloth (0.33-0.57 m)."""
-    stiff = {"k_bend": 5.0}
-    _, low = _drop(seed, frames=30, material=stiff)
-    _, low_exact = _drop(seed, frames=30, material=stiff, solve="exact")
-    assert low > EQUATOR + 0.2 and abs(low - low_exact) < 0.05, (low, low_exact)
 
 
 @pytest.mark.parametrize("seed", ENSEMBLE)

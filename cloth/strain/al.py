@@ -601,24 +601,20 @@ def choose_start(method: ti.template(), from_prev, K, nv, nf, ns, mu, mesh: T, m
                  cons: T, contacts: T, vec: T, start: T):
     """Assemble the constraints at the Newton iteration's start (the caller left only their
     values at x = x_hat). With ``from_prev``, start at ``start`` instead of at x_hat when its
-    merit is lower: each vertex where the substep began, x_prev = x_hat - h v, if it is at
-    rest, where the dynamics put it (x_hat) if it moves, blended by its last speed
-    (``start_candidate``). In the implicit step's metric a cloth at rest is a fixed point,
-    so x_prev is then the solution itself (one round, one Newton step), while x_hat lies a
-    whole sag away (12-17 % strain past the band on the soft cloth) and Newton has to travel
-    back across the constraints' curvature. Pinned vertices stay at x_hat (their targets).
+    merit is lower: the step's start x_prev = x_hat - h v, each vertex moved on at its last
+    velocity when that is above the settle speed (``begin_solve``). In the implicit step's
+    metric a cloth at rest is a fixed point, so x_prev is then the solution itself (one
+    round, one Newton step), while x_hat lies a whole sag away (12-17 % strain past the band
+    on the soft cloth) and Newton has to travel back across the constraints' curvature.
+    Pinned vertices stay at x_hat (their targets).
 
-    Why the moving vertices start at x_hat: the default solve stops once the limits hold, so
-    its answer lies near its start, and a vertex's motion over the substep is where the
-    answer puts it. From x_prev, a landing sheet was held in the air (0.3 % of its kinetic
-    energy kept through the landing, exact Newton steps keep 72 %). Moved on from x_prev at
-    the last projection's velocity, the start had every force of the substep taken out of
-    it (x_hat - x_prev - h v_last = h^2 x the forces' acceleration): a stiff plate landing
-    on the sphere (B = 5 N m) kept the downward motion of its rim with nothing of the bending
-    that stops it, and wrapped the sphere like cloth in 4 of 5 runs from starts 1 nm apart
-    (lowest point 0.33-0.49 m at frame 30, the exact solve 0.79-0.83 m; docs/speed/solve_cost.md).
-    x_hat for every vertex keeps the plate too, but a resting frame then costs about twice as
-    much (hanging 19.7 -> 34.5 ms, drape 38 -> 85 ms)."""
+    Why moved on: the default solve stops once the limits hold, so its answer lies near its
+    start. A sheet landing on a sphere (its landing vertices stopped by the collision pass,
+    the rest still falling: x_hat stretched, x_prev the lower merit) was held in the air from
+    x_prev, keeping 0.3 % of its kinetic energy through the landing (exact Newton steps keep
+    72 %; docs/speed/motion_error.md). x_hat as the start drapes too, but costs a resting
+    cloth 10x; a start halfway between, chosen by merit, was held like x_prev; running the
+    first round's Newton loop to its end instead of to INNER_RTOL draped 5 of 7 drops."""
     # One call site each for assemble_all and merit (a ti.func is inlined at every call, and
     # solve_al's compile time grows with its size): pass 0 evaluates x_hat's merit (from the
     # values), pass 1 assembles and evaluates x_prev, pass 2 assembles x_hat when it wins
@@ -844,14 +840,14 @@ def near_obstacle(contacts: ti.template(), n):
 @ti.func
 def start_candidate(n, xp, h, extrapolate, settle, step_start, io: ti.template(),
                     contacts: ti.template()):
-    """choose_start's candidate for vertex n: between x_prev = x_hat - h v (``xp``) and x_hat
-    (``io.x_in``), at the vertex's ``moving_share`` of the way. With ``step_start``, a vertex near an
+    """choose_start's candidate for vertex n: x_prev = x_hat - h v (``xp``), moved on by
+    h v_last in the vertex's ``moving_share``. With ``step_start``, a vertex near an
     obstacle starts instead, in the share that is not moving, where the substep truly began
     (io.x_step): the obstacle pass between the dynamics and the projection stopped it
     without the matching change of x, so its x_hat - h v lies where it never was (on the
     resting drape 0.10-0.17 strain past the limits, where x_step met them to 4e-6)."""
     share = moving_share(io.v_last[n], extrapolate, settle)
-    out = xp + share * (io.x_in[n] - xp)
+    out = xp + share * h * io.v_last[n]
     if step_start and near_obstacle(contacts, n):
         out = share * out + (1.0 - share) * io.x_step[n]
     return out
@@ -905,7 +901,7 @@ def finish_solve(nv: int, h: float, cap: float, extrapolate: int, settle: float,
                  step_start: int, x: A, io: StepPack, contacts: ContactPack):
     """v += dx / h (docs/method.md §4): the projection's correction becomes a velocity change, of at
     most ``cap`` (m/s) per vertex when cap > 0; x and v are copied to x_in and v_in (the
-    model's state) and v to v_last (its speed sets the next projection's start, ``begin_solve``).
+    model's state) and v to v_last (the next projection's start, ``begin_solve``).
 
     With ``step_start``, a vertex near an obstacle takes, in the share of it that is not
     moving (``moving_share``), the velocity of its whole substep, (x - x_step) / h, instead:

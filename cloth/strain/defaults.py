@@ -57,8 +57,7 @@ MAX_NEWTON, FACTOR_NEWTON, MULTIGRID_NEWTON = 5, 4, 2
 # runs tighter and a round takes more steps (with the fast settings 2 of 8 frames stalled).
 PDAS_CG_RTOL, PDAS_NEWTON = 1e-2, 10
 
-# The projection starts each vertex where the dynamics put it (x_hat) in full from 4 x this
-# speed (m/s, its last projection's), where the substep began below it: from where the
-# vertices were, a landing sheet was held in the air; from x_hat at every speed, a resting
-# frame costs about twice as much (``al.choose_start``).
+# The projection starts each vertex moved on at its last velocity, in full from 4 x this speed
+# (m/s), not at all below it: from where the vertices were, a landing sheet was held in the air;
+# moved on at every speed, the resting cloth jittered.
 SETTLE_SPEED = 0.1

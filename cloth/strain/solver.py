@@ -543,25 +543,24 @@ class StrainLimiter:
         return int(round(CG_BUDGET[self.method] * max(1.0, np.sqrt(n / 1000.0))))
 
     def last_velocity(self):
-        """(v_last (V, 3), valid): the last projection's velocities, whose speeds decide how
-        far each vertex's start in the next projection follows the dynamics
-        (``al.start_candidate``), for a remesh to carry to the new vertices with
-        ``set_last_velocity``."""
+        """(v_last (V, 3), valid): the last projection's velocities, where the next
+        projection's start moves each vertex on to (``al.start_candidate``), for a remesh to
+        carry to the new vertices with ``set_last_velocity``."""
         self._sync_mesh()
         return self._ws.v_last.to_numpy()[:self.model.n_verts].copy(), self._v_last_valid
 
     def set_last_velocity(self, v_last, valid):
         """The last velocities for the model's (new) vertices: a remesh renumbers them, and
-        without them the next projection would start every vertex where the substep began,
-        which holds a landing sheet in the air (its kinetic energy fell from 0.122 J to
+        without them the next projection would start from the substep's start, not moved
+        on, which holds a landing sheet in the air (its kinetic energy fell from 0.122 J to
         0.006 J in the frame after the remesh that refined it)."""
         self._sync_mesh()
         ndarrays.put_rows(self._ws.v_last, np.asarray(v_last, np.float64))
         self._v_last_valid = bool(valid)
 
     def forget_last_velocity(self):
-        """The next projection starts every vertex where the substep began, as if at rest
-        (``SETTLE_SPEED``): after a correction that is not motion."""
+        """The next projection starts from the substep's start, not moved on at the last
+        projection's velocities (``SETTLE_SPEED``): after a correction that is not motion."""
         self._v_last_valid = False
 
     def multipliers(self):
