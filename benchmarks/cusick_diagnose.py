@@ -14,7 +14,7 @@ cloth/dynamics.py), the skirt's shear angle (p95, max) and thread strain (p95 of
 rounds, the largest violation where the dynamics put the cloth (x_hat) and after the
 projection, and the RMS speed. ``--settle-speed``: cloth.strain.solver.SETTLE_SPEED for the
 run (the speed below which a vertex's projection starts where the substep began; 0: every
-vertex starts at x_hat).
+vertex starts at x_hat); ``--solve exact``: strain.solve for the run.
 """
 import argparse
 import json
@@ -95,6 +95,8 @@ def main():
     ap.add_argument("--membrane-scale", type=float, default=1.0)
     ap.add_argument("--seconds", type=float, default=4.0)
     ap.add_argument("--settle-speed", type=float, default=None)
+    ap.add_argument("--solve", choices=("fast", "exact"), default=None,
+                    help="strain.solve for the run (default: the configuration's, fast)")
     a = ap.parse_args()
     from cloth import backend
     backend.init("cpu", "f64")
@@ -103,6 +105,15 @@ def main():
     import cloth.strain.solver as solver
     if a.settle_speed is not None:
         solver.SETTLE_SPEED = a.settle_speed
+    if a.solve:
+        from cloth import fabrics
+        apply = fabrics.apply_fabric
+
+        def with_solve(cfg, name):
+            out = apply(cfg, name)
+            out["strain"]["solve"] = a.solve
+            return out
+        fabrics.apply_fabric = with_solve        # cusick.run looks it up at each call
     edge_h = a.h / 2
     if a.what == "frames":
         simulator.Simulator = frame_logger(print)
