@@ -1,5 +1,5 @@
 """The exact solve (strain.solve = "exact"): its active-set Newton model
-(cloth/strain/active_set.py in the host loop, margin 0 without re-solves in the kernels), its
+(cloth/strain/active_set.py in the host loop, al.pdas_resolves in the kernels), its
 Gauss-Newton blocks against a dense assembly, projections that land on a tightly solved
 projection where the fast solve stops short, and its fallback on the fast model when it does
 not converge."""

@@ -1,8 +1,6 @@
 """The primal-dual active-set (PDAS) Newton step of the exact strain solve (settings
 ``strain.solve = "exact"``): here for the host loop of ``direct.py`` with exact linear solves
-(cloth with seams, Vulkan). In the kernels (PCG) the exact solve takes the first of its
-solves only, the Newton step of the merit with the set active at x: the re-solves cost
-3-11x there for the same answer (docs/speed/solve_cost.md).
+(cloth with seams, Vulkan); ``al.pdas_resolves`` is the same step in the kernels with PCG.
 
 Why: the default Newton model puts every constraint within ``active_margin`` (1e-2 strain) of
 its band into the Newton matrix. That keeps the line search from running into constraints the
@@ -30,9 +28,10 @@ their curvature. Those Gauss-Newton terms are replaced by the predicted set's; t
 import numpy as np
 
 # At most this many solves per Newton step while the predicted set keeps changing (the
-# prototype needed 2-3; a step whose set has not settled is still a descent direction for the
-# line search, since each solve's matrix is positive definite).
-MAX_RESOLVES = 6
+# kernels' limit, al.PDAS_SOLVES: the prototype needed 2-3; a step whose set has not settled
+# is still a descent direction for the line search, since each solve's matrix is positive
+# definite).
+from .al import PDAS_SOLVES as MAX_RESOLVES  # noqa: E402
 
 
 class LinearisedConstraints:

@@ -452,10 +452,11 @@ def precondition(pc_mode, nv, pc: T, r: T, z: T):
 
 
 @ti.func
-def newton_direction(method: ti.template(), K, nv, nf, ns, mu, max_cg, rtol, margin,
-                     use_twist, c_scale, pc_mode, mesh: T, metric: T, cons: T, contacts: T,
-                     vec: T, pc: T):
-    """pcg_direction's matrix and PCG solve at vec.x, with r = -grad L_A already in vec.r."""
+def newton_direction(method: ti.template(), pdas: ti.template(), K, nv, nf, ns, mu, max_cg, rtol, margin, use_twist, c_scale, pc_mode, mesh: T,
+                     metric: T, cons: T, contacts: T, vec: T, pc: T):
+    """pcg_direction's matrix and PCG solve at vec.x, with r = -grad L_A already in vec.r
+    (and, in a kernel compiled with ``pdas``, the active-set re-solves when params[P_PDAS] is
+    set; vec.x_trial is their scratch)."""
     newton_matrix(K, nv, nf, ns, mu, margin, c_scale, use_twist, vec.x, mesh, metric, cons,
                   contacts)
     rr = 0.0
@@ -465,11 +466,20 @@ def newton_direction(method: ti.template(), K, nv, nf, ns, mu, max_cg, rtol, mar
         vec.b[n] = vec.r[n]
         vec.d[n] = ti.Vector([0.0, 0.0, 0.0])
         rr += vec.r[n].dot(vec.r[n])
-    it = pcg_loop(nv, max_cg, rtol, rr, pc_mode, metric, vec, pc)
-    return -dot(vec.b, vec.d, nv), it
+    it = pcg_loop(False, K, nv, nf, mu, max_cg, rtol, rr, pc_mode, mesh, metric, cons,
+                  contacts, vec, pc, vec.x_trial, cons.kappa)
+    slope = -dot(vec.b, vec.d, nv)
+    if ti.static(pdas):
+        if mesh.params[P_PDAS] > 0.0:
+            slope, it = pdas_resolves(K, nv, nf, mu, max_cg, rtol, it, pc_mode, mesh, metric,
+                                      cons, contacts, vec, pc, cons.kappa, vec.x_trial)
+    return slope, it
 
 
-# ---- the exact solve's Newton loop (strain.solve = "exact") -------------------------
+# ---- the primal-dual active-set step (strain.solve = "exact", PCG) -----------------------
+# At most this many solves per Newton step while the predicted active set keeps changing
+# (active_set.MAX_RESOLVES, the host version's).
+PDAS_SOLVES = 6
 # Each round's Newton loop runs to this fraction of the kkt tolerance before the multiplier
 # update (with the kkt tolerance itself the rounds ended after one step), and the penalty
 # grows only in a round whose violation did not fall below PDAS_STALL times the last
@@ -480,10 +490,162 @@ PDAS_STALL = 0.25
 
 
 @ti.func
-def pcg_loop(nv, max_cg, rtol, rr, pc_mode, metric: T, vec: T, pc: T):
-    """The PCG iterations of a Newton step on H, from d = 0 with the residual in r (|r|^2 =
-    rr) to |r| <= rtol |r0| (d, r and the work vectors z, p, Ap in ``vec``). Returns the
-    iterations."""
+def face_step(face_verts: T, v: T, f):
+    """The 9-vector of v at face f's three vertices."""
+    ids = face_verts[f]
+    a, b_, c = v[ids[0]], v[ids[1]], v[ids[2]]
+    return ti.Vector([a[0], a[1], a[2], b_[0], b_[1], b_[2], c[0], c[1], c[2]])
+
+
+@ti.func
+def pdas_changes(K, nv, nf, mu, mesh: T, cons: T, contacts: T, vec: T, prev: T, first,
+                 flip: T):
+    """How many constraints the linearised step d = vec.d switches relative to the set the
+    last solve used (the set active at x = vec.x when ``first``, else the one predicted from
+    ``prev``); writes flip[f, c] = (active after d) - (active at x) in {-1, 0, 1} for the faces
+    (the contacts' are recomputed where needed: ``pdas_contact_flip``)."""
+    changes = 0
+    for f in range(nf):
+        jd = face_step(mesh.face_verts, vec.d, f)
+        jp = face_step(mesh.face_verts, prev, f)
+        for c in range(K):
+            t = cons.g[f, c] + cons.lam[f, c] / mu
+            gr = pair_grad(cons.grad, f, c)
+            now = 1 if t > 0.0 else 0
+            new = 1 if t + gr.dot(jd) > 0.0 else 0
+            old = now
+            if not first:
+                old = 1 if t + gr.dot(jp) > 0.0 else 0
+            if new != old:
+                changes += 1
+            flip[f, c] = float(new - now)
+    for n in range(nv):
+        if mesh.pinned[n] == 0:
+            for j in ti.static(range(CONTACT_SLOTS)):
+                cn = contact_normal(contacts.contact, n, j)
+                t = (contacts.lam_c[n, j] + mu * contact_g(contacts.contact, vec.x, n, j)) / mu
+                now = 1 if t > 0.0 else 0
+                new = 1 if t - cn.dot(vec.d[n]) > 0.0 else 0
+                old = now
+                if not first:
+                    old = 1 if t - cn.dot(prev[n]) > 0.0 else 0
+                if new != old:
+                    changes += 1
+    return changes
+
+
+@ti.func
+def pdas_contact_flip(mu, contact: T, lam_c: T, x: T, prev: T, n, j):
+    """(active after the step ``prev``) - (active at x) of vertex n's contact slot j, and t."""
+    cn = contact_normal(contact, n, j)
+    t = (lam_c[n, j] + mu * contact_g(contact, x, n, j)) / mu
+    now = 1.0 if t > 0.0 else 0.0
+    new = 1.0 if t - cn.dot(prev[n]) > 0.0 else 0.0
+    return new - now, t
+
+
+@ti.func
+def pdas_times(K, nv, nf, mu, mesh: T, metric: T, cons: T, contacts: T, vec: T, prev: T,
+               flip: T):
+    """vec.Ap = (H + mu sum_c flip_c J_c^T J_c) vec.p: the Newton matrix with the Gauss-Newton
+    terms of the predicted set in place of those of the set active at x (``flip``,
+    ``prev``)."""
+    for n in range(nv):
+        vec.Ap[n] = metric_times(n, metric.w_ptr, metric.w_col, metric.H, vec.p)
+    for f in range(nf):
+        ids = mesh.face_verts[f]
+        jp = face_step(mesh.face_verts, vec.p, f)
+        for pair in range(K // 2):
+            # A bound pair shares its gradient up to sign; at most one of the two is active.
+            c = 2 * pair
+            w = flip[f, c] + flip[f, c + 1]
+            if w != 0.0:
+                gr = cons.grad[f, c]
+                scatter(vec.Ap, ids, gr, mu * w * gr.dot(jp))
+    for n in range(nv):
+        if mesh.pinned[n] == 1:
+            vec.Ap[n] = ti.Vector([0.0, 0.0, 0.0])
+        else:
+            for j in ti.static(range(CONTACT_SLOTS)):
+                fl, _t = pdas_contact_flip(mu, contacts.contact, contacts.lam_c, vec.x, prev,
+                                           n, j)
+                if fl != 0.0:
+                    cn = contact_normal(contacts.contact, n, j)
+                    vec.Ap[n] += (mu * fl * cn.dot(vec.p[n])) * cn
+
+
+@ti.func
+def pdas_resolves(K, nv, nf, mu, max_cg, rtol, it, pc_mode, mesh: T, metric: T, cons: T,
+                  contacts: T, vec: T, pc: T, flip: T, prev: T):
+    """The active-set Newton step (cloth/strain/active_set.py, here in the kernels with PCG):
+    d holds the step with the set active at x (H's own, margin 0) and b = -grad L_A. While
+    the step switches constraints on or off, solve again with the Gauss-Newton terms and
+    forces of the set it predicts, t + J d > 0 (t = g + lambda / mu), at most PDAS_SOLVES
+    times; a re-solved step that is not a descent direction is replaced by the first solve's.
+    ``flip`` (kappa's storage, free once H is assembled) and ``prev`` (x_trial's, free until
+    the line search) are scratch. Returns (slope, CG iterations)."""
+    total = it
+    k = 1
+    while k < PDAS_SOLVES:
+        if pdas_changes(K, nv, nf, mu, mesh, cons, contacts, vec, prev, k == 1, flip) == 0:
+            break
+        for n in range(nv):
+            prev[n] = vec.d[n]
+        # rhs = b - mu sum_c flip_c t_c J_c^T (faces; contacts' J = -n).
+        for n in range(nv):
+            vec.r[n] = vec.b[n]
+        for f in range(nf):
+            ids = mesh.face_verts[f]
+            for c in range(K):
+                if flip[f, c] != 0.0:
+                    t = cons.g[f, c] + cons.lam[f, c] / mu
+                    scatter(vec.r, ids, pair_grad(cons.grad, f, c), -mu * flip[f, c] * t)
+        for n in range(nv):
+            if mesh.pinned[n] == 1:
+                vec.r[n] = ti.Vector([0.0, 0.0, 0.0])
+            else:
+                for j in ti.static(range(CONTACT_SLOTS)):
+                    fl, t = pdas_contact_flip(mu, contacts.contact, contacts.lam_c, vec.x,
+                                              prev, n, j)
+                    if fl != 0.0:
+                        vec.r[n] += (mu * fl * t) * contact_normal(contacts.contact, n, j)
+        total += pdas_pcg(K, nv, nf, mu, max_cg, rtol, pc_mode, mesh, metric, cons, contacts,
+                          vec, pc, prev, flip)
+        k += 1
+    slope = -dot(vec.b, vec.d, nv)
+    if k > 1 and not slope < 0.0:
+        # Back to the first solve: the set active at x (no flips).
+        for f in range(nf):
+            for c in range(K):
+                flip[f, c] = 0.0
+        for n in range(nv):
+            prev[n] = ti.Vector([0.0, 0.0, 0.0])
+            vec.r[n] = vec.b[n]
+        total += pdas_pcg(K, nv, nf, mu, max_cg, rtol, pc_mode, mesh, metric, cons, contacts,
+                          vec, pc, prev, flip)
+        slope = -dot(vec.b, vec.d, nv)
+    return slope, total
+
+
+@ti.func
+def pdas_pcg(K, nv, nf, mu, max_cg, rtol, pc_mode, mesh: T, metric: T, cons: T, contacts: T,
+             vec: T, pc: T, prev: T, flip: T):
+    """PCG from d = 0 on ``pdas_times``' matrix with the rhs in r (H's preconditioner)."""
+    rr = 0.0
+    for n in range(nv):
+        vec.d[n] = ti.Vector([0.0, 0.0, 0.0])
+        rr += vec.r[n].dot(vec.r[n])
+    return pcg_loop(True, K, nv, nf, mu, max_cg, rtol, rr, pc_mode, mesh, metric, cons,
+                    contacts, vec, pc, prev, flip)
+
+
+@ti.func
+def pcg_loop(flipped: ti.template(), K, nv, nf, mu, max_cg, rtol, rr, pc_mode, mesh: T,
+             metric: T, cons: T, contacts: T, vec: T, pc: T, prev: T, flip: T):
+    """The PCG iterations of a Newton step, from d = 0 with the residual in r (|r|^2 = rr)
+    to |r| <= rtol |r0| (d, r and the work vectors z, p, Ap in ``vec``): on H, or with
+    ``flipped`` on ``pdas_times``' matrix (H with the predicted set's Gauss-Newton terms;
+    ``prev``, ``flip``). Returns the iterations."""
     rz = precondition(pc_mode, nv, pc, vec.r, vec.z)
     for n in range(nv):
         vec.p[n] = vec.z[n]
@@ -491,9 +653,14 @@ def pcg_loop(nv, max_cg, rtol, rr, pc_mode, metric: T, vec: T, pc: T):
     it = 0
     while it < max_cg and rr > stop:
         pAp = 0.0
-        for n in range(nv):
-            vec.Ap[n] = metric_times(n, metric.w_ptr, metric.w_col, metric.H, vec.p)
-            pAp += vec.p[n].dot(vec.Ap[n])
+        if ti.static(flipped):
+            pdas_times(K, nv, nf, mu, mesh, metric, cons, contacts, vec, prev, flip)
+            for n in range(nv):
+                pAp += vec.p[n].dot(vec.Ap[n])
+        else:
+            for n in range(nv):
+                vec.Ap[n] = metric_times(n, metric.w_ptr, metric.w_col, metric.H, vec.p)
+                pAp += vec.p[n].dot(vec.Ap[n])
         if pAp <= 0.0:
             break
         alpha = rz / pAp
@@ -512,9 +679,9 @@ def pcg_loop(nv, max_cg, rtol, rr, pc_mode, metric: T, vec: T, pc: T):
 
 
 @ti.func
-def pcg_direction(method: ti.template(), K, nv, nf, ns, mu, max_cg, rtol, margin, use_twist,
-                  c_scale, pc_mode, skip_rr, mesh: T, metric: T, cons: T, contacts: T, vec: T,
-                  pc: T):
+def pcg_direction(method: ti.template(), pdas: ti.template(), K, nv, nf,
+                  ns, mu, max_cg, rtol, margin, use_twist, c_scale, pc_mode, skip_rr, mesh: T,
+                  metric: T, cons: T, contacts: T, vec: T, pc: T):
     """Projected-Newton direction at vec.x: solve H d = -grad L_A (H from ``newton_matrix``)
     by PCG with H's 3x3 diagonal blocks as preconditioner (block Jacobi), from d = 0 to
     |r| <= rtol |grad L_A| (an inexact Newton step: measured on the hanging scene, rtol = 0.1
@@ -525,9 +692,9 @@ def pcg_direction(method: ti.template(), K, nv, nf, ns, mu, max_cg, rtol, margin
     rr0 = dot(vec.r, vec.r, nv)
     slope, it = 0.0, 0
     if rr0 > skip_rr:
-        slope, it = newton_direction(method, K, nv, nf, ns, mu, max_cg, rtol, margin,
-                                     use_twist, c_scale, pc_mode, mesh, metric, cons, contacts,
-                                     vec, pc)
+        slope, it = newton_direction(method, pdas, K, nv, nf, ns, mu, max_cg, rtol,
+                                     margin, use_twist, c_scale, pc_mode, mesh, metric, cons,
+                                     contacts, vec, pc)
     else:
         for n in range(nv):
             vec.d[n] = ti.Vector([0.0, 0.0, 0.0])
@@ -640,7 +807,7 @@ def choose_start(method: ti.template(), from_prev, K, nv, nf, ns, mu, mesh: T, m
 
 
 @ti.kernel
-def solve_al(method: ti.template(), budget: A,
+def solve_al(method: ti.template(), with_pdas: ti.template(), budget: A,
              mesh: MeshPack, metric: MetricPack, cons: ConstraintPack, contacts: ContactPack,
              vec: VectorPack, pc: PrecondPack, stats: A):
     """The whole AL projection (docs/method.md §4) in one launch (measured: with one launch per
@@ -652,8 +819,12 @@ def solve_al(method: ti.template(), budget: A,
     (complementarity) are below tol (strain units). Stops early, with every multiplier kept,
     if x (= x_hat) is already feasible. Fills stats (rounds, violation, converged, CG,
     Newton steps, complementarity, line-search trials). The solve's controls (penalty,
-    budgets, tolerances, preconditioner) are read from ``budget`` (buffers.B_*); the exact
-    solve (params[P_PDAS]) is the same kernel with the margin 0 and the KKT stop."""
+    budgets, tolerances, preconditioner) are read from ``budget`` (buffers.B_*).
+
+    ``with_pdas`` compiles the active-set re-solves in (strain.solve = "exact"
+    under PCG). They are a template, not only a runtime switch, because inlined into every
+    solve they tripled the optimised compile of the default solve (svd: 261 s with them,
+    91 s before they were added, on the 2-core CPU); a kernel without them is the default's."""
     ti.loop_config(serialize=True)
     for _ in range(1):
         K, nv, nf, ns = cons.n_per_face, mesh.n_verts, mesh.n_faces, contacts.n_stitches
@@ -702,9 +873,10 @@ def solve_al(method: ti.template(), budget: A,
                     skip = NO_SKIP
                     if inner > 0:
                         skip = mesh.params[P_INNER_RTOL] ** 2 * rr_first
-                    slope, cg_it, rr = pcg_direction(method, K, nv, nf, ns, mu, max_cg, rtol,
-                                                     margin, use_twist, c_scale, pc_mode, skip,
-                                                     mesh, metric, cons, contacts, vec, pc)
+                    slope, cg_it, rr = pcg_direction(method, with_pdas, K, nv, nf, ns, mu,
+                                                     max_cg, rtol, margin, use_twist, c_scale,
+                                                     pc_mode, skip, mesh, metric, cons,
+                                                     contacts, vec, pc)
                     if inner == 0:
                         rr_first = rr
                     cg_total += cg_it

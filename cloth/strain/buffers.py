@@ -55,8 +55,8 @@ P_INNER_RTOL = 11
 # The KKT stop's stationarity tolerance (metres: the largest vertex move of a Newton step at the
 # answer); 0 = the fast solve's stop on violation and multiplier change alone.
 P_KKT_TOL = 12
-# 1: the PCG path's Newton step is the exact solve's (margin 0, each round run to a tenth of
-# the KKT tolerance, ``al.PDAS_INNER_FRACTION``); 0: the fast (margin) model's.
+# 1: the PCG path's Newton step is the primal-dual active-set step (``al.pdas_resolves``,
+# the exact solve in the kernels); 0: the fast (margin) model's.
 P_PDAS = 13
 N_PARAMS = 14
 # Indices into the ``budget`` array: one AL solve's controls (``al.solve_al``), written by the

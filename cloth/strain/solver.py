@@ -199,7 +199,7 @@ class StrainLimiter:
         return _host_loop_only() or (self._exact() and len(self._stitches) > 0)
 
     def _kernel_pdas(self):
-        """The exact solve's Newton model in the kernels (PCG, margin 0, ``P_PDAS``)."""
+        """The exact solve's active-set model in the kernels (PCG, ``al.pdas_resolves``)."""
         return self._exact() and not self.uses_host_loop()
 
     def _upload_params(self, margin_fallback=False):
@@ -634,7 +634,7 @@ class StrainLimiter:
         budget[buffers.B_TOL], budget[buffers.B_STEP_TOL] = self.tol, step_tol
         budget[buffers.B_FROM_PREV] = float(metric is self._system)
         budget[buffers.B_PC_MODE] = pc_mode
-        al.solve_al(mid, ws.budget, ws.mesh_pack(),
+        al.solve_al(mid, self._kernel_pdas(), ws.budget, ws.mesh_pack(),
                     ws.metric_pack(metric), ws.constraint_pack(K), ws.contact_pack(),
                     ws.vector_pack(), ws.precond_pack(fp, mg), ws.stats)
         stats = ws.stats.to_numpy()
