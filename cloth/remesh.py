@@ -506,6 +506,17 @@ class _Work:
         lb, lc = math.hypot(bx, by), math.hypot(cx, cy)
         return abs(_cross2(bx, by, cx, cy)) <= _COLLINEAR_EPS * lb * lc and bx * cx + by * cy < 0
 
+    def _replace_faces(self, gone, changed, v):
+        """A collapse's edit: drop the faces ``gone`` (those on the collapsed edge) and turn
+        each (f, q, r) of ``changed`` into the face (v, q, r)."""
+        for f in gone:
+            for t in self.faces[f]:
+                self.vf[t].discard(f)
+            self.set_face(f, None)
+        for f, q, r in changed:
+            self.set_face(f, [v, q, r])
+            self.vf[v].add(f)
+
     def collapse(self, a, b):
         """Remove vertex a by merging it into b, if that keeps the mesh manifold, keeps the
         boundary, creates no edge longer than ``_collapse_limit`` in the metric, no triangle
@@ -536,13 +547,7 @@ class _Work:
                 return False
             changed.append((f, q, r))
         # Apply: drop the faces on the edge, re-point a's other faces to b.
-        for f in fs:
-            for t in self.faces[f]:
-                self.vf[t].discard(f)
-            self.set_face(f, None)
-        for f, q, r in changed:
-            self.set_face(f, [b, q, r])
-            self.vf[b].add(f)
+        self._replace_faces(fs, changed, b)
         self.vf[a] = set()
         self.alive[a] = False
         self.n_collapse += 1
@@ -603,13 +608,7 @@ class _Work:
                     return False
                 changed.append((f, q, r))
         m = self._midpoint_vertex(a, b, len(fs) == 1)
-        for f in fs:
-            for t in self.faces[f]:
-                self.vf[t].discard(f)
-            self.set_face(f, None)
-        for f, q, r in changed:
-            self.set_face(f, [m, q, r])
-            self.vf[m].add(f)
+        self._replace_faces(fs, changed, m)
         self.vf[a], self.vf[b] = set(), set()
         self.alive[a] = self.alive[b] = False
         self.n_collapse += 1
