@@ -103,9 +103,20 @@ def _inv2(A):
 _times = metrics.columns_times
 
 
+SIZING_TERMS = ("curvature", "velocity", "compression", "obstacle")
+
+
 def face_sizing(mesh, params, obstacle_distance=None, edges=None):
-    """Per-face sizing metric (F, 2, 2) in material space before clamping, and face areas.
-    ``edges``: ``build_edges(mesh.faces)`` if the caller has it already."""
+    """Per-face sizing metric (F, 2, 2) in material space before clamping, and face areas:
+    the terms of ``face_sizing_terms`` combined. ``edges``: ``build_edges(mesh.faces)`` if the
+    caller has it already."""
+    terms, area = face_sizing_terms(mesh, params, obstacle_distance, edges)
+    return sum(terms.values()), area
+
+
+def face_sizing_terms(mesh, params, obstacle_distance=None, edges=None):
+    """Each criterion's per-face metric (a dict over ``SIZING_TERMS``, (F, 2, 2) each, the
+    obstacle term only with ``obstacle_distance``) before clamping, and face areas."""
     uv, x, faces = mesh.uv, mesh.x, mesh.faces
     i, j, k = faces[:, 0], faces[:, 1], faces[:, 2]
     Dm = np.stack([uv[j] - uv[i], uv[k] - uv[i]], axis=2)
@@ -132,18 +143,18 @@ def face_sizing(mesh, params, obstacle_distance=None, edges=None):
     S /= area[:, None, None]
     for _ in range(params.curvature_smoothing):
         S = _vertex_mean(S, area, faces, len(x))[faces].mean(axis=1)
-    M = _gram(S) / params.refine_angle ** 2        # S S (S symmetric)
+    terms = {"curvature": _gram(S) / params.refine_angle ** 2}   # S S (S symmetric)
 
     # Velocity gradient (3x2): bounds the velocity difference across an edge.
     Gv = _times(mesh.v[j] - mesh.v[i], mesh.v[k] - mesh.v[i], Dm_inv)
-    M += _gram(Gv) / params.refine_velocity ** 2
+    terms["velocity"] = _gram(Gv) / params.refine_velocity ** 2
 
     # Compression: principal stretches below 1 (from F^T F) ask for a finer mesh along their
     # direction, reaching size_min at a compressive strain of refine_compression.
     F = _times(x[j] - x[i], x[k] - x[i], Dm_inv)
     lam, V = _sym_eig2(_gram(F))
     comp = np.maximum(0.0, 1.0 - np.sqrt(np.maximum(lam, 0.0)))
-    M += _compose(comp / (params.refine_compression * params.size_min ** 2), V)
+    terms["compression"] = _compose(comp / (params.refine_compression * params.size_min ** 2), V)
 
     # Obstacle proximity: the material gradient g of the obstacle distance d; the change of d
     # across an edge must stay below refine_obstacle * (|d| + size_min). A sheet lying
@@ -155,8 +166,8 @@ def face_sizing(mesh, params, obstacle_distance=None, edges=None):
             raise ModelError("obstacle_distance must return one finite distance per vertex")
         g = np.einsum("fji,fj->fi", Dm_inv, np.stack([d[j] - d[i], d[k] - d[i]], axis=1))
         scale = params.refine_obstacle * (np.abs(d[faces]).mean(axis=1) + params.size_min)
-        M += _outer(g, g) / (scale ** 2)[:, None, None]
-    return M, area
+        terms["obstacle"] = _outer(g, g) / (scale ** 2)[:, None, None]
+    return terms, area
 
 
 def _vertex_mean(face_T, area, faces, n_verts):
