@@ -255,3 +255,28 @@ def test_exact_solve_reaches_its_stationarity(method):
     sim.step_frame()
     row = sim.metrics_row()
     assert 0.0 <= row["sl_stationarity"] <= KKT_VELOCITY
+
+
+def test_a_substep_tried_again_from_its_state_gives_the_same_projection():
+    """``Simulator.substep_state`` holds everything the next projection starts from, the
+    contacts' and friction's warm-started multipliers too: drape with mapping, at the frame
+    the sheet lies on the sphere, the same substep run twice from the state gives the same
+    positions (before the contacts' multipliers were kept, the second try started from the
+    first try's)."""
+    from benchmarks.harness import configure
+    from cloth.simulator import Simulator
+    _, cfg, setup = configure("drape", [{"cloth": {"resolution": 9},
+                                         "strain": {"method": "mapping"}}])
+    sim = Simulator(setup, cfg)
+    for _ in range(40):                 # until the sphere's contacts hold the sheet
+        sim.step_frame()
+        if np.abs(sim.strain.multipliers()[1]).max() > 0.0:
+            break
+    assert np.abs(sim.strain.multipliers()[1]).max() > 0.0
+    state = sim.substep_state()
+    tries = []
+    for _ in range(2):
+        sim.set_substep_state(state)
+        sim.run_substep_through("strain_limit")
+        tries.append(sim.model.positions())
+    assert np.array_equal(tries[0], tries[1])

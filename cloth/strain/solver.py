@@ -361,16 +361,23 @@ class StrainLimiter:
 
     def solve_state(self):
         """What the next projection depends on besides the positions and velocities: the
-        faces' multipliers and the last projection's velocities (where its start moves each
-        vertex on to, ``al.begin_solve``). With ``set_solve_state``: one substep tried several
-        ways from the same state (``Simulator.substep_state``)."""
-        return self.face_state(), self._ws.v_last.to_numpy(), self._v_last_valid
+        faces' multipliers, the vertices' (contacts, seams, friction: all warm-started) and
+        the last projection's velocities (where its start moves each vertex on to,
+        ``al.begin_solve``). With ``set_solve_state``: one substep tried several ways from the
+        same state (``Simulator.substep_state``); without the vertices' multipliers a
+        projection with contacts or seams, solved again, started from the last try's."""
+        ws = self._ws
+        return (self.face_state(), ws.v_last.to_numpy(), self._v_last_valid,
+                [a.to_numpy() for a in (ws.lam_c, ws.lam_s, ws.lam_t)])
 
     def set_solve_state(self, state):
-        faces, v_last, valid = state
+        faces, v_last, valid, vertex_multipliers = state
         self.set_face_state(faces)
-        self._ws.v_last.from_numpy(v_last)
+        ws = self._ws
+        ws.v_last.from_numpy(v_last)
         self._v_last_valid = valid
+        for a, val in zip((ws.lam_c, ws.lam_s, ws.lam_t), vertex_multipliers):
+            a.from_numpy(val)
 
     def set_face_state(self, data):
         """After a remesh (and ``on_mesh_changed``): each new face starts from the multipliers
