@@ -57,6 +57,58 @@ gf cm/cm^2; KES defines LT = WT / (Fm EMT / 2), so either gives the other), bend
    rigidity of the orthotropic plate (cloth/bending.py) and the value isotropic bending uses.
 
 Damping is not measured by KES: ``apply_fabric`` keeps the configuration's damping.
+
+**Measured-moduli records** (``format = "wang2011"``): the ten fabrics that H. Wang, J. F.
+O'Brien and R. Ramamoorthi measured ("Data-Driven Elastic Models for Cloth: Modeling and
+Measurement", ACM TOG 30(4) 71, SIGGRAPH 2011), as ARCSim ships them (``materials/*.json``),
+transcribed digit for digit: ``density`` (kg/m^2); ``[stretching]``, six rows of [c11, c12,
+c22, c33] (N/m): ``zero_strain``, then ``stretch0``, ``stretch22_5``, ``stretch45``,
+``stretch67_5``, ``stretch90``, the moduli at a principal strain of 1/6 with the principal
+stretch at that angle (deg) from the material's u axis; ``[bending]``, three rows of five
+samples (N m) at rising curvature: ``hinge0``, ``hinge45``, ``hinge90``, the stiffness of a
+hinge (fold line) at that angle from u. That is how ARCSim reads the files (src/conf.cpp: the
+first JSON row fills every angle at zero strain, the next five the angles at 1/6; src/dde.cpp:
+linear in the largest principal strain from 0 to 1/6, constant beyond, linear in the angle,
+negative entries clamped at 0; a hinge's row by the angle of its edge in material space).
+Neither the files nor ARCSim says which of u and v is the fabric's warp: Loom's warp is u.
+``load`` checks a record: a missing row, a row of the wrong length, a c11, c22, bending sample
+or density not > 0, is one line naming the file and the field; c12 and c33 may be negative
+(published so in places) and the rule clamps them at 0, as ARCSim does.
+
+The rule W (``derive`` on such a record), each step a stated formula:
+
+W1. *The membrane the numbers describe* is ARCSim's (physics.cpp ``stretching_force``): energy
+    per area ``c11 E11^2 + 2 c12 E11 E22 + c22 E22^2 + 2 c33 E12^2`` on the Green strain E
+    (ARCSim doubles the four entries into k = 2c and applies the force of ``k0 E11^2 / 2 +
+    k1 E11 E22 + k2 E22^2 / 2 + k3 E12^2``), the c's at the current strain (``wang_moduli``). In Loom's terms (energy ``k_warp E11^2 / 2 + k_weft E22^2 / 2 + 2
+    k_shear E12^2``): k_warp = 2 c11, k_weft = 2 c22, k_shear = c33, and a Poisson coupling 2
+    c12 that Loom's membrane does not have.
+W2. *The strip curves* (what a strip test reads of that membrane): a strip cut along u (warp),
+    v (weft) or the bias, free across its width, has the modulus ``1 / (n . S . n)``, S the
+    compliance of the moduli at its strain (``strip_modulus``; c12 enters here), and the
+    nominal tension ``T(e) = (1 + e)(e + e^2 / 2) * modulus`` (``strip_tension``), the
+    moduli from ``stretch0``, ``stretch90`` and ``stretch45`` respectively.
+W3. *What the limit means*: as in rule 2, the strain at which the strip's curve reaches the
+    limit load ``LIMIT_LOAD`` = 20 gf/cm (19.6 N/m); the band is ``[-e, e]``. The bias band is
+    the bias strip's ``[-e, e]``, widened where needed to contain the automatic band.
+W4. *Moduli*: k_warp, k_weft the strips' secants at the limit load (as rule 3; the
+    ``crimp_modulus`` entry is the strip's modulus at zero strain); k_shear = c33 of
+    ``zero_strain``. The shear reported at the limit load is the bias strip's, ``T / (2
+    c33)`` at its strain, capped at ``JAMMING_DEG``.
+W5. *Bending*: per direction the median of the row's five samples (its curvature dependence
+    is not modelled: Loom's plate is linear), times ``HINGE_TO_PLATE`` = 1/4:
+    ``k_bend_warp`` from ``hinge90`` (hinges along v bend the cloth along u),
+    ``k_bend_weft`` from ``hinge0``; ``k_bend`` = sqrt(B_warp B_weft). The factor: ARCSim's
+    hinge energy ``ke l^2 theta^2 / (8 (A0 + A1))`` stores ``(ke / 4) kappa^2 / 2`` per area
+    on a cylinder of curvature kappa meshed with near-equilateral triangles (and along the
+    legs of a grid of right triangles), so the cloth ARCSim simulates from these files has the
+    plate rigidity ke / 4 (tests/test_fabrics.py checks it on ARCSim's formula).
+W6. *Density*: ``density`` as it is (kg/m^2; ``weight`` = 100 x it in mg/cm^2).
+
+W1 and W5 take the numbers as ARCSim uses them. ARCSim's own comments in its aluminium and
+paper files call the stretching entry "E h" and the bending entry "E h^3 / 12", i.e. half the
+membrane stiffness and four times the plate rigidity that its code then simulates; docs/
+fabrics.md says which reading the units check supports and by how much the two differ.
 """
 import copy
 import math
@@ -90,6 +142,25 @@ TENSILE = {"EMT": ("%", "strain at 500 gf/cm (KES-FB1)"),
 SHEAR = {"G": ("gf/(cm deg)", "shear stiffness (KES-FB1)"),
          "2HG": ("gf/cm", "shear hysteresis at 0.5 deg (KES-FB1)")}
 
+# Measured-moduli records (format "wang2011"): an ARCSim material file's tables, row by row
+# (Wang, O'Brien and Ramamoorthi 2011; the layout as ARCSim's conf.cpp and dde.cpp read it).
+FORMATS = ("kes", "wang2011")
+WANG_STRAIN = 1.0 / 6.0          # the principal strain of the stretching rows after the first
+STRETCH_ROWS = {                 # row -> (the principal stretch's angle from u, deg; what it is)
+    "zero_strain": (None, "the moduli at zero strain, every direction"),
+    "stretch0": (0.0, "the moduli at 1/6 strain, principal stretch along u (Loom's warp)"),
+    "stretch22_5": (22.5, "the moduli at 1/6 strain, principal stretch at 22.5 deg from u"),
+    "stretch45": (45.0, "the moduli at 1/6 strain, principal stretch on the bias"),
+    "stretch67_5": (67.5, "the moduli at 1/6 strain, principal stretch at 67.5 deg from u"),
+    "stretch90": (90.0, "the moduli at 1/6 strain, principal stretch along v (Loom's weft)")}
+MODULI = ("c11", "c12", "c22", "c33")
+BEND_ROWS = {                    # row -> what it is (five samples, curvature 0 to 0.4 1/cm)
+    "hinge0": "bending stiffness of hinges along u (curvature along v: Loom's weft)",
+    "hinge45": "bending stiffness of hinges on the bias",
+    "hinge90": "bending stiffness of hinges along v (curvature along u: Loom's warp)"}
+BEND_SAMPLES = 5
+HINGE_TO_PLATE = 0.25            # the plate rigidity of ARCSim's hinge energy per its ke (rule, W5)
+
 
 class FabricError(ConfigError):
     """A fabric record that cannot be used; the message is one line naming file and field."""
@@ -97,7 +168,10 @@ class FabricError(ConfigError):
 
 @dataclass(frozen=True)
 class Fabric:
-    """One checked record: ``warp`` / ``weft`` {EMT, LT, WT?, B}, ``shear`` {G, 2HG}."""
+    """One checked record. A KES-FB record (``format`` "kes"): ``warp`` / ``weft`` {EMT, LT,
+    WT?, B}, ``shear`` {G, 2HG}. A measured-moduli record (``format`` "wang2011"):
+    ``stretching`` {row: [c11, c12, c22, c33] N/m} and ``bending`` {row: five N m}, the
+    tables of an ARCSim material file; its ``warp``, ``weft``, ``shear`` are empty."""
     name: str
     path: str
     kind: str
@@ -106,6 +180,9 @@ class Fabric:
     weft: dict
     shear: dict
     source: dict = field(default_factory=dict)
+    format: str = "kes"
+    stretching: dict = field(default_factory=dict)
+    bending: dict = field(default_factory=dict)
 
 
 def _where(path):
@@ -124,6 +201,59 @@ def _number(value, path, key, unit, what, lo=0.0, hi=None):
     return float(value)
 
 
+def _finite(value, path, key, unit, what):
+    """A finite number of either sign (a published modulus ARCSim clamps at 0), or one line."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise FabricError(f"{_where(path)}: {key} = {value!r} must be a number ({what}, {unit})")
+    return float(value)
+
+
+def _parse_wang(data, path, name):
+    """A measured-moduli record (``format = "wang2011"``): the ARCSim material file's density,
+    stretching and bending tables, each row under its name (module docstring, W)."""
+    density = data.get("density")
+    if density is None:
+        raise FabricError(f"{_where(path)}: density is missing (areal density, kg/m^2)")
+    density = _number(density, path, "density", "kg/m^2", "areal density")
+    tables = {}
+    for table, rows, width, unit in (("stretching", STRETCH_ROWS, len(MODULI), "N/m"),
+                                     ("bending", BEND_ROWS, BEND_SAMPLES, "N m")):
+        t = data.get(table)
+        if not isinstance(t, dict):
+            raise FabricError(f"{_where(path)}: [{table}] is missing (the {table} table of the "
+                              "material file, one row per direction)")
+        unknown = sorted(set(t) - set(rows))
+        if unknown:
+            raise FabricError(f"{_where(path)}: {table}.{unknown[0]} is not a row (use "
+                              + ", ".join(rows) + ")")
+        out = {}
+        for r in rows:
+            what = rows[r][1] if table == "stretching" else rows[r]
+            if r not in t:
+                raise FabricError(f"{_where(path)}: {table}.{r} is missing ({what})")
+            row = t[r]
+            if not isinstance(row, list) or len(row) != width:
+                raise FabricError(f"{_where(path)}: {table}.{r} must be a list of {width} numbers"
+                                  f" ({what}, {unit})")
+            vals = []
+            for i, v in enumerate(row):
+                if table == "stretching":
+                    key = f"{table}.{r}[{i}]"
+                    label = f"{MODULI[i]}, {what}"
+                    # c11 and c22 (the direct moduli) must be positive; c12 and c33 are
+                    # published negative in places and clamped at 0 by the rule, as by ARCSim.
+                    vals.append(_number(v, path, key, unit, label) if i in (0, 2)
+                                else _finite(v, path, key, unit, label))
+                else:
+                    vals.append(_number(v, path, f"{table}.{r}[{i}]", unit,
+                                        f"curvature sample {i}, {what}"))
+            out[r] = vals
+        tables[table] = out
+    return Fabric(name=name, path=path, kind=str(data.get("kind", "")), weight=density * 100.0,
+                  warp={}, weft={}, shear={}, source=dict(data.get("source", {})),
+                  format="wang2011", stretching=tables["stretching"], bending=tables["bending"])
+
+
 def parse(data, path="<record>"):
     """A ``Fabric`` from a record's parsed TOML (``load`` reads the file)."""
     def need(table, key, where):
@@ -136,6 +266,12 @@ def parse(data, path="<record>"):
     name = data.get("name", os.path.splitext(os.path.basename(path))[0])
     if not isinstance(name, str) or not name:
         raise FabricError(f"{_where(path)}: name must be a word")
+    fmt = data.get("format", "kes")
+    if fmt not in FORMATS:
+        raise FabricError(f"{_where(path)}: format = {fmt!r} is not a record kind (use "
+                          + " or ".join(repr(f) for f in FORMATS) + ")")
+    if fmt == "wang2011":
+        return _parse_wang(data, path, name)
     weight = _number(need(data, "weight", ""), path, "weight", "mg/cm^2", "areal density W")
     dirs = {}
     for d in DIRECTIONS:
@@ -287,6 +423,8 @@ def derive(fabric, limit_load=LIMIT_LOAD):
     (the bias band's shear angle), ``crimp_modulus`` (per direction, N/m) and ``provenance``
     (setting key -> one line saying where its number came from)."""
     f = get(fabric) if isinstance(fabric, str) else fabric
+    if f.format == "wang2011":
+        return _derive_wang(f, limit_load)
     src = _where(f.path)
     mat, bands, prov, crimp = {}, {}, {}, {}
     for d in DIRECTIONS:
@@ -316,6 +454,116 @@ def derive(fabric, limit_load=LIMIT_LOAD):
     prov["material.k_shear"] = f"{src}: G {G:g} gf/(cm deg) x 0.980665 x 180/pi"
     mat["density"] = f.weight * MG_PER_CM2
     prov["material.density"] = f"{src}: W {f.weight:g} mg/cm^2 x 0.01"
+    mat["k_bend"] = math.sqrt(mat["k_bend_warp"] * mat["k_bend_weft"])
+    prov["material.k_bend"] = f"{src}: sqrt(B_warp B_weft), the plate's twisting rigidity"
+    status = f.source.get("status", "")
+    if status:
+        for k in prov:
+            prov[k] += f" [{status}]"
+    return dict(name=f.name, material=mat, strain=bands, shear_deg=gamma_deg,
+                crimp_modulus=crimp, provenance=prov)
+
+
+# ---- the rule for measured-moduli records (format "wang2011") ------------------------------------
+def wang_moduli(fabric, row, strain):
+    """[c11, c12, c22, c33] (N/m, the file's numbers) at principal strain ``strain`` of
+    stretching row ``row``: linear from ``zero_strain`` to ``row`` over 0 ... 1/6, constant
+    beyond, each clamped at 0 (ARCSim's dde.cpp does both)."""
+    w = min(max(strain / WANG_STRAIN, 0.0), 1.0)
+    a, b = fabric.stretching["zero_strain"], fabric.stretching[row]
+    return [max((1.0 - w) * x + w * y, 0.0) for x, y in zip(a, b)]
+
+
+def strip_modulus(c, angle):
+    """The modulus (N/m, second Piola-Kirchhoff tension per Green strain) of a strip cut at
+    ``angle`` (rad) from u, free across its width, of a membrane with energy density
+    ``c11 E11^2 + 2 c12 E11 E22 + c22 E22^2 + 2 c33 E12^2`` (ARCSim's, rule W1): 1 / (n.S.n),
+    S the compliance (engineering shear). 0 where the membrane is not stable."""
+    a, b, d, g = 2.0 * c[0], 2.0 * c[1], 2.0 * c[2], c[3]
+    det = a * d - b * b
+    cs, sn = math.cos(angle) ** 2, math.sin(angle) ** 2
+    if det <= 0.0 or (g <= 0.0 and cs * sn > 1e-12):
+        return 0.0
+    comp = (d * cs * cs - 2.0 * b * cs * sn + a * sn * sn) / det
+    if cs * sn > 1e-12:
+        comp += cs * sn / g
+    return 1.0 / comp
+
+
+def strip_tension(fabric, row, angle, strain):
+    """The nominal tension (N/m) of a strip at ``strain`` (the tension a strip test reads):
+    ``(1 + e) (e + e^2 / 2) * strip_modulus`` at that strain."""
+    e = strain
+    return (1.0 + e) * (e + 0.5 * e * e) * strip_modulus(wang_moduli(fabric, row, e), angle)
+
+
+def strip_strain(fabric, row, angle, load):
+    """The strain (fraction) at which the strip reaches ``load`` N/m: the first crossing,
+    found on a 1e-4 grid and bisected; inf if not reached by 300 %."""
+    step, e = 1e-4, 0.0
+    while e < 3.0:
+        if strip_tension(fabric, row, angle, e + step) >= load:
+            lo, hi = e, e + step
+            for _ in range(60):
+                mid = 0.5 * (lo + hi)
+                lo, hi = (mid, hi) if strip_tension(fabric, row, angle, mid) < load else (lo, mid)
+            return 0.5 * (lo + hi)
+        e += step
+    return math.inf
+
+
+WANG_STRIPS = {"warp": ("stretch0", 0.0), "weft": ("stretch90", 0.5 * math.pi),
+               "bias": ("stretch45", 0.25 * math.pi)}
+WANG_BENDS = {"warp": "hinge90", "weft": "hinge0", "bias": "hinge45"}
+
+
+def _median(xs):
+    ys = sorted(xs)
+    n = len(ys)
+    return ys[n // 2] if n % 2 else 0.5 * (ys[n // 2 - 1] + ys[n // 2])
+
+
+def _derive_wang(f, limit_load):
+    """The rule W of the module docstring on a measured-moduli record."""
+    src = _where(f.path)
+    load = limit_load * GF_PER_CM                          # N/m
+    mat, bands, prov, crimp = {}, {}, {}, {}
+    strains = {}
+    for d, (row, angle) in WANG_STRIPS.items():
+        e = strip_strain(f, row, angle, load)
+        if not math.isfinite(e):
+            raise FabricError(f"{src}: the {d} strip ({row}) does not reach {limit_load:g} "
+                              "gf/cm by 300 % strain")
+        strains[d] = e
+    for d in DIRECTIONS:
+        row, angle = WANG_STRIPS[d]
+        e = strains[d]
+        bands[d] = [-e, e]
+        mat["k_" + d] = load / e
+        crimp[d] = strip_modulus(wang_moduli(f, row, 0.0), angle)
+        prov[f"strain.{d}"] = (f"{src}: strain at {limit_load:g} gf/cm of the {d} strip "
+                               f"(stretching.zero_strain to .{row}; cloth/fabrics.py, rule W)")
+        prov[f"material.k_{d}"] = (f"{src}: secant of the {d} strip at {limit_load:g} gf/cm "
+                                   f"({load:.4g} N/m / {e:.4g})")
+        b = _median(f.bending[WANG_BENDS[d]])
+        mat["k_bend_" + d] = HINGE_TO_PLATE * b
+        prov[f"material.k_bend_{d}"] = (f"{src}: {HINGE_TO_PLATE:g} x the median of "
+                                        f"bending.{WANG_BENDS[d]} ({1e6 * b:.4g} uN m)")
+    e_b = strains["bias"]
+    alo, ahi = automatic_bias(bands["warp"], bands["weft"])
+    bands["bias"] = [min(-e_b, alo), max(e_b, ahi)]
+    g = wang_moduli(f, "stretch45", e_b)[3]
+    gamma_deg = JAMMING_DEG if g <= 0 else min(math.degrees(load / (2.0 * g)), JAMMING_DEG)
+    prov["strain.bias"] = (f"{src}: strain at {limit_load:g} gf/cm of the bias strip "
+                           f"(stretching.zero_strain to .stretch45), mirrored; shear "
+                           f"{gamma_deg:.3g} deg" + (f" (capped at {JAMMING_DEG:g})"
+                                                     if gamma_deg >= JAMMING_DEG else "")
+                           + " (cloth/fabrics.py, rule W)")
+    c33 = max(f.stretching["zero_strain"][3], 0.0)
+    mat["k_shear"] = c33
+    prov["material.k_shear"] = f"{src}: c33 of stretching.zero_strain ({c33:.4g} N/m)"
+    mat["density"] = f.weight * MG_PER_CM2
+    prov["material.density"] = f"{src}: density {f.weight * MG_PER_CM2:g} kg/m^2"
     mat["k_bend"] = math.sqrt(mat["k_bend_warp"] * mat["k_bend_weft"])
     prov["material.k_bend"] = f"{src}: sqrt(B_warp B_weft), the plate's twisting rigidity"
     status = f.source.get("status", "")
@@ -418,9 +666,27 @@ def table_lines(directory=None):
          "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for p in paths(directory):
         f = load(p)
+        if f.format != "kes":
+            continue
         L.append(f"| {f.name} | {f.kind} | {10 * f.weight:.0f} | {f.warp['EMT']:g} / "
                  f"{f.weft['EMT']:g} | {f.warp['LT']:.3g} / {f.weft['LT']:.3g} | "
                  f"{f.warp['B']:g} / {f.weft['B']:g} | {f.shear['G']:g} | {f.shear['2HG']:g} | "
+                 f"{f.source.get('cite', '')} ({f.source.get('status', '')}) |")
+    L += ["", "Measured-moduli records (`format = \"wang2011\"`: Wang, O'Brien and Ramamoorthi "
+          "2011, the tables of ARCSim's material files; N/m and N m as in the files):", "",
+          "| fabric | kind | density (g/m^2) | zero strain: c11 / c12 / c22 / c33 (N/m) | at 1/6 "
+          "strain: c11 along u / c22 along v / c33 on the bias (N/m) | bending, median of 5: "
+          "hinges along u / bias / along v (uN m, file values) | source |",
+          "| --- | --- | --- | --- | --- | --- | --- |"]
+    for p in paths(directory):
+        f = load(p)
+        if f.format != "wang2011":
+            continue
+        z, st, b = f.stretching["zero_strain"], f.stretching, f.bending
+        L.append(f"| {f.name} | {f.kind} | {10 * f.weight:.0f} | "
+                 + " / ".join(f"{v:.4g}" for v in z) + " | "
+                 f"{st['stretch0'][0]:.4g} / {st['stretch90'][2]:.4g} / {st['stretch45'][3]:.4g} | "
+                 + " / ".join(f"{1e6 * _median(b[r]):.3g}" for r in BEND_ROWS) + " | "
                  f"{f.source.get('cite', '')} ({f.source.get('status', '')}) |")
     L += ["", "Derived by the rule (cloth/fabrics.py; limit load "
           f"{LIMIT_LOAD:g} gf/cm, jamming cap {JAMMING_DEG:g} deg):", "",
@@ -440,7 +706,7 @@ def table_lines(directory=None):
                  " / ".join(f"{100 * c:.2f}" for c in bending_lengths(d)) + " |")
     L += ["", "The shear each method's derived bands admit (`cloth.fabrics.shear_limits`: the threads' "
           "cell sheared, the threads unstretched):", "",
-          "| fabric | shear at the limit load, from G and 2HG (deg) | largest shear admitted: "
+          "| fabric | shear at the limit load (deg; rule 4 or W4) | largest shear admitted: "
           "warp-weft / svd / mapping (deg) |", "| --- | --- | --- |"]
     for p in paths(directory):
         d = derive(load(p))
