@@ -2,7 +2,7 @@
 that turns them into Loom's material and strain bands.
 
     from cloth import fabrics
-    fabrics.names()                          # ['cotton-jersey', 'cotton-shirting', 'denim', ...]
+    fabrics.names()                          # ['11oz-black-denim', 'camel-ponte-roma', ...]
     cfg = fabrics.apply_fabric(cfg, "denim") # material and bands of a config (dict or Settings)
     fabrics.provenance("denim")              # {"material.k_warp": "where it came from", ...}
     python -m cloth.fabrics                  # the table of docs/fabrics.md
