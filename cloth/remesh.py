@@ -108,10 +108,40 @@ SIZING_TERMS = ("curvature", "velocity", "compression", "obstacle")
 
 def face_sizing(mesh, params, obstacle_distance=None, edges=None):
     """Per-face sizing metric (F, 2, 2) in material space before clamping, and face areas:
-    the terms of ``face_sizing_terms`` combined. ``edges``: ``build_edges(mesh.faces)`` if the
-    caller has it already."""
+    the terms of ``face_sizing_terms`` combined by ``metric_max``. ``edges``:
+    ``build_edges(mesh.faces)`` if the caller has it already."""
     terms, area = face_sizing_terms(mesh, params, obstacle_distance, edges)
-    return sum(terms.values()), area
+    M = None
+    for T in terms.values():
+        M = T if M is None else metric_max(M, T)
+    return M, area
+
+
+def metric_max(A, B):
+    """The smallest-trace metric M with M - A and M - B positive semidefinite (stacks of
+    symmetric 2x2): an edge short enough in M is short enough in both, and M is no finer than
+    that needs. ARCSim combines its sizing terms so (``tensor_max``); their sum, which Loom
+    used before, is finer by up to sqrt(2) in length where two terms ask for the same size.
+
+    A symmetric 2x2 matrix [[a, b], [b, c]] is the disk with centre ((a - c) / 2, b) and
+    radius (a + c) / 2 (its eigenvalues are the radius plus and minus the centre's length),
+    and M - A is positive semidefinite exactly when M's disk contains A's: M is the smallest
+    disk containing both. Folded over several terms this bounds each of them, and is at most
+    slightly finer than the smallest metric that does."""
+    ca = np.stack([0.5 * (A[:, 0, 0] - A[:, 1, 1]), A[:, 0, 1]], axis=1)
+    cb = np.stack([0.5 * (B[:, 0, 0] - B[:, 1, 1]), B[:, 0, 1]], axis=1)
+    ra, rb = 0.5 * (A[:, 0, 0] + A[:, 1, 1]), 0.5 * (B[:, 0, 0] + B[:, 1, 1])
+    d = np.linalg.norm(cb - ca, axis=1)
+    r = 0.5 * (ra + d + rb)
+    t = np.where(d > 0.0, (r - ra) / np.where(d > 0.0, d, 1.0), 0.0)
+    c = ca + t[:, None] * (cb - ca)
+    a_in_b, b_in_a = d + ra <= rb, d + rb <= ra
+    r = np.where(a_in_b, rb, np.where(b_in_a, ra, r))
+    c = np.where(a_in_b[:, None], cb, np.where(b_in_a[:, None], ca, c))
+    M = np.empty_like(A)
+    M[:, 0, 0], M[:, 1, 1] = r + c[:, 0], r - c[:, 0]
+    M[:, 0, 1] = M[:, 1, 0] = c[:, 1]
+    return M
 
 
 def face_sizing_terms(mesh, params, obstacle_distance=None, edges=None):
@@ -149,22 +179,41 @@ def face_sizing_terms(mesh, params, obstacle_distance=None, edges=None):
     Gv = _times(mesh.v[j] - mesh.v[i], mesh.v[k] - mesh.v[i], Dm_inv)
     terms["velocity"] = _gram(Gv) / params.refine_velocity ** 2
 
-    # Compression: principal stretches below 1 (from F^T F) ask for a finer mesh along their
-    # direction, reaching size_min at a compressive strain of refine_compression.
+    # Compression: a region compressed (Green strain e = F^T F - I below 0 along a direction)
+    # will buckle, and is refined before the wrinkles form: along it, the metric m that
+    # solves c^2 m^2 + e m + k^2 = 0 (the larger root), k the curvature across that direction
+    # (S^2's adjugate). Flat (k = 0), m = -e / c^2: size_min at a compression of about
+    # refine_compression, c^2 = 2 refine_compression size_min^2. Curved across it, the
+    # surface resists buckling there (a shell, or a rib, is stiffer against compression
+    # along it than a flat sheet) and asks for less; nothing below a compression of about
+    # c k / sqrt(2). Where the root is complex, the square root of the negative discriminant
+    # is taken negative, so that the metric falls continuously to 0 (ARCSim's
+    # compression_metric with rib_stiffening 1).
     F = _times(x[j] - x[i], x[k] - x[i], Dm_inv)
-    lam, V = _sym_eig2(_gram(F))
-    comp = np.maximum(0.0, 1.0 - np.sqrt(np.maximum(lam, 0.0)))
-    terms["compression"] = _compose(comp / (params.refine_compression * params.size_min ** 2), V)
+    e = _gram(F)
+    e[:, 0, 0] -= 1.0
+    e[:, 1, 1] -= 1.0
+    c2 = 2.0 * params.refine_compression * params.size_min ** 2
+    S2 = _gram(S)
+    k2 = np.empty_like(S2)                        # adj(S^2): the curvature across
+    k2[:, 0, 0], k2[:, 1, 1] = S2[:, 1, 1], S2[:, 0, 0]
+    k2[:, 0, 1] = k2[:, 1, 0] = -S2[:, 0, 1]
+    lam, V = _sym_eig2(_gram(e) - 4.0 * c2 * k2)  # e symmetric: e^T e
+    lam, V = _sym_eig2(_compose(np.sign(lam) * np.sqrt(np.abs(lam)), V) - e)
+    terms["compression"] = _compose(np.maximum(lam, 0.0) / (2.0 * c2), V)
 
-    # Obstacle proximity: the material gradient g of the obstacle distance d; the change of d
-    # across an edge must stay below refine_obstacle * (|d| + size_min). A sheet lying
-    # parallel to the obstacle (g ~ 0) is not refined by this term, only where it approaches
-    # or leaves it.
+    # Obstacle proximity: the material gradient g of the obstacle distance d; within
+    # obstacle_reach of an obstacle, the change of d across an edge must stay below
+    # refine_obstacle * (|d| + size_min). A sheet lying on an obstacle, flat or curved with
+    # it (d the same at its vertices, g ~ 0), is not refined by this term, only where it
+    # approaches or leaves it; farther than the reach, not at all (ARCSim: nearest-obstacle
+    # planes within 10 repulsion thicknesses).
     if obstacle_distance is not None:
         d = np.asarray(obstacle_distance(x), dtype=np.float64).reshape(-1)
         if d.shape != (len(x),) or not np.all(np.isfinite(d)):
             raise ModelError("obstacle_distance must return one finite distance per vertex")
         g = np.einsum("fji,fj->fi", Dm_inv, np.stack([d[j] - d[i], d[k] - d[i]], axis=1))
+        g[~(d[faces].min(axis=1) < params.obstacle_reach)] = 0.0
         scale = params.refine_obstacle * (np.abs(d[faces]).mean(axis=1) + params.size_min)
         terms["obstacle"] = _outer(g, g) / (scale ** 2)[:, None, None]
     return terms, area

@@ -14,11 +14,24 @@ class RemeshParams:
         may create.
     refine_angle: rad, largest turning of the surface normal across one edge (curvature).
     refine_velocity: m/s, largest velocity difference across one edge.
-    refine_compression: compressive strain at which a region is refined to ``size_min``
-        (finer target length ``size_min * sqrt(refine_compression / compression)``), so
-        regions about to buckle are refined before the wrinkles form.
-    refine_obstacle: largest change of obstacle distance across an edge, as a fraction of the
-        distance (plus ``size_min``): refines where the cloth approaches or leaves an obstacle.
+    refine_compression: compressive strain at which a flat region is refined to ``size_min``
+        (finer target length about ``size_min * sqrt(refine_compression / compression)``), so
+        regions about to buckle are refined before the wrinkles form. Where the surface is
+        already curved across the compression it asks for less, and nothing below a
+        compression of about ``size_min * sqrt(refine_compression) * curvature``: a shell
+        curved across the direction it is compressed in resists buckling (ARCSim's rib
+        stiffening; 1.1 % on the drape's 0.3 m sphere). ``face_sizing_terms``.
+    refine_obstacle, obstacle_reach: within ``obstacle_reach`` (m) of an obstacle, the largest
+        change of the obstacle distance across an edge, as a fraction of the distance plus
+        ``size_min``: refines where the cloth approaches or leaves an obstacle, not where it
+        lies on it (the distance does not change along it). 1 and 0.05 m, as ARCSim (the
+        change of height over the nearest obstacle's tangent plane at most the height, within
+        10 repulsion thicknesses; Loom's collision thickness is 5 mm). With 0.25 and no reach
+        (before), the drape's skirt was refined to ``size_min`` for several centimetres where
+        it leaves the sphere (docs/remesh/drape.md).
+    The terms are combined by the smallest metric that bounds each of them (``metric_max``),
+    as ARCSim does, not by their sum: where two terms ask for the same size, the mesh has that
+    size, not 0.7 of it.
     curvature_smoothing: rounds of face -> vertex -> face averaging of the signed shape operator
         before the curvature term squares it. Creases that zigzag one triangle wide (a
         strain-limited soft sheet crumples at the scale of its triangles) cancel, so refining
@@ -67,7 +80,8 @@ class RemeshParams:
     refine_angle: float = 0.3
     refine_velocity: float = 1.0
     refine_compression: float = 0.05
-    refine_obstacle: float = 0.25
+    refine_obstacle: float = 1.0
+    obstacle_reach: float = 0.05
     curvature_smoothing: int = 2
     collapse_margin: float = 0.1
     collapse_rounds: int = 2
@@ -90,6 +104,9 @@ class RemeshParams:
             if not getattr(self, name) > 0:
                 raise _error()(f"remesh {name} must be > 0 (got {getattr(self, name)}); "
                                  "a larger value refines less")
+        if not self.obstacle_reach > 0:
+            raise _error()(f"remesh obstacle_reach must be > 0 m (got {self.obstacle_reach}); "
+                             "0.05 refines within 5 cm of an obstacle")
         if not 0 <= self.collapse_margin < 1:
             raise _error()(f"remesh collapse_margin must be in [0, 1) (got "
                              f"{self.collapse_margin}); 0.2 is a good hysteresis")

@@ -144,7 +144,9 @@ SCHEMA = {
         "refine_compression": Key("strain", "compression refined to size_min", lo=0,
                                   lo_open=True),
         "refine_obstacle": Key("", "largest change of obstacle distance across an edge, per "
-                               "edge length", lo=0, lo_open=True),
+                               "distance plus size_min", lo=0, lo_open=True),
+        "obstacle_reach": Key("m", "distance from an obstacle within which refine_obstacle "
+                              "applies", lo=0, lo_open=True),
         "curvature_smoothing": Key("", "rounds of averaging of the shape operator", lo=0),
         "collapse_margin": Key("", "hysteresis of edge collapses", lo=0, hi=0.999999),
         "collapse_rounds": Key("", "collapse passes per remesh", lo=0),
