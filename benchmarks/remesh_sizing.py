@@ -1,7 +1,9 @@
 """What each term of the remesher's sizing metric asks on a cloth state written by a run.
 
-    python -m benchmarks.remesh_sizing out/drape/meshes/frame_0030.obj [--config out/drape/config.toml]
+    python -m benchmarks.remesh_sizing out/drape/meshes/frame_0030.obj [--config CONFIG.toml]
                                        [--set size_min=0.01 ...]
+    python -m benchmarks.remesh_sizing drape --trace 30 [--set remesh.size_min=0.01 ...]
+    python -m benchmarks.remesh_sizing A.obj --picture OUT.png --vs B.obj --titles "a,b"
 
 Reads the OBJ (world positions and material coordinates) and the run's ``config.toml`` next to
 ``meshes/`` (the scene's obstacles and the remesh settings), and prints for the whole metric and
@@ -15,7 +17,8 @@ faces of area sqrt(det M) / (sqrt(3) / 4), with each face's metric clamped (``cl
 clamped face metrics averaged to the vertices, a face's metric the mean of its three). A mesh
 the remesher made has about twice the asked count (docs/remesh/drape.md). The area is split
 into the cloth *lying* on an obstacle (every vertex of the face within ``2 * thickness`` of
-it) and the rest.
+it) and the rest. ``--picture``: the drape's OBJs side by side as wireframes, coloured by
+triangle size on one scale (size_min to size_max), the sphere drawn as the scene's.
 """
 import argparse
 import math
@@ -118,6 +121,50 @@ def trace(scene, frames, sets=()):
               + " | ".join(f"{v:,.0f}" for v in per) + " |", flush=True)
 
 
+def picture(objs, titles, out, lo=15.0, hi=80.0):
+    """OBJs of the drape (world y up) side by side, each triangle coloured by the edge of an
+    equilateral triangle of its rest area (mm, ``lo``..``hi``), edges drawn."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+    from cloth.io import read_obj_uv
+    from scenes.drape import DEFAULTS
+    centre, radius = DEFAULTS["sphere"]["center"], DEFAULTS["sphere"]["radius"]
+    fig = plt.figure(figsize=(6 * len(objs), 6), dpi=100)
+    cmap = plt.get_cmap("viridis")
+    for n, (path, title) in enumerate(zip(objs, titles)):
+        x, uv, f = read_obj_uv(path)
+        e1, e2 = uv[f[:, 1]] - uv[f[:, 0]], uv[f[:, 2]] - uv[f[:, 0]]
+        area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+        edge = 1e3 * np.sqrt(4.0 * area / math.sqrt(3.0))
+        ax = fig.add_subplot(1, len(objs), n + 1, projection="3d")
+        p = x[:, [0, 2, 1]]                                  # world y up -> plot z
+        ax.add_collection3d(Poly3DCollection(
+            p[f], facecolors=cmap(np.clip((edge - lo) / (hi - lo), 0.0, 1.0)),
+            edgecolors=(0, 0, 0, 0.5), linewidths=0.2))
+        u, v = np.mgrid[0:2 * np.pi:40j, 0:np.pi:20j]
+        r = 0.97 * radius
+        ax.plot_wireframe(centre[0] + r * np.cos(u) * np.sin(v),
+                          centre[2] + r * np.sin(u) * np.sin(v),
+                          centre[1] + r * np.cos(v), color="0.8", linewidth=0.3)
+        ax.set_xlim(centre[0] - 0.36, centre[0] + 0.36)
+        ax.set_ylim(centre[2] - 0.36, centre[2] + 0.36)
+        ax.set_zlim(centre[1] - 0.3, centre[1] + 0.35)
+        ax.set_box_aspect((0.72, 0.72, 0.65), zoom=1.45)
+        ax.view_init(elev=30, azim=-62)
+        ax.set_axis_off()
+        ax.set_title(f"{title}: {len(f):,} faces", fontsize=11)
+    sm = plt.cm.ScalarMappable(cmap=cmap, norm=plt.Normalize(lo, hi))
+    fig.colorbar(sm, ax=fig.axes, shrink=0.6,
+                 label="triangle size (mm, equilateral edge of its rest area)")
+    import io
+    from PIL import Image
+    buf = io.BytesIO()
+    fig.savefig(buf, bbox_inches="tight")
+    Image.open(buf).convert("RGB").quantize(colors=128).save(out, optimize=True)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("obj", help="a run's meshes/frame_NNNN.obj, or with --trace a scene")
@@ -128,7 +175,14 @@ def main(argv=None):
     ap.add_argument("--trace", type=int, metavar="FRAMES",
                     help="run the scene (OBJ names a scene) remeshed for FRAMES frames and "
                          "print the asks after every frame")
+    ap.add_argument("--picture", metavar="PNG", help="draw OBJ (and --vs OBJs) side by side")
+    ap.add_argument("--vs", action="append", default=[], help="another OBJ for --picture")
+    ap.add_argument("--titles", help="comma-separated titles for --picture")
     args = ap.parse_args(argv)
+    if args.picture:
+        objs = [args.obj] + args.vs
+        titles = args.titles.split(",") if args.titles else objs
+        return picture(objs, titles, args.picture)
     if args.trace:
         return trace(args.obj, args.trace, args.set)
     config = args.config or os.path.join(os.path.dirname(os.path.dirname(
