@@ -36,7 +36,7 @@ def test_exact_solve_sets_the_penalty_and_the_hessian():
     assert lim._ws.params.to_numpy()[direct.P_MARGIN] == 0.0
     sim._change("strain", solve="fast")
     assert lim.mu_scale == fast_mu
-    assert lim._ws.params.to_numpy()[direct.P_MARGIN] == lim.active_margin
+    assert lim._ws.params.to_numpy()[direct.P_MARGIN] == lim.newton_margin()
 
 
 def test_gauss_newton_blocks_equal_a_dense_assembly():

@@ -506,3 +506,45 @@ def test_cusick_picture_of_a_flat_specimen(tmp_path):
     cusick_pictures.draw(path, dict(x=x, DC=1.0, folds=0), faces, "flat")
     with open(path, "rb") as fh:
         assert fh.read(8) == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.parametrize("method", ["warp-weft", "mapping"])
+def test_a_cusick_skirt_under_a_wovens_tight_bands_falls_from_rest(method):
+    """A denim specimen (bands +-0.57 %) released flat on the Cusick support cannot come to
+    rest within 0.4 s: its skirt takes about a second to drape. Before the fast Newton
+    matrix's margin shrank with tight bands (``StrainLimiter.newton_margin``), every face sat
+    within the 1e-2 margin of its band, the penalty stiffened every motion, and from frame 5
+    each projection put the skirt back where it was (RMS speed 0.1-0.6 mm/s at 2 cm
+    triangles); now it keeps falling (10-36 mm/s)."""
+    from benchmarks import cusick
+    from cloth import simulator
+    speeds = []
+
+    class Logged(simulator.Simulator):
+        def step_frame(self):
+            super().step_frame()
+            speeds.append(np.sqrt(np.mean(np.sum(self.model.velocities() ** 2, axis=1))))
+    orig = simulator.Simulator
+    simulator.Simulator = Logged
+    try:
+        cusick.run("denim", h=0.02, method=method, seconds=0.4, log=lambda s: None)
+    finally:
+        simulator.Simulator = orig
+    assert len(speeds) == 12
+    assert min(speeds[4:]) > 3e-3                       # m/s: still falling at frames 5-12
+
+
+def test_the_fast_newton_margin_shrinks_only_for_bands_narrower_than_it():
+    """``newton_margin``: 1e-2 strain for the scenes' bands (hanging: warp +-1 %, weft
+    +-5 %), w^2 / 1e-2 for a narrowest half-width w below it (the denim's +-0.57 %), and the
+    kernels get what it says."""
+    from cloth.strain import buffers
+    from cloth.strain.defaults import ACTIVE_MARGIN
+    from tests.test_coupling import _hanging
+    sim = _hanging("warp-weft", res=4)
+    lim = sim.strain
+    assert lim.newton_margin() == ACTIVE_MARGIN
+    w = 0.0057
+    sim.set_bands(warp=(-w, w), weft=(-0.05, 0.05))
+    assert lim.newton_margin() == pytest.approx(w * w / ACTIVE_MARGIN)
+    assert lim._ws.params.to_numpy()[buffers.P_MARGIN] == pytest.approx(w * w / ACTIVE_MARGIN)

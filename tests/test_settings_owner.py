@@ -51,7 +51,7 @@ def check_copies(st):
         exact = s.strain.solve == "exact"
         kernel_pdas = exact and not lim.uses_host_loop()
         assert p[buffers.P_PDAS] == float(kernel_pdas)
-        assert p[buffers.P_MARGIN] == (0.0 if exact else lim.active_margin)
+        assert p[buffers.P_MARGIN] == (0.0 if exact else lim.newton_margin())
         assert p[buffers.P_INNER_RTOL] == (0.0 if kernel_pdas else lim.inner_rtol)
     # The window keeps no copy: it reads the simulator's settings.
     assert not hasattr(st, "cfg")

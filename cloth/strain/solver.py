@@ -192,6 +192,14 @@ class StrainLimiter:
         """The bias band in ||w_u + w_v|| units (sqrt 2 at rest), as the constraints use it."""
         return tuple(float(np.sqrt(2.0) * (1.0 + b)) for b in self.bias)
 
+    def newton_margin(self):
+        """How close to its band (strain) a constraint enters the fast Newton matrix:
+        ``active_margin``, or w^2 / ``active_margin`` for a narrowest band of half-width
+        w below it (tight bands, e.g. a measured woven's: defaults.py says why)."""
+        bands = [self.warp, self.weft] + ([self.bias] if self.method == "warp-weft" else [])
+        w = min(0.5 * (hi - lo) for lo, hi in bands)
+        return self.active_margin if w >= self.active_margin else w * w / self.active_margin
+
     def uses_host_loop(self):
         """The AL loop on the host with Cholesky steps (direct.py) instead of the one-kernel
         PCG solve: on Vulkan and Metal, and for the exact solve of a cloth with seams (the
@@ -215,7 +223,7 @@ class StrainLimiter:
         params[buffers.P_WEFT:buffers.P_WEFT + 2] = self.weft
         params[buffers.P_SHEAR:buffers.P_SHEAR + 2] = self.shear_band()
         # The active-set model's matrix is the Hessian: no constraint enters it early.
-        params[buffers.P_MARGIN] = 0.0 if active_set else self.active_margin
+        params[buffers.P_MARGIN] = 0.0 if active_set else self.newton_margin()
         params[buffers.P_INNER_RTOL] = 0.0 if self._kernel_pdas() else self.inner_rtol
         params[buffers.P_KKT_TOL] = self.kkt_length
         params[buffers.P_PDAS] = 1.0 if self._kernel_pdas() and active_set else 0.0
