@@ -452,16 +452,8 @@ def derive(fabric, limit_load=LIMIT_LOAD):
                               else "") + ", threads at half the load (cloth/fabrics.py)")
     mat["k_shear"] = G * GF_PER_CM * PER_DEG
     prov["material.k_shear"] = f"{src}: G {G:g} gf/(cm deg) x 0.980665 x 180/pi"
-    mat["density"] = f.weight * MG_PER_CM2
     prov["material.density"] = f"{src}: W {f.weight:g} mg/cm^2 x 0.01"
-    mat["k_bend"] = math.sqrt(mat["k_bend_warp"] * mat["k_bend_weft"])
-    prov["material.k_bend"] = f"{src}: sqrt(B_warp B_weft), the plate's twisting rigidity"
-    status = f.source.get("status", "")
-    if status:
-        for k in prov:
-            prov[k] += f" [{status}]"
-    return dict(name=f.name, material=mat, strain=bands, shear_deg=gamma_deg,
-                crimp_modulus=crimp, provenance=prov)
+    return _derived(f, src, mat, bands, gamma_deg, crimp, prov)
 
 
 # ---- the rule for measured-moduli records (format "wang2011") ------------------------------------
@@ -562,8 +554,15 @@ def _derive_wang(f, limit_load):
     c33 = max(f.stretching["zero_strain"][3], 0.0)
     mat["k_shear"] = c33
     prov["material.k_shear"] = f"{src}: c33 of stretching.zero_strain ({c33:.4g} N/m)"
-    mat["density"] = f.weight * MG_PER_CM2
     prov["material.density"] = f"{src}: density {f.weight * MG_PER_CM2:g} kg/m^2"
+    return _derived(f, src, mat, bands, gamma_deg, crimp, prov)
+
+
+def _derived(f, src, mat, bands, gamma_deg, crimp, prov):
+    """The steps both rules end with: density from the weight, the twisting rigidity from
+    the two bending rigidities, the record's status on every provenance line; the result
+    ``derive`` returns."""
+    mat["density"] = f.weight * MG_PER_CM2
     mat["k_bend"] = math.sqrt(mat["k_bend_warp"] * mat["k_bend_weft"])
     prov["material.k_bend"] = f"{src}: sqrt(B_warp B_weft), the plate's twisting rigidity"
     status = f.source.get("status", "")
