@@ -536,8 +536,8 @@ def test_a_cusick_skirt_under_a_wovens_tight_bands_falls_from_rest(method):
 
 def test_the_fast_newton_margin_shrinks_only_for_bands_narrower_than_it():
     """``newton_margin``: 1e-2 strain for the scenes' bands (hanging: warp +-1 %, weft
-    +-5 %), w^2 / 1e-2 for a narrowest half-width w below it (the denim's +-0.57 %), and the
-    kernels get what it says."""
+    +-5 %), w^2 / 1e-2 where a band end lies w < 1e-2 from rest (the denim's +-0.57 %, also
+    with its compression opened to -5 %), and the kernels get what it says."""
     from cloth.strain import buffers
     from cloth.strain.defaults import ACTIVE_MARGIN
     from tests.test_coupling import _hanging
@@ -548,3 +548,5 @@ def test_the_fast_newton_margin_shrinks_only_for_bands_narrower_than_it():
     sim.set_bands(warp=(-w, w), weft=(-0.05, 0.05))
     assert lim.newton_margin() == pytest.approx(w * w / ACTIVE_MARGIN)
     assert lim._ws.params.to_numpy()[buffers.P_MARGIN] == pytest.approx(w * w / ACTIVE_MARGIN)
+    sim.set_bands(warp=(-0.05, w))
+    assert lim.newton_margin() == pytest.approx(w * w / ACTIVE_MARGIN)

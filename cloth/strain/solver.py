@@ -194,10 +194,13 @@ class StrainLimiter:
 
     def newton_margin(self):
         """How close to its band (strain) a constraint enters the fast Newton matrix:
-        ``active_margin``, or w^2 / ``active_margin`` for a narrowest band of half-width
-        w below it (tight bands, e.g. a measured woven's: defaults.py says why)."""
+        ``active_margin``, or w^2 / ``active_margin`` where w, the nearest band end's
+        distance from rest (strain 0), is below it (tight bands, e.g. a measured woven's:
+        defaults.py says why). An end on the near side of rest (a band [0, hi]) does not
+        count: it binds at rest whatever the margin."""
         bands = [self.warp, self.weft] + ([self.bias] if self.method == "warp-weft" else [])
-        w = min(0.5 * (hi - lo) for lo, hi in bands)
+        ends = [e for lo, hi in bands for e in (-lo, hi) if e > 0.0]
+        w = min(ends) if ends else self.active_margin
         return self.active_margin if w >= self.active_margin else w * w / self.active_margin
 
     def uses_host_loop(self):
