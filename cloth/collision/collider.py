@@ -380,7 +380,8 @@ def _resolve_obstacle(kind: ti.i32, prm: shape.params_t, prims: A, grid: A, x: A
                     # the step moved a sticking vertex back by a whole h v_t each pass (a
                     # sheet landing on a 20-degree plane, mu 0.8: 10-16 mm a pass, the
                     # limits broken by 0.3 at the frame's end).
-                    if step > 0.0:
+                    before_projection = step > 0.0    # the pass with the continuous test
+                    if before_projection:
                         xn += (1.0 - s_hit) * h * (vt_new - vt)
                     # On a curved surface that tangential step can dip below the shell.
                     pt = R1.transpose() @ (xn - c1)

@@ -1041,8 +1041,8 @@ def begin_solve(nv: int, h: float, friction: int, clear: int, extrapolate: int,
                 contacts: ContactPack, stats: A):
     """Set up a projection from the model's state (x_in, v_in): x = x_hat = x_start = x_in,
     v = v_in; fric = (anchor, mu_f) per vertex, the anchor where the substep began (x_prev =
-    x_hat - h v, or x_step near an obstacle), mu_f = 0 (no friction) unless ``friction``; vec.Wdx = choose_start's candidates
-    (``start_candidate``); with ``clear`` no contact half-spaces. One launch instead of five
+    x_hat - h v, or x_step near an obstacle), mu_f = 0 (no friction) unless ``friction``;
+    vec.Wdx = choose_start's candidates (``start_candidate``); with ``clear`` no contact half-spaces. One launch instead of five
     (each costs ~0.1 ms: a tenth of a resting 1.2k-face projection's host time)."""
     ti.loop_config(serialize=True)
     for n in range(nv):
@@ -1060,7 +1060,7 @@ def begin_solve(nv: int, h: float, friction: int, clear: int, extrapolate: int,
         # substep began. Near an obstacle that is, in the share of the vertex that is not
         # moving (as in start_candidate and finish_solve), x_step: the obstacle pass moved x
         # without the matching v, so x_hat - h v lies where the vertex never was, and
-        # friction pulled it there (measured: drape's strain limiting 20.5 -> 14.8 ms a frame
+        # friction pulled it there (measured: drape's strain limiting 20.5 -> 16.3 ms a frame
         # with x_step; with the x_hat start, a tabard's shoulders were held 24 % past their
         # limits until the penalty threw its chest 12 cm). A moving vertex keeps x_hat - h v:
         # its velocity after the pass is the impact's, friction included.
