@@ -164,6 +164,7 @@ class StrainLimiter:
         self.last_fallback = False    # exact: solved again with the fast model
         self.last_stationarity, self._kkt_h = 0.0, 1.0 / 30.0
         self.last_reverted, self.reverted_count = False, 0
+        self.last_slid, self.slid_count = False, 0   # solved again without friction
         self.rounds_total = 0         # AL rounds over every projection so far
 
     # ---- settings ------------------------------------------------------------------------
@@ -454,7 +455,10 @@ class StrainLimiter:
         half a typical edge per substep: an unconverged Newton iterate can have moved a vertex
         far, and dx / h would become a kick (measured on tshirt: an unconverged solve with a
         final violation of 2e-3 had moved one vertex 18 cm, 11 m/s, and the shirt blew up;
-        reverting such solves instead left the cloth stuck outside its limits)."""
+        reverting such solves instead left the cloth stuck outside its limits).
+
+        A projection with friction that ends unconverged is solved once more from its start
+        without friction (``last_slid``; docs/method.md §7)."""
         t0 = time.perf_counter()
         if self.method == "none":
             self.last_iterations, self.last_violation_max = 0, 0.0
@@ -468,23 +472,34 @@ class StrainLimiter:
         # Friction holds contact vertices against sliding over the substep (from x - h v).
         self._start_args = (float(h), int(self._v_last_valid), float(SETTLE_SPEED),
                             int(m.state.step_start_valid))
-        al.begin_solve(nv, float(h), int(contacts and h > 0),
+        friction = contacts and h > 0
+        al.begin_solve(nv, float(h), int(friction),
                        int(not contacts), *self._start_args[1:], ws.step_pack(m.state),
                        ws.vector_pack(), ws.contact_pack(), ws.stats)
-        self.last_reverted = False
+        self.last_reverted = self.last_slid = False
         saved = None
         if not warm:
             saved = self.multipliers()
             for a in (ws.lam, ws.lam_c, ws.lam_s, ws.lam_t):
                 ndarrays.zero(a)
         use_system = h > 0 and self._system_ready
-        if self.uses_host_loop():
-            rounds, newton, converged = self._solve_direct(mid, K, use_system)
-            stats = ws.stats.to_numpy()
-        else:
-            # (_solve_al read the stats already: a read-back costs ~0.2 ms.)
-            rounds, newton, converged, stats = self._solve_al_with_fallback(
-                mid, K, self._newton_metric(use_system), contacts)
+        rounds, newton, converged, stats = self._solve(mid, K, use_system, contacts)
+        if not converged and friction:
+            # Friction could not hold the cloth within its limits: its bound mu lam_n grows
+            # with the contact multipliers that the limits' own pull raises (a capstan), so
+            # the rounds can lock. Measured on the garment example's shoulders: 100 rounds
+            # without moving, and the grown multipliers made the next projections throw the
+            # tabard 28 cm (16 m/s); without friction the same projection met the limits in
+            # 9 rounds. The cloth slides this substep instead: solved again from its start,
+            # without friction and from zero multipliers.
+            al.begin_solve(nv, float(h), 0, 0, *self._start_args[1:], ws.step_pack(m.state),
+                           ws.vector_pack(), ws.contact_pack(), ws.stats)
+            for a in (ws.lam, ws.lam_c, ws.lam_s, ws.lam_t):
+                ndarrays.zero(a)
+            more = self._solve(mid, K, use_system, contacts)
+            rounds, newton, converged, stats = rounds + more[0], newton + more[1], more[2], more[3]
+            self.last_slid = True
+            self.slid_count += 1
         if saved is not None:
             for a, val in zip((ws.lam, ws.lam_c, ws.lam_s, ws.lam_t), saved):
                 a.from_numpy(val)
@@ -512,6 +527,15 @@ class StrainLimiter:
         self.last_stationarity = float(stats[ST_KKT]) / self._kkt_h if self._exact() else \
             (0.0 if rounds == 0 else float("nan"))
         self.last_ms = 1e3 * (time.perf_counter() - t0)
+
+    def _solve(self, mid, K, use_system, contacts):
+        """One solve of the projection set up by ``begin_solve``: (rounds, Newton steps,
+        converged, the stats array)."""
+        if self.uses_host_loop():
+            rounds, newton, converged = self._solve_direct(mid, K, use_system)
+            return rounds, newton, converged, self._ws.stats.to_numpy()
+        # (_solve_al read the stats already: a read-back costs ~0.2 ms.)
+        return self._solve_al_with_fallback(mid, K, self._newton_metric(use_system), contacts)
 
     def _set_kkt_length(self, h):
         """This projection's stationarity tolerance in metres: ``KKT_VELOCITY`` x h (a
