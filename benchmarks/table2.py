@@ -210,15 +210,19 @@ def chance_lines(seeds, energy, dihedral, shirt):
     return lines
 
 
-def overrides_of(method, band, frames, remesh=False):
+def overrides_of(method, band, frames, remesh=False, edge=None):
+    """The tshirt scene's settings of one run; ``edge`` (m): the shirt built at that material
+    edge length (``garment.edge``), None: the shipped mesh."""
     ov = {"sim": {"frames": frames},
           "strain": {"method": method, "warp": [-band, band], "weft": [-band, band]}}
     if remesh:
         ov["remesh"] = {"enabled": True}
+    if edge is not None:
+        ov["garment"] = {"edge": edge}
     return ov
 
 
-def run(method, band, frames, seed, remesh=False):
+def run(method, band, frames, seed, remesh=False, edge=None):
     """One run of Table 2 (in a sweep's worker): the shirt settled from its start (``seed``
     0) or from a start perturbed by 1 micrometre (``perturb``); its measures, the stage ms,
     check_final and the final positions (for the picture)."""
@@ -230,7 +234,7 @@ def run(method, band, frames, seed, remesh=False):
     prepare = ((lambda s: record_stage_ms(s, stage_ms)) if seed == 0 else
                (lambda s: perturb(s, seed)))
     sim, ms, late_viol = settle(scenes.get("tshirt"),
-                                [overrides_of(method, band, frames, remesh)], frames,
+                                [overrides_of(method, band, frames, remesh, edge)], frames,
                                 prepare=prepare)
     r = measure(sim)
     r.update({f"chest_{k}": v for k, v in chest_measures(sim).items()})
@@ -248,7 +252,7 @@ def run(method, band, frames, seed, remesh=False):
     return r
 
 
-def picture(renderer, method, band, frames, x, r):
+def picture(renderer, method, band, frames, x, r, edge=None):
     """The shaded and warp-strain pair of a run's final positions (a Simulator built here,
     its positions set, not stepped; on a remeshed run's own mesh, without the seams'
     stitches, which name the start mesh's vertices)."""
@@ -258,7 +262,7 @@ def picture(renderer, method, band, frames, x, r):
     from cloth.simulator import Simulator
     from scenes.common import resolve
     module = scenes.get("tshirt")
-    cfg = resolve(module.DEFAULTS, [overrides_of(method, band, frames)])
+    cfg = resolve(module.DEFAULTS, [overrides_of(method, band, frames, edge=edge)])
     setup = module.build(cfg)
     if "tri" in r:
         setup.mesh = MeshArrays(uv=np.asarray(r["uv"]), x=np.asarray(x),
@@ -276,10 +280,11 @@ def table2(args):
     frames = 30 if args.quick else args.frames
     seeds = max(1, getattr(args, "seeds", 1))
     remesh = bool(getattr(args, "remesh", False))
-    plan = [(method, band, frames, seed, remesh) for method, band in RUNS
+    edge = getattr(args, "edge", None)
+    plan = [(method, band, frames, seed, remesh, edge) for method, band in RUNS
             for seed in range(seeds)]
     sweep = [Run("benchmarks.table2:run", list(p), f"{p[0]} +-{p[1]:.0%} seed {p[3]}",
-                 scene=("tshirt", overrides_of(*p[:3], remesh))) for p in plan]
+                 scene=("tshirt", overrides_of(*p[:3], remesh, edge))) for p in plan]
     results = run_sweep(sweep, os.path.join(args.out, "table2_runs"),
                         getattr(args, "scheduler", None), getattr(args, "workers", None),
                         getattr(args, "fresh", False), name="table2")
@@ -309,7 +314,7 @@ def table2(args):
               f"mean |dihedral| {r['chest_mean_abs_dihedral']:.4g} viol {r['own_violation_max']:.2e} "
               f"{r['ms_per_frame']:.0f} ms/frame  {r['check']}", flush=True)
         if renderer is not None:
-            tiles.append(label(picture(renderer, method, band, frames, x, mesh),
+            tiles.append(label(picture(renderer, method, band, frames, x, mesh, edge),
                                f"{method} +-{band:.0%}"))
     if not rows:
         raise SystemExit("table2: every setting's first run failed: "

@@ -18,6 +18,19 @@ def saved():
 
 
 @pytest.fixture(scope="module")
+def finer():
+    """The shirt built at half the shipped edge length (``garment.edge = 0.015``)."""
+    from assets import tshirt_at
+    return tshirt_at(0.015)
+
+
+@pytest.fixture(scope="module", params=["shipped", "finer"])
+def shirt(request, saved):
+    """The shipped shirt and one built finer: both must be valid cloth input."""
+    return saved if request.param == "shipped" else request.getfixturevalue("finer")
+
+
+@pytest.fixture(scope="module")
 def fresh():
     return gen.build_tshirt(float(load_tshirt()["resolution"]))
 
@@ -86,35 +99,35 @@ def test_shape_and_types(saved):
     assert len(np.unique(saved["faces"])) == V            # no unused vertices
 
 
-def test_material_triangles_ccw_and_well_shaped(saved):
-    area = signed_material_areas(saved["uv"], saved["faces"])
-    assert area.min() > 0.05 * float(saved["resolution"]) ** 2
-    assert gen.min_angles(saved["uv"], saved["faces"]).min() > 20.0
+def test_material_triangles_ccw_and_well_shaped(shirt):
+    area = signed_material_areas(shirt["uv"], shirt["faces"])
+    assert area.min() > 0.05 * float(shirt["resolution"]) ** 2
+    assert gen.min_angles(shirt["uv"], shirt["faces"]).min() > 20.0
 
 
-def test_edge_manifold_one_piece_per_panel(saved):
-    faces = saved["faces"]
+def test_edge_manifold_one_piece_per_panel(shirt):
+    faces = shirt["faces"]
     ev, ef, _ = build_edges(faces)                 # raises if not manifold / inconsistent
     # Every vertex on the boundary has exactly two boundary edges (no pinch points).
     boundary = ev[ef[:, 1] < 0]
     assert np.all(np.bincount(boundary.ravel())[np.unique(boundary)] == 2)
     # Each panel is one connected piece with one boundary loop (no holes).
     for panel in (0, 1):
-        verts = np.unique(faces[saved["panel"] == panel])
-        assert np.all(saved["vert_panel"][verts] == panel)
-        n_edges = np.count_nonzero(saved["vert_panel"][ev[:, 0]] == panel)
-        n_faces = np.count_nonzero(saved["panel"] == panel)
+        verts = np.unique(faces[shirt["panel"] == panel])
+        assert np.all(shirt["vert_panel"][verts] == panel)
+        n_edges = np.count_nonzero(shirt["vert_panel"][ev[:, 0]] == panel)
+        n_faces = np.count_nonzero(shirt["panel"] == panel)
         assert len(verts) - n_edges + n_faces == 1          # Euler characteristic of a disc
 
 
-def test_grain_is_unit_and_warp_vertical(saved):
-    g = saved["grain"]
+def test_grain_is_unit_and_warp_vertical(shirt):
+    g = shirt["grain"]
     np.testing.assert_allclose(np.linalg.norm(g, axis=1), 1.0)
     np.testing.assert_allclose(g[:, :, 0], np.tile([0.0, 1.0], (len(g), 1)))   # warp = +v
     np.testing.assert_allclose(np.einsum("fi,fi->f", g[:, :, 0], g[:, :, 1]), 0.0, atol=1e-12)
     # On the torso below the chest, the warp's world image points up.
-    uv, x, faces = saved["uv"], saved["x"], saved["faces"]
-    torso = (saved["region"] == 0) & (uv[faces].mean(axis=1)[:, 1] < 0.4)
+    uv, x, faces = shirt["uv"], shirt["x"], shirt["faces"]
+    torso = (shirt["region"] == 0) & (uv[faces].mean(axis=1)[:, 1] < 0.4)
     Dm = np.stack([uv[faces[:, 1]] - uv[faces[:, 0]], uv[faces[:, 2]] - uv[faces[:, 0]]], axis=2)
     Ds = np.stack([x[faces[:, 1]] - x[faces[:, 0]], x[faces[:, 2]] - x[faces[:, 0]]], axis=2)
     warp_world = np.einsum("fij,fjk,fk->fi", Ds, np.linalg.inv(Dm), g[:, :, 0])[torso]
@@ -129,9 +142,9 @@ def test_loads_as_mesh_arrays(saved):
 
 
 # -- stitches ---------------------------------------------------------------------------------
-def test_stitches_pair_boundary_vertices_across_panels(saved):
-    st, uv, vp = saved["stitches"], saved["uv"], saved["vert_panel"]
-    ev, ef, _ = build_edges(saved["faces"])
+def test_stitches_pair_boundary_vertices_across_panels(shirt):
+    st, uv, vp = shirt["stitches"], shirt["uv"], shirt["vert_panel"]
+    ev, ef, _ = build_edges(shirt["faces"])
     on_boundary = np.zeros(len(uv), bool)
     on_boundary[ev[ef[:, 1] < 0].ravel()] = True
     assert st.shape[1] == 2 and len(st) >= 40
@@ -140,23 +153,23 @@ def test_stitches_pair_boundary_vertices_across_panels(saved):
     # Pairs sit at mirrored material positions, so seams are equally long and evenly paired.
     np.testing.assert_allclose(uv[st[:, 0]] * [-1, 1], uv[st[:, 1]], atol=1e-9)
     # Every seam is sewn: shoulder, over-arm, under-arm and side seams, on both sides.
-    for k, name in enumerate(saved["seam_names"]):
-        seam = st[saved["stitch_seam"] == k, 0]
+    for k, name in enumerate(shirt["seam_names"]):
+        seam = st[shirt["stitch_seam"] == k, 0]
         assert len(seam) >= 4, name
         assert (uv[seam, 0] > 0).any() and (uv[seam, 0] < 0).any(), name
 
 
-def test_stitch_pairs_start_close(saved):
-    gap = np.linalg.norm(saved["x"][saved["stitches"][:, 0]] - saved["x"][saved["stitches"][:, 1]],
+def test_stitch_pairs_start_close(shirt):
+    gap = np.linalg.norm(shirt["x"][shirt["stitches"][:, 0]] - shirt["x"][shirt["stitches"][:, 1]],
                          axis=1)
     assert gap.max() < 0.03
 
 
 # -- placement --------------------------------------------------------------------------------
-def test_shirt_clear_of_mannequin(saved, prims):
-    thickness = float(saved["thickness"])
-    assert mannequin_sdf(saved["x"], prims).min() > thickness
-    assert primitives_sdf(_edge_points(saved["x"], saved["faces"]), prims).min() > thickness
+def test_shirt_clear_of_mannequin(shirt, prims):
+    thickness = float(shirt["thickness"])
+    assert mannequin_sdf(shirt["x"], prims).min() > thickness
+    assert primitives_sdf(_edge_points(shirt["x"], shirt["faces"]), prims).min() > thickness
 
 
 def test_front_and_back_do_not_cross(saved):
@@ -203,18 +216,18 @@ def test_shirt_initial_stretch_moderate(saved):
     assert 0.7 < ratio.min() and ratio.max() < 1.4
 
 
-def test_sleeves_around_upper_arms(saved, prims):
+def test_sleeves_around_upper_arms(shirt, prims):
     arms = [p for p in prims if p["name"].endswith("upper_arm")]
-    sleeve = np.unique(saved["faces"][saved["region"] == 1])
-    d = primitives_sdf(saved["x"][sleeve], arms)
+    sleeve = np.unique(shirt["faces"][shirt["region"] == 1])
+    d = primitives_sdf(shirt["x"][sleeve], arms)
     assert np.median(d) < 0.04 and d.max() < 0.12
 
 
 # -- sizes ------------------------------------------------------------------------------------
-def test_shirt_material_size_adult(saved):
-    uv = saved["uv"]
+def test_shirt_material_size_adult(shirt):
+    uv = shirt["uv"]
     for panel in (0, 1):
-        p = uv[saved["vert_panel"] == panel]
+        p = uv[shirt["vert_panel"] == panel]
         hem = p[p[:, 1] < 1e-9]
         assert 0.45 < np.ptp(hem[:, 0]) < 0.62          # body width
         assert 0.65 < np.ptp(p[:, 1]) < 0.80            # length, hem to shoulder at the neck
@@ -255,3 +268,17 @@ def test_mannequin_sdf(prims):
     head = next(p for p in prims if p["name"] == "head")
     above = np.array(head["center"]) + [0, head["radius"] + 0.1, 0]
     assert abs(mannequin_sdf(above[None], prims)[0] - 0.1) < 1e-9
+
+
+def test_a_finer_shirt_has_about_four_times_the_triangles(saved, finer):
+    """Half the edge length: about four times the triangles, the same seams sewn."""
+    ratio = len(finer["faces"]) / len(saved["faces"])
+    assert 3.5 < ratio < 4.5, ratio
+    assert list(finer["seam_names"]) == list(saved["seam_names"])
+    assert float(finer["resolution"]) == 0.015
+    ev, _, _ = build_edges(finer["faces"])
+    ratio = (np.linalg.norm(finer["x"][ev[:, 1]] - finer["x"][ev[:, 0]], axis=1)
+             / np.linalg.norm(finer["uv"][ev[:, 1]] - finer["uv"][ev[:, 0]], axis=1))
+    assert 0.97 < np.median(ratio) < 1.05          # placed about unstretched, as the shipped
+    # (a few edges at the seams start up to 44 % long; the start is projected onto the limits)
+    assert np.percentile(ratio, 1) > 0.8 and np.percentile(ratio, 99) < 1.2 and ratio.max() < 1.5
