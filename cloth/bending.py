@@ -1,5 +1,5 @@
-"""The isotropic bending energy (issues #16, #35): a constant matrix Q over the vertices, built
-on the host from the material mesh and its pins whenever the mesh changes.
+"""The isotropic bending energy: a constant matrix Q over the vertices, built on the host from
+the material mesh and its pins whenever the mesh changes.
 
     E_bend = (B / 2) sum_c x_c^T Q x_c         (c = the three world coordinates, B = k_bend)
 
@@ -311,7 +311,7 @@ def isotropic_matrix(uv, faces, edge_verts, edge_faces, edge_opp, area, pinned=N
 
 
 # ---------------------------------------------------------------------------------------------
-# Orthotropic bending (issue #52): B_warp, B_weft, and the plate's twist from them
+# Orthotropic bending (docs/method.md §9.11): B_warp, B_weft, and the plate's twist from them
 # ---------------------------------------------------------------------------------------------
 def orthotropic_stretch(b_warp, b_weft):
     """alpha = (B_warp / B_weft)^(1/8): the material coordinates along the warp are divided by
@@ -393,7 +393,7 @@ def rows_with_diagonal_first(Q):
 
 
 # ---------------------------------------------------------------------------------------------
-# The same matrix from per-face terms, reused across remeshes (issue #34)
+# The same matrix from per-face terms, reused across remeshes (docs/remesh/remesh_frame.md)
 # ---------------------------------------------------------------------------------------------
 def face_terms(uv, faces, edge_faces, edge_opp, area, held, subset=None):
     """Every face's share of Q, which depends on its stencil alone (its three vertices, the

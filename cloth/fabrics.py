@@ -1,5 +1,5 @@
-"""Fabrics from the lab (issue #52): measured fabric records (``fabrics/*.toml``) and the rule
-that turns them into Loom's material and strain bands.
+"""Fabrics from the lab (docs/fabrics.md): measured fabric records (``fabrics/*.toml``) and the
+rule that turns them into Loom's material and strain bands.
 
     from cloth import fabrics
     fabrics.names()                          # ['11oz-black-denim', 'camel-ponte-roma', ...]

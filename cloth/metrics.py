@@ -184,8 +184,8 @@ def gravitational_energy(x, mass, gravity):
 
 
 def energy_drift(total_energy, scale):
-    """Energy gained where none may enter (issue 7's error (c)): the largest rise of the total
-    mechanical energy (kinetic + elastic + gravitational) above its lowest earlier value,
+    """Energy gained where none may enter: the largest rise of the total mechanical energy
+    (kinetic + elastic + gravitational) above its lowest earlier value,
     max_t (E_t - min_{s <= t} E_s), divided by ``scale`` (J; the benchmarks use the cloth's
     weight times its size, m |g| L). For a scene whose pins and obstacles stand still and
     without wind, no energy enters, so any rise is numerical error: 0 is exact, a value near 1

@@ -5,7 +5,7 @@ and ``n_edges`` say how much of each is active, so a remesh refills the arrays i
 reallocating them every frame (when capacity runs out the Simulator builds a bigger model).
 The arrays are ndarrays, never fields, because every kernel takes them as arguments: a kernel
 then compiles once per process, not once per model (a field captured by a kernel is baked
-into it, so every new model recompiled every kernel: 4-10 s per Simulator, issue #15).
+into it, so every new model recompiled every kernel: 4-10 s per Simulator).
 
 Units are SI throughout: metres, kilograms, seconds, newtons.
 

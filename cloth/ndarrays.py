@@ -2,7 +2,7 @@
 
 Every kernel in ``cloth`` takes its arrays as ndarray arguments (``A``) and every ``ti.func``
 takes them by reference as templates (``T``), so a kernel compiles once per process and not
-once per model, solver or obstacle (issue #15; cloth/strain/buffers.py has the measurements).
+once per model, solver or obstacle (cloth/strain/buffers.py has the measurements).
 
 ``zero`` exists because Taichi 1.7's own ``fill`` on a vector or matrix ndarray passes the
 value to its fill kernel as a template argument keyed by the value object, so every call
@@ -10,7 +10,7 @@ compiled a new kernel (measured: three new kernels per Simulator, and one per no
 projection and per Cholesky Newton step before this helper).
 
 ``PackCache`` keeps the argpacks (``ti.types.argpack`` groups of ndarrays) the kernels take
-their arrays in (issue #37): the strain solver's (cloth/strain/buffers.py) and the dynamics'
+their arrays in: the strain solver's (cloth/strain/buffers.py) and the dynamics'
 (cloth/dynamics.py).
 """
 import taichi as ti

@@ -10,7 +10,7 @@ metrics.csv has a column per stage). With obstacles and strain limiting both on,
 are constraints of the strain projection (half-spaces found by the collision stage), so the
 projection cannot push cloth into a body and contact cannot undo the limits; the
 ``collision_final`` stage then runs the obstacle pass once more to remove what the half-spaces'
-linearisation leaves on curved bodies (issue #5; tested in tests/test_all_scenes.py), and where
+linearisation leaves on curved bodies (tested in tests/test_all_scenes.py), and where
 it had to push further than the strain tolerance ``contact_reproject`` projects again. After an
 applied remesh ``remesh_reproject`` projects where the new mesh broke the limits. Seams
 (stitch pairs) are equality constraints of the same projection.

@@ -7,7 +7,7 @@ instead of the paper's mass-weighted distance: one linearised backward-Euler ste
 limits as constraints. Its constraint forces then meet the same inertia and elastic stiffness
 as the dynamics' forces, so a cloth at rest is an exact fixed point (with the mass metric the
 projection's correction disagrees with the dynamics' response, by h^2 K / M ~ 100 on the soft
-cloth, and the hanging sheet never settles: issue #13).
+cloth, and the hanging sheet never settles).
 
 The pattern (which vertex pairs couple: faces, bending stencils, stitches) is built on the
 host when the mesh changes; ``slots`` map every element's local block (n, m) to its place in

@@ -16,7 +16,7 @@ import numpy as np
 # ends below tol, and the obstacle pass after it may move a vertex a little (the smoke runs of
 # every scene stay under 2 tol, tests/test_all_scenes.py).
 LIMIT_FACTOR = 2.0
-# At rest: mass-weighted RMS speed below this (m/s). Issue #13's rest targets for the hanging
+# At rest: mass-weighted RMS speed below this (m/s). The solver's rest targets for the hanging
 # sheet (kinetic energy 3e-7 to 1e-6 J, 0.15 kg) are 2.0-3.7 mm/s; it rests at 0.5 mm/s
 # (mapping, resolution 25, 5 s); a swinging sheet moves at 0.1-1 m/s.
 REST_SPEED = 0.004

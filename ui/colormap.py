@@ -34,7 +34,7 @@ SEQ = [(0.0, np.array([0.99, 0.93, 0.55])), (0.5, np.array([0.93, 0.45, 0.15])),
 SEQ_SIZE = [(0.0, np.array([0.23, 0.30, 0.75])), (0.5, np.array([0.55, 0.80, 0.60])),
             (1.0, np.array([0.98, 0.85, 0.25]))]
 INSIDE = np.array([0.82, 0.86, 0.88])     # violation mode: faces inside every band
-# The binding map (issue #36): which of the method's constraints binds, by name
+# The binding map (docs/teaching.md): which of the method's constraints binds, by name
 # (``metrics.CONSTRAINT_NAMES``): upper bounds warm (stretch held), lower bounds cool
 # (compression held), grey where none binds.
 FREE = np.array([0.70, 0.72, 0.75])

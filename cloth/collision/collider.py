@@ -33,9 +33,9 @@ Pinned vertices are never touched.
 The kernels are module-level functions of ndarray arguments: the model's arrays, the
 collider's small result arrays and the obstacle's shape (kind, parameters, primitives, grid; see
 ``shape.py``). None captures a field or is specialised to an obstacle, so each compiles once
-per process however many Colliders, obstacles and models a process builds (issue #15). The
-obstacle pass takes the obstacle's motion over the substep and its scalars in one float array
-(``_motion``, ``M_*`` indices; issue #37: it took 21 arguments).
+per process however many Colliders, obstacles and models a process builds. The obstacle pass
+takes the obstacle's motion over the substep and its scalars in one float array (``_motion``,
+``M_*`` indices; it took 21 arguments).
 
 Units: SI. Arrays use ``float`` (Taichi's default float).
 """
@@ -62,10 +62,10 @@ M_H, M_TH, M_MU, M_STEP, M_R0, M_C0, M_R1, M_C1, M_VLIN, M_OMEGA = \
     0, 1, 2, 3, 4, 13, 16, 25, 28, 31
 N_MOTION = 34
 # The cloth's vertex arrays the contact-plane and resting passes read, with the active vertex
-# count (issue #37: those kernels took 14 and 13 arguments). The pose stays a mat3 / vec3
-# argument: read from the motion array instead (before the loop, or in it with full
-# optimisation), tshirt's capsule planes came out different in the last bit, which the
-# strain projection's active-set model then amplified into visible differences (measured).
+# count (those kernels took 14 and 13 arguments). The pose stays a mat3 / vec3 argument: read
+# from the motion array instead (before the loop, or in it with full optimisation), tshirt's
+# capsule planes came out different in the last bit, which the strain projection's active-set
+# model then amplified into visible differences (measured).
 ClothPack = ti.types.argpack(x=A, v=A, pinned=A, n_verts=ti.i32)
 
 
@@ -226,11 +226,11 @@ class Collider:
         instead of being pushed from one into the other by the fix-up passes.
 
         The strain projection then keeps contact vertices outside while it limits the
-        strains, instead of the collider pushing them out afterwards and undoing the limits
-        (issue #5). ``reach`` also catches vertices the projection would pull into the
-        obstacle. On a curved obstacle the plane is its linearisation: a vertex sliding along
-        it by s sinks by about s^2 / (2 radius), which the obstacle pass after the projection
-        removes (``test_obstacle_contacts_keep_the_strain_limits`` in tests/test_all_scenes.py)."""
+        strains, instead of the collider pushing them out afterwards and undoing the limits.
+        ``reach`` also catches vertices the projection would pull into the obstacle. On a
+        curved obstacle the plane is its linearisation: a vertex sliding along it by s sinks
+        by about s^2 / (2 radius), which the obstacle pass after the projection removes
+        (``test_obstacle_contacts_keep_the_strain_limits`` in tests/test_all_scenes.py)."""
         reach = self.thickness if reach is None else max(float(reach), self.thickness)
         n = self.model.n_verts
         if mu_out is None:

@@ -6,7 +6,7 @@ of time), evaluated once per substep on the host and sent to the kernels as argu
 The shape, too, reaches the kernels as arguments (``Obstacle.shape_args``: a kind id, a small
 parameter vector and two arrays, see ``shape.py``), never as a compile-time specialisation: every
 collision kernel compiles once per process, however many obstacles of whatever kinds and sizes
-a process builds (issue #15).
+a process builds.
 """
 import numpy as np
 import taichi as ti

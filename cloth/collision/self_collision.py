@@ -28,9 +28,9 @@ No friction between layers.
 
 Every buffer is an ndarray and every kernel a module-level function of ndarray arguments (the
 model's arrays and the buffers below), so the kernels compile once per process however many
-models and colliders it builds, and a buffer reallocated for a larger mesh needs no recompile
-(issue #15). The kernels with the most arrays take them in named argpacks (``GeoPack``,
-``HashPack``, ``PairPack``; issue #37, as cloth/dynamics.py and cloth/strain/buffers.py).
+models and colliders it builds, and a buffer reallocated for a larger mesh needs no recompile.
+The kernels with the most arrays take them in named argpacks (``GeoPack``, ``HashPack``,
+``PairPack``), as cloth/dynamics.py and cloth/strain/buffers.py do.
 """
 import time
 
@@ -46,9 +46,9 @@ from .obstacles import THICKNESS
 S_MAX_SPEED, S_EDGE_SUM = 0, 1
 C_TRI, C_EDGE, C_PAIRS = 0, 1, 2
 
-# Named argument groups (issue #37): the broad and narrow phase took up to 24 positional
-# arguments. Made once per set of arrays (``SelfCollision._packs``, ndarrays.PackCache) and
-# again when one was replaced (larger entry or pair arrays, a model with larger capacities).
+# Named argument groups: the broad and narrow phase took up to 24 positional arguments. Made
+# once per set of arrays (``SelfCollision._packs``, ndarrays.PackCache) and again when one was
+# replaced (larger entry or pair arrays, a model with larger capacities).
 #   geo    the substep's start and predicted end positions, velocities, face and edge vertices;
 #   table  the spatial hash: bucket counts and starts, and the entries (id, cell) of the
 #          triangles and of the edges;

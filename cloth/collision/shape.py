@@ -13,8 +13,7 @@ kernels are generic over every kind, so their signature must not change with it.
 ``grad_local`` and ``nearest_two`` branch on ``kind`` at run time (the same branch for every
 vertex of a launch). Why not one specialisation per obstacle (``ti.template()`` obstacles with
 their sizes as compile-time constants, as before): every new obstacle and every new Simulator
-then recompiled the collider's kernels, ~3 s per tshirt Simulator even with fast compile
-(issue #15).
+then recompiled the collider's kernels, ~3 s per tshirt Simulator even with fast compile.
 
 Parameter layout after prm[P_FD_EPS]:
     SPHERE   radius

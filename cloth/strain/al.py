@@ -116,7 +116,7 @@ def stitch_g(stitch: T, pos: T, s):
     """Seam s's equality constraint x_a - x_b = 0 (metres, a 3-vector). Linear, so in the AL
     it adds mu (e_a - e_b)(e_a - e_b)^T to the Newton matrix and no curvature. (Measured on
     tshirt: the inequality |x_a - x_b| <= 2 mm instead, with its curvature 1/|x_a - x_b|,
-    needed 96-190 AL rounds where the contacts and seams met; see the closing note of #5.)"""
+    needed 96-190 AL rounds where the contacts and seams met.)"""
     ab = stitch[s]
     return pos[ab[0]] - pos[ab[1]]
 
@@ -846,7 +846,7 @@ def solve_al(method: ti.template(), with_pdas: ti.template(), budget: A,
         # change below tol) only proposes convergence; the next round's first Newton step,
         # computed with the new multipliers, must then move no vertex further than kkt_tol.
         # That step is the distance to the minimiser as far as the Newton model sees it, so
-        # the stop bounds stationarity, not only feasibility (issue #32).
+        # the stop bounds stationarity, not only feasibility.
         kkt_tol = mesh.params[P_KKT_TOL]
         # The active-set step's matrix is the merit's Hessian: each round's Newton loop runs
         # to a tenth of the kkt tolerance before the multipliers move, and the penalty grows

@@ -60,9 +60,9 @@ P_KKT_TOL = 12
 P_PDAS = 13
 N_PARAMS = 14
 # Indices into the ``budget`` array: one AL solve's controls (``al.solve_al``), written by the
-# host before each launch. Why an array and not kernel arguments: solve_al had 65 parameters
-# (issue #37), and Taichi counts every scalar, ndarray and argpack member against one limit
-# of 64 per launch; the integers are exact in a float.
+# host before each launch. Why an array and not kernel arguments: solve_al had 65 parameters,
+# and Taichi counts every scalar, ndarray and argpack member against one limit of 64 per
+# launch; the integers are exact in a float.
 (B_MU0, B_MU_GROW, B_MU_MAX, B_MAX_ROUNDS, B_MAX_NEWTON, B_MAX_CG, B_RTOL, B_TOL, B_STEP_TOL,
  B_FROM_PREV, B_PC_MODE) = range(11)
 N_BUDGET = 11
@@ -74,7 +74,7 @@ NO_CONTACT = -1e30
 CONTACT_SLOTS = 2
 
 
-# Named argument groups (issue #37): the kernels take their arrays in these packs, by name,
+# Named argument groups: the kernels take their arrays in these packs, by name,
 # instead of ~50 positional ndarrays whose order every call site had to repeat (a misordered
 # argument still compiled). A member's name is unique across the packs: in Taichi 1.7.4 two
 # packs passed to one kernel cannot share a member name, and a kernel cannot assign a local of
@@ -130,7 +130,7 @@ class Workspace:
         self.lam = ti.ndarray(float, (F, K))
         # Contact half-spaces n.x >= d per vertex as (n, d) (see ``contact_g``) and their
         # multipliers: the obstacles are constraints of the same projection, so a contact
-        # cannot undo the limits afterwards (issue #5).
+        # cannot undo the limits afterwards.
         self.contact = ti.ndarray(ti.types.vector(4, float), (V, CONTACT_SLOTS))
         self.lam_c = ti.ndarray(float, (V, CONTACT_SLOTS))
         # Coulomb friction at contacts (see ``friction_state``): the obstacle's friction
