@@ -1,4 +1,4 @@
-"""Bending energies compared on the calibration's strips (#16), without the simulator:
+"""Bending energies compared on the calibration's strips, without the simulator:
 
     python -m benchmarks.bending_models --out docs/calibration   # -> bending_models_table.md
 
@@ -225,7 +225,7 @@ def report(rows, out, seconds, ledge_rows=(), cmd="python -m benchmarks.bending_
     if ledge_rows:
         from benchmarks.calibration import WIDTHS
         v = [x for r in ledge_rows for x in r["ratios"] if x is not None]
-        L += ["", "## Linearised ledge cantilever (isotropic energy, #35)\n",
+        L += ["", "## Linearised ledge cantilever (isotropic energy)\n",
               "The ledge of `calibration.ledge` linearised like the cantilever above: the "
               "strip's vertices on the 10 cm ledge pinned, the 20 cm overhang under its weight; "
               "B_eff / B = q L^4 / (8 B w_tip), by strip width (cm); a dash where the strip is "

@@ -1,5 +1,5 @@
-"""Material calibration (#16): does the simulated cloth have the lab's bending rigidity and
-tensile moduli, at any resolution and with any triangulation?
+"""Material calibration: does the simulated cloth have the lab's bending rigidity and tensile
+moduli, at any resolution and with any triangulation?
 
     python -m benchmarks.calibration --out docs/calibration   # ~8-15 min on 2 shared cores
     python -m benchmarks.calibration --quick --out /tmp/cal   # h = 1 and 2 cm only
@@ -10,8 +10,7 @@ a strip) is a run of a sweep (``benchmarks.sweep``: a local cluster, one worker 
 core, or ``--scheduler tcp://HOST:PORT``; cached in --out/calibration_runs/, --fresh runs
 them again); a worker keeps one ``Rig`` for all its runs. Three static experiments, each
 against a reference computed here (nothing hard-coded): the back-to-back cantilevers and the
-hanging strip below, and the lab's own cantilever on a ledge at widths 2-16 cm (``ledge``,
-#35).
+hanging strip below, and the lab's own cantilever on a ledge at widths 2-16 cm (``ledge``).
 
 Cantilever (flexural rigidity B = ``material.k_bend``, N m). Two cantilevers back to back: a
 strip 2 L long (L = 20 cm, 8 cm wide) is held only along its middle line of vertices and both
@@ -550,7 +549,7 @@ def run(quick=False, log=print, out=None, scheduler=None, workers=None, fresh=Fa
     return rows, sweep, results
 
 
-# ---- the lab's cantilever on a ledge (#35, ASTM D1388) ----------------------------------
+# ---- the lab's cantilever on a ledge (ASTM D1388) ---------------------------------------
 # A strip on a ledge, its vertices there pinned, overhanging the ledge's edge by L = 20 cm under
 # its own weight; B_eff read back from the chord angle through the inextensible elastica whose
 # clamp is the ledge's edge. Unlike the back-to-back strips, a ledge has a clamp (two rows of
@@ -559,7 +558,7 @@ def run(quick=False, log=print, out=None, scheduler=None, workers=None, fresh=Fa
 # coupling, so the width must not matter.
 LEDGE = 0.10                       # m: the length of strip held on the ledge
 WIDTHS = (0.02, 0.025, 0.04, 0.08, 0.16)
-LEDGE_TARGET = {0.005: 0.03, 0.01: 0.05, 0.02: 0.05}      # #35: |B_eff / B - 1| by triangle size
+LEDGE_TARGET = {0.005: 0.03, 0.01: 0.05, 0.02: 0.05}      # |B_eff / B - 1| by triangle size
 
 
 def ledge_mesh(width, h, pattern="regular", direction="warp", seed=0, L=CANT_L,
@@ -601,7 +600,7 @@ def ledge(rig, G=1.0, h=0.01, pattern="regular", direction="warp", seed=0, mater
                 ratio=G / G_from_chord(chord), steps=steps, faces=len(faces))
 
 
-# ---- orthotropic bending (#52): B_warp != B_weft ---------------------------------------------
+# ---- orthotropic bending: B_warp != B_weft ---------------------------------------------------
 def strip_rigidity(b_warp, b_weft, angle):
     """The B a narrow strip cut at ``angle`` (rad) from the warp reads, for Loom's orthotropic
     plate (cloth/bending.py: B_warp, B_weft, no Poisson coupling, twisting rigidity
@@ -690,7 +689,7 @@ def orthotropic_lines(rows):
 
 
 def ledge_counts(r):
-    """Whether the issue's targets cover a case: at least two triangles across."""
+    """Whether the ledge targets cover a case: at least two triangles across."""
     return r["width"] >= 2 * r["h"] - 1e-9
 
 
@@ -719,7 +718,7 @@ def ledge_report_lines(rows):
          ", ".join(f"{100 * w:g}" for w in WIDTHS) + " cm (2.5 cm: ASTM D1388's strip); the "
          "same fabric, deflections, patterns and directions as the back-to-back strips. The "
          "chord from the middle of the ledge's edge to the middle of the tip is read back "
-         "through the clamped elastica. Targets (#35), for every width with at least two "
+         "through the clamped elastica. Targets, for every width with at least two "
          "triangles across (width >= 2 h): within 5 % at 1 and 2 cm, within 3 % at 0.5 cm.\n"]
     used = [r for r in rows if ledge_counts(r)]
     for h in sorted({r["h"] for r in used}):
@@ -983,7 +982,7 @@ def main():
     ap.add_argument("--quick", action="store_true", help="h = 1 and 2 cm only")
     ap.add_argument("--out", default=os.path.join(ROOT, "docs", "calibration"))
     ap.add_argument("--orthotropic", action="store_true",
-                    help="only the orthotropic ledge sweep (#52): print its tables "
+                    help="only the orthotropic ledge sweep: print its tables "
                          "(docs/fabrics.md; ~3 min)")
     from benchmarks.sweep import add_arguments, failed_lines
     add_arguments(ap)

@@ -1,4 +1,4 @@
-"""The Cusick drape of the fabric records (issue #52 item 4): ISO 9073-9 / BS 5058 geometry, a
+"""The Cusick drape of the fabric records (docs/fabrics.md): ISO 9073-9 / BS 5058 geometry, a
 disk of cloth 30 cm across held between two disks 18 cm across, left to hang.
 
     python -m benchmarks.cusick --out /tmp/cusick                    # every fabric, h = 1 cm

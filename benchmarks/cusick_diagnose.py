@@ -1,5 +1,5 @@
-"""What decides a Cusick drape (docs/fabrics.md, issue #52): one run of benchmarks/cusick.py's
-drape (start 0, the graded mesh), taken apart.
+"""What decides a Cusick drape (docs/fabrics.md): one run of benchmarks/cusick.py's drape
+(start 0, the graded mesh), taken apart.
 
     python -m benchmarks.cusick_diagnose energy denim --method none --shear-scale 1 4 0.1
     python -m benchmarks.cusick_diagnose frames denim --method warp-weft --seconds 1

@@ -1,6 +1,6 @@
-"""Does the draped sheet's resting shape depend on the strain solve? (issue #32: "a cloth's
-final draped shape must not depend on the solver's tolerance: the default and exact steps
-give the same drape, the same fold count, within the chaos floor").
+"""Does the draped sheet's resting shape depend on the strain solve? The target: a cloth's
+final draped shape must not depend on the solver's tolerance; the default and exact steps
+give the same drape, the same fold count, within the chaos floor.
 
     python -m benchmarks.drape_shape --out docs/speed          # ~15 min, a run per core at a time
     python -m benchmarks.drape_shape --drops 0.95 --out /tmp/ds   # one height

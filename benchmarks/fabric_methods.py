@@ -1,7 +1,7 @@
-"""The same sheet under the three methods with a fabric's derived bands (docs/fabrics.md,
-issue #52): a scene run headless once per method (svd, warp-weft, mapping) with ``--fabric``,
-coloured by the binding constraint, with the strain-space plot; the last frame of each is
-copied to OUT/SCENE_FABRIC_METHOD.png and the frame's strains are printed as a table.
+"""The same sheet under the three methods with a fabric's derived bands (docs/fabrics.md): a
+scene run headless once per method (svd, warp-weft, mapping) with ``--fabric``, coloured by
+the binding constraint, with the strain-space plot; the last frame of each is copied to
+OUT/SCENE_FABRIC_METHOD.png and the frame's strains are printed as a table.
 
     python -m benchmarks.fabric_methods                                  # pull, cotton-shirting
     python -m benchmarks.fabric_methods --scene pull --fabric denim --frames 120 --out DIR

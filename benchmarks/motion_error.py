@@ -184,8 +184,8 @@ def _run_minutes(runs, drape):
 
 
 def trade_off(rows, drows, runs):
-    """The issue's targets read off the runs: per moving case the default's error at frame 10
-    against the chaos floor, and the cheapest solve within 3 floors with its cost against the
+    """The targets read off the runs: per moving case the default's error at frame 10 against
+    the chaos floor, and the cheapest solve within 3 floors with its cost against the
     default's; for the drape, the default against the exact solve."""
     import numpy as np
     L = ["## The default on the speed-against-error curve\n",

@@ -4,7 +4,7 @@ exponent k of cost ~ N^k per stage.
     python -m benchmarks.scaling --out docs/speed            # ~500 to ~100k triangles
     python -m benchmarks.scaling --quick --out results/scale  # ~500 to ~8k, a few minutes
     python -m benchmarks.scaling --there-and-back --resolutions 33 46 65 91 129 181 \
-        --strain-frames 10 --out docs/speed   # #13's 2k-64k, drift cancelled (~25 min)
+        --strain-frames 10 --out docs/speed   # 2k-64k, drift cancelled (~25 min)
 
 Each size runs in its own child process (so its peak memory is its own):
   dynamics              the hanging scene (soft cloth, one 1/30 s substep per frame, CG to
@@ -45,7 +45,7 @@ from cloth.strain.families import METHODS
 STAGES = ("dynamics", "collision", "self_collision", "remesh") + tuple(
     f"strain_limit:{m}" for m in METHODS)
 # Vertices per side: 2 (n - 1)^2 triangles, from 512 to 100352.
-# 181: 64.8k triangles, the top of #13's 2k-64k range.
+# 181: 64.8k triangles, the top of the scaling target's 2k-64k range.
 FULL = [17, 33, 46, 65, 91, 129, 181, 225]
 QUICK = [17, 33, 65]
 
@@ -310,7 +310,7 @@ def write_outputs(base, rows, skipped, out, cmd, seconds, budget_s):
             elif s == "field_bytes":
                 pts.append((r["faces"], r["field_bytes"]))
         big = [p for p in pts if p[0] >= 8000]
-        issue = [p for p in pts if 2000 <= p[0] <= 70000]       # #13's range, 2k-64k
+        issue = [p for p in pts if 2000 <= p[0] <= 70000]       # the scaling target's 2k-64k
         fits[s] = {"k_all": fit_exponent(*zip(*pts)) if len(pts) > 1 else float("nan"),
                    "k_8k": fit_exponent(*zip(*big)) if len(big) > 1 else float("nan"),
                    "k_2k_64k": fit_exponent(*zip(*issue)) if len(issue) > 1 else float("nan"),
@@ -350,8 +350,8 @@ def write_outputs(base, rows, skipped, out, cmd, seconds, budget_s):
                      f" | {r['peak_rss_mb']:.0f}"
                      f" | {r['field_bytes'] / 2**20:.1f} |")
     lines += ["", "Fitted exponent k of cost ~ N^k (least squares in log-log), over every "
-              "measured size, over sizes of 8k triangles and more, and over 2k-64k (issue "
-              "#13's range):", "",
+              "measured size, over sizes of 8k triangles and more, and over 2k-64k (the "
+              "range of the solver's scaling target):", "",
               "| stage | k (all sizes) | k (>= 8k) | k (2k-64k) | sizes | largest N |",
               "|---|---|---|---|---|---|"]
     for s in STAGES:

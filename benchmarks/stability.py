@@ -179,7 +179,7 @@ def cases():
                         "hanging", dict(hang, material={"k_bend": kb}), viol_end_max=1e-3))
     out.append(Case("16k triangles (resolution 91)", "hanging",
                     dict(hang, cloth={"resolution": 91}), frames=8, viol_end_max=1e-3,
-                    note="issue #13: the default solve at the size of its speed target; the "
+                    note="the default solve at the size of the solver's speed target; the "
                          "sheet's first 8 frames (its fall starts)"))
     out.append(Case("remeshing, extreme coarse sizing (0.25 - 0.5 m)", "hanging",
                     dict(hang, remesh={"enabled": True, "size_min": 0.25, "size_max": 0.5}),
