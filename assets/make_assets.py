@@ -712,11 +712,11 @@ def preview(path, prims, shirt, size=420):
 
 
 # ---------------------------------------------------------------------------------------------
-# Garment example (issue #14): a dress form as one closed triangle mesh, and a two-panel tabard
-# (front and back panel sewn along the shoulders) exported the way pattern tools write
-# garments: one UV island per panel at a non-metric scale (a 0..1 texture atlas), the panels
-# turned in the atlas so that the garment's vertical (the warp) runs along u, and one shared
-# vertex ("v") per seam point with a texture coordinate ("vt") per panel.
+# Garment example: a dress form as one closed triangle mesh, and a two-panel tabard (front and
+# back panel sewn along the shoulders) exported the way pattern tools write garments: one UV
+# island per panel at a non-metric scale (a 0..1 texture atlas), the panels turned in the atlas
+# so that the garment's vertical (the warp) runs along u, and one shared vertex ("v") per seam
+# point with a texture coordinate ("vt") per panel.
 # ---------------------------------------------------------------------------------------------
 FORM_BOTTOM, FORM_TOP = 0.74, 1.44   # the dress form's torso spans these heights
 TABARD_LENGTH = 0.50                 # m, shoulder seam to hem (material, per panel)

@@ -1,7 +1,7 @@
 """The AL's Newton iteration descends on its merit: the residual the PCG and Cholesky paths
 solve for is minus the gradient of the merit the line search tests (finite differences), in
-the implicit step's metric, with active strain constraints. (Issue #13: an inconsistency here
-would stall every inner loop.)"""
+the implicit step's metric, with active strain constraints. (An inconsistency here would stall
+every inner loop.)"""
 import numpy as np
 import pytest
 import taichi as ti

@@ -65,8 +65,8 @@ def test_scenes_enable_only_what_they_need():
 @pytest.mark.slow
 @pytest.mark.parametrize("name,frames", [("drape", 20)])
 def test_obstacle_contacts_keep_the_strain_limits(name, frames):
-    """Contacts are constraints of the projection (issue 5): landing on the sphere and the
-    ground must not undo the limits (before, the own violation reached O(0.1-1) there)."""
+    """Contacts are constraints of the projection: landing on the sphere and the ground must
+    not undo the limits (before, the own violation reached O(0.1-1) there)."""
     sim, cfg = make_sim(name, **SMALL.get(name, {}))
     worst, touched = 0.0, 0
     for _ in range(frames):
@@ -87,7 +87,7 @@ def test_the_drape_lands_without_stopping_dead():
     frame 8 = 0.85 of the largest before it, 44 vertices in contact at frame 12. Its PCG
     steps start from where each vertex was going (strain.solver.SETTLE_SPEED); from the
     substep's start they kept 0.20 and touched 9 (exact Newton steps: 0.22 and 37, at frame 8
-    already stopped around the sphere; issue #32, docs/speed/motion_error.md)."""
+    already stopped around the sphere; docs/speed/motion_error.md)."""
     from cloth import metrics
     sim, cfg = make_sim("drape", cloth={"resolution": 11})
     ke = []

@@ -46,8 +46,8 @@ def fresh_state():
 
 @pytest.fixture
 def st():
-    """A new app state per test (a new Simulator compiles nothing: issue #15), so no test
-    sees what another changed."""
+    """A new app state per test (a new Simulator compiles nothing), so no test sees what
+    another changed."""
     return fresh_state()
 
 
@@ -274,8 +274,8 @@ def test_live_controls_refuse_bad_values_and_keep_the_settings(st):
 
 
 def test_ui_changes_the_simulator_only_through_its_public_controls():
-    """#15: nothing in ui/ assigns to a simulator's attributes, writes a model's fields or
-    calls a private ``_make_`` method; the Simulator owns its live state."""
+    """Nothing in ui/ assigns to a simulator's attributes, writes a model's fields or calls a
+    private ``_make_`` method; the Simulator owns its live state."""
     import re
     bad = re.compile(r"\bs\.\w+ =(?!=)|\bsim\.\w+ =(?!=)|\bm\.vert_\w+\[|\._make_")
     hits = []
@@ -338,7 +338,7 @@ def test_offscreen_frame_matches_the_reference_image(rendered, mode, tmp_path_fa
     compare_with_reference(images[mode], f"hanging_{mode}.png", tmp_path_factory)
 
 
-# The teaching view (issue #36) on the mapping sheet, drawn by the same offscreen renderer.
+# The teaching view (docs/teaching.md) on the mapping sheet, drawn by the same offscreen renderer.
 TEACH_VIEWS = ("axes", "binding", "plot")
 
 
@@ -703,9 +703,9 @@ if __name__ == "__main__":
 
 
 def test_layers_import_only_downwards():
-    """#15: the physics core never imports the window, the scenes, the benchmarks or the
-    tests; scenes never import the window or the benchmarks; benchmarks never import the
-    tests. Checked on every import statement, including those inside functions."""
+    """The physics core never imports the window, the scenes, the benchmarks or the tests;
+    scenes never import the window or the benchmarks; benchmarks never import the tests.
+    Checked on every import statement, including those inside functions."""
     import ast
     rules = {"cloth": ("ui", "scenes", "benchmarks", "tests"),
              "scenes": ("ui", "benchmarks", "tests"),
@@ -729,9 +729,9 @@ def test_layers_import_only_downwards():
 
 
 def test_settings_and_metrics_import_without_the_model_or_taichi():
-    """#37: the settings schema and the strain measures are light: reading a scene's
-    settings or measuring a mesh imports neither the Taichi model nor the remesher (the
-    metrics <-> model import cycle and settings -> remesh are gone)."""
+    """The settings schema and the strain measures are light: reading a scene's settings or
+    measuring a mesh imports neither the Taichi model nor the remesher (the metrics <-> model
+    import cycle and settings -> remesh are gone)."""
     import subprocess
     code = ("import sys, cloth.settings, cloth.metrics; "
             "print(sorted(m for m in ('taichi', 'cloth.model', 'cloth.remesh') "

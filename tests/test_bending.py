@@ -1,4 +1,4 @@
-"""The isotropic bending energy's boundary treatment (cloth/bending.py, #35): exact second
+"""The isotropic bending energy's boundary treatment (cloth/bending.py): exact second
 derivatives at free edges and clamps for the fields those boundaries allow, no energy for
 affine maps or held (clamped) faces. Host-side numpy only, no simulation."""
 import numpy as np
@@ -122,7 +122,7 @@ def test_one_row_of_pins_is_no_clamp():
     assert abs(Q1 - Q0).max() == 0.0
 
 
-# ---- orthotropic bending (issue #52) ---------------------------------------------------------
+# ---- orthotropic bending ---------------------------------------------------------------------
 def _strip_energy(L, W, h, pattern, field, alpha, grain_angle=0.0, clamp=True):
     """(1/2) z^T Q z of the height field ``field(u, v)`` on a strip [-2h, L] x [0, W] whose
     plate is orthotropic with stretch ``alpha`` (the warp at ``grain_angle`` from u), held

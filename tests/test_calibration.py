@@ -1,7 +1,7 @@
-"""Material calibration (#16): material.k_bend is the plate's flexural rigidity B and k_warp /
-k_weft the tensile moduli, checked on small static experiments against references computed
-here (the static solves use benchmarks.calibration's rig: the simulator's own forces and
-Jacobian, minimised)."""
+"""Material calibration: material.k_bend is the plate's flexural rigidity B and k_warp / k_weft
+the tensile moduli, checked on small static experiments against references computed here (the
+static solves use benchmarks.calibration's rig: the simulator's own forces and Jacobian,
+minimised)."""
 import numpy as np
 import pytest
 
@@ -95,7 +95,7 @@ def test_narrow_ledge_cantilever_has_the_rigidity_k_bend(rig):
     # ASTM D1388: a strip 2.5 cm wide (two rows of triangles at 1 cm) on a ledge, its vertices
     # there pinned, overhanging 20 cm at the test's 41.5 deg (G = 8). The pinned rows must
     # hold the slope and the free long edges carry no moment: with both counted as bendable
-    # cloth the strip read 0.73 B (issue #35).
+    # cloth the strip read 0.73 B.
     r = cal.ledge(rig, G=8.0, h=0.01, pattern="alternating", direction="warp", width=0.025)
     assert r["chord_deg"] > 30.0                                   # it did bend
     B_eff = 8.0 / G_read_back(np.radians(r["chord_deg"]), 8.0)
@@ -105,8 +105,8 @@ def test_narrow_ledge_cantilever_has_the_rigidity_k_bend(rig):
 @pytest.mark.parametrize("pattern,direction", [("alternating", "warp"), ("irregular", "warp")])
 def test_ledge_cantilevers_of_every_width_read_the_same_rigidity(rig, pattern, direction):
     # The plate energy has no Poisson coupling, so a strip's width must not change the B it
-    # reads: ledges 2, 4, 8 and 16 cm wide at 1 cm (before #35: 0.79 ... 0.89 B, a spread of
-    # 13 %, the narrower the softer through the free edges).
+    # reads: ledges 2, 4, 8 and 16 cm wide at 1 cm (before the bending's boundary treatment:
+    # 0.79 ... 0.89 B, a spread of 13 %, the narrower the softer through the free edges).
     G = 0.15 * G_ACC * 0.2 ** 3 / 1e-3                             # B = 1e-3 N m: 11.8
     B = [G / G_read_back(np.radians(cal.ledge(rig, G=G, h=0.01, pattern=pattern,
                                               direction=direction, width=w)["chord_deg"]), G)
@@ -227,7 +227,7 @@ def test_face_fit_is_exact_for_quadratic_fields():
     ("irregular", "warp", 0.0, 8.0), ("irregular", "warp", 90.0, 8.0),
     ("irregular", "warp", 45.0, 8.0)])
 def test_orthotropic_ledge_reads_the_strips_closed_form(rig, pattern, direction, grain_deg, G):
-    # Issue #52: B_warp = 3 B_weft (the issue's smallest ratio), the ledge 4 cm wide at 1 cm,
+    # B_warp = 3 B_weft (the smallest ratio in docs/fabrics.md), the ledge 4 cm wide at 1 cm,
     # cut along the warp, the weft and the bias (from a mesh along each; or from one Delaunay
     # mesh with the grain turned), chord 7 or 41.5 deg. The closed form is the narrow strip's,
     # 1 / sqrt(B) = cos^2 / sqrt(B_warp) + sin^2 / sqrt(B_weft) (benchmarks.calibration:

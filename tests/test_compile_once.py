@@ -1,6 +1,6 @@
-"""Every kernel compiles once per process (issue #15): the model, the solvers and the
-obstacles hand Taichi their data as ndarray arguments, so a second Simulator of another mesh,
-other obstacles and other parameters runs on the kernels the first one compiled.
+"""Every kernel compiles once per process: the model, the solvers and the obstacles hand Taichi
+their data as ndarray arguments, so a second Simulator of another mesh, other obstacles and
+other parameters runs on the kernels the first one compiled.
 
 Checked by counting the compiled kernel instances Taichi holds (``Kernel.compiled_kernels``,
 one entry per specialisation), not by timing: a recompiling kernel adds an entry.

@@ -1,5 +1,5 @@
-"""Fabric records and the rule that derives Loom's material and bands from them (issue #52,
-cloth/fabrics.py). Pure Python: no Taichi."""
+"""Fabric records and the rule that derives Loom's material and bands from them
+(cloth/fabrics.py). Pure Python: no Taichi."""
 import math
 import os
 

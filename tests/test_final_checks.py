@@ -70,7 +70,7 @@ def test_drape_check_passes_a_draped_sheet_and_fails_a_flat_one_on_the_top():
     drape, cfg, c, r, t, late, draped = drape_case()
     ok, msg = drape.check_final(fake(draped, late), cfg)
     assert ok and "draped over the sphere (below its equator on all 8 sides)" in msg, msg
-    # The picture: the sheet lies flat on the sphere's top like a board.
+    # The picture the check must refuse: the sheet lies flat on the sphere's top like a board.
     flat = sheet_over_sphere(c, r, 0.5 * t, flat_from=-1.0)
     ok, msg = drape.check_final(fake(flat, late), cfg)
     assert not ok and "not draped" in msg, msg

@@ -1,4 +1,4 @@
-"""A flat frame (issue #37): every piece of work a frame does is a named, timed stage of
+"""A flat frame: every piece of work a frame does is a named, timed stage of
 ``Simulator.stages``; the stages' times add up to the frame's wall time, metrics.csv has a
 column per stage, and the re-projections (after contact, after a remesh) have their own."""
 import time

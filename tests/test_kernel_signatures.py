@@ -1,7 +1,7 @@
-"""No kernel in ``cloth/`` takes more than MAX_PARAMS parameters (issue #37): arrays that
-belong together travel in named argpacks (cloth/strain/buffers.py, cloth/dynamics.py) with the
-counts that size them, and a kernel's scalar controls in an array (``budget``, ``motion``), so a
-call cannot misorder a long run of positional arguments. Read from the source (no Taichi)."""
+"""No kernel in ``cloth/`` takes more than MAX_PARAMS parameters: arrays that belong together
+travel in named argpacks (cloth/strain/buffers.py, cloth/dynamics.py) with the counts that size
+them, and a kernel's scalar controls in an array (``budget``, ``motion``), so a call cannot
+misorder a long run of positional arguments. Read from the source (no Taichi)."""
 import ast
 import pathlib
 

@@ -50,8 +50,8 @@ def test_kernel_cycle_matches_the_documented_one_and_is_symmetric_positive(monke
     """For random vectors the kernel's z = M^-1 r equals the numpy statement of the cycle
     (``apply_reference``), x.M^-1 y = y.M^-1 x, r.M^-1 r > 0, and pinned vertices get no
     step. The hierarchy has more than two levels (the V-cycle's down and up loops run)."""
-    # Resolution 21: with the boundary-consistent bending (issue #35) the hierarchy at 17 has
-    # two levels only (867 and 60 unknowns; at 21: 1323, 63, 12).
+    # Resolution 21: with the boundary-consistent bending the hierarchy at 17 has two levels
+    # only (867 and 60 unknowns; at 21: 1323, 63, 12).
     sim, pc, _ = _built(monkeypatch, res=21)
     assert len(pc.levels) >= 3 and pc.levels[0] == 3 * sim.model.n_verts
     nv = sim.model.n_verts

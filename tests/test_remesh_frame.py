@@ -1,8 +1,8 @@
-"""What a remesh sets off, done locally (issue #34): the bending matrix updated from the faces
-a remesh changed, the block pattern and the factor preconditioner built over reused arrays,
-the model refilled row by row, per-vertex data carried like x and v, small remeshes deferred;
-each must equal what a rebuild gives (to round-off), and the limits must hold after every
-frame's remesh."""
+"""What a remesh sets off, done locally: the bending matrix updated from the faces a remesh
+changed, the block pattern and the factor preconditioner built over reused arrays, the model
+refilled row by row, per-vertex data carried like x and v, small remeshes deferred; each must
+equal what a rebuild gives (to round-off), and the limits must hold after every frame's
+remesh."""
 import numpy as np
 import pytest
 import scipy.sparse as sp

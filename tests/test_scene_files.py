@@ -1,6 +1,6 @@
-"""Scene files (issue #14): bad input stops with one line and exit code 2 before Taichi compiles
-anything and without touching an earlier output folder; OBJ garments are split along their UV
-seams and stitched; the example files reproduce the built-in scenes."""
+"""Scene files: bad input stops with one line and exit code 2 before Taichi compiles anything
+and without touching an earlier output folder; OBJ garments are split along their UV seams and
+stitched; the example files reproduce the built-in scenes."""
 import os
 
 import numpy as np
@@ -458,9 +458,9 @@ def test_a_garment_started_stretched_is_projected_onto_its_limits_before_the_fir
 
 
 def test_a_scene_file_without_a_camera_frames_its_cloth_and_obstacles(tmp_path, capsys):
-    """The issue's case: a 0.8 m sheet over a box, no [camera]. The view frames both (every
-    cloth vertex and box corner inside the window's middle between its columns, and filling
-    it), from the front and above; a given camera is kept; a bad one is one line."""
+    """A 0.8 m sheet over a box, no [camera]. The view frames both (every cloth vertex and box
+    corner inside the window's middle between its columns, and filling it), from the front and
+    above; a given camera is kept; a bad one is one line."""
     import scenes
     from scenes.common import resolve
     from ui.camera import OrbitCamera

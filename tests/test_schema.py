@@ -1,6 +1,6 @@
-"""The settings schema (issue #14): every key documented with its unit, out-of-range values and
-unknown choices refused with one line naming the key, --show-config and config.toml from the
-schema, and docs/scenes.md generated from it."""
+"""The settings schema: every key documented with its unit, out-of-range values and unknown
+choices refused with one line naming the key, --show-config and config.toml from the schema,
+and docs/scenes.md generated from it."""
 import os
 import tomllib
 

@@ -1,8 +1,8 @@
-"""One owner per setting (issue #37): ``Simulator.settings`` is the truth. Every live control
-the window exposes is changed here through the path the window uses (``ui.state.AppState``),
-and every copy of the setting kept elsewhere (the strain limiter's attributes, its kernels'
-``params``, the model's material, the stages switched on, the collider) must have followed, or
-not exist."""
+"""One owner per setting: ``Simulator.settings`` is the truth. Every live control the window
+exposes is changed here through the path the window uses (``ui.state.AppState``), and every
+copy of the setting kept elsewhere (the strain limiter's attributes, its kernels' ``params``,
+the model's material, the stages switched on, the collider) must have followed, or not
+exist."""
 import dataclasses
 import os
 
@@ -175,9 +175,9 @@ def test_the_strain_limiter_is_built_from_the_settings_alone():
 
 
 def test_the_bending_ratio_is_read_when_the_cloth_is_built(tmp_path):
-    # Issue #52: k_bend_warp / k_bend_weft's ratio lives in the bending matrix (built with the
-    # cloth); a live change of it is refused with one line and changes nothing, scaling both
-    # together is live (the kernels' factor, Material.bend_scale).
+    # k_bend_warp / k_bend_weft's ratio lives in the bending matrix (built with the cloth); a
+    # live change of it is refused with one line and changes nothing, scaling both together is
+    # live (the kernels' factor, Material.bend_scale).
     from cloth.config import ConfigError
     st = sheet_scene(tmp_path, '[material]\npreset = "cotton-jersey"\n')
     sim = st.sim

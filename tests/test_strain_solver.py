@@ -229,7 +229,7 @@ def test_mesh_change_and_new_model():
     model.load(MeshArrays(uv=uv, x=np.c_[uv * [1.05, 1.0], np.zeros(len(uv))], faces=faces))
     limiter.on_mesh_changed()
     # The new mesh's faces start from zero multipliers (rows past n_faces are not read, and
-    # on_mesh_changed clears only the active rows: issue #34).
+    # on_mesh_changed clears only the active rows).
     assert np.all(limiter._ws.lam.to_numpy()[: model.n_faces] == 0.0)
     assert limiter.constraint_values().shape == (model.n_faces, 6)
     limiter.project(H)
@@ -317,7 +317,7 @@ def test_friction_in_the_projection_follows_coulomb(mu):
     set_velocities(model, (x_hat - x_prev) / H)          # x_prev = x_hat - h v
     # Default tolerance; positions are checked to 2 tol x edge (about 1e-5 m here, against
     # slides of 0.5 and 1 mm). (Known gap: asked for 1e-9, the sticking case does not
-    # converge, the sliding one does; see the closing note of issue 5.)
+    # converge, the sliding one does.)
     limiter = StrainLimiter(model, method="warp-weft", warp=(-0.5, 0.5), weft=(-0.5, 0.5),
                             bias=(-0.5, 0.5), rounds=200, solve="exact")
     atol = 2 * limiter.tol * limiter.model.typical_edge()

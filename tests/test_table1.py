@@ -1,5 +1,5 @@
-"""Paper Table 1 at low resolution (issue #3): the hanging cloth near rest for the three
-methods x the two band settings, asserting the findings recorded in docs/table1.
+"""Paper Table 1 at low resolution: the hanging cloth near rest for the three methods x the two
+band settings, asserting the findings recorded in docs/table1.
 
 The cloth does not come fully to rest with strain limiting (kinetic energy stays ~1e-4 J: a
 jitter of a few vertices), so the strain maxima of single frames jitter too (mapping's warp

@@ -1,4 +1,4 @@
-"""The teaching view (issue #36): what it plots is what the solver limits. The points and
+"""The teaching view (docs/teaching.md): what it plots is what the solver limits. The points and
 regions come from ``cloth.metrics`` (checked against the solver's own constraint values),
 every triangle of a converged frame lies in the drawn region, the binding map names
 constraints that are at their bounds, and drawing it leaves the simulation untouched.
