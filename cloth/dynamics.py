@@ -456,10 +456,19 @@ def bend_apply(src: T, dst: T, scale, mesh: T):
     zero, so row i applies to src_k - src_i: exact for a translated cloth, and without the
     round-off of large positions (1e-16 |x| |Q| per entry)."""
     for i in range(mesh.bend_ptr.shape[0] - 1):
-        acc = ti.Vector([0.0, 0.0, 0.0])
-        for k in range(mesh.bend_ptr[i], mesh.bend_ptr[i + 1]):
-            acc += mesh.bend_val[k] * (src[mesh.bend_col[k]] - src[i])
-        dst[i] += scale * acc
+        dst[i] += scale * bend_row(i, src, mesh.bend_ptr, mesh.bend_col, mesh.bend_val)
+
+
+@ti.func
+def bend_row(i, src: T, bend_ptr: T, bend_col: T, bend_val: T):
+    """(Q src)_i = sum_k Q_ik (src_k - src_i), one row (``bend_apply``; the parallel CG
+    experiment, benchmarks/dynamics_parallel.py, gathers it per vertex). Two sums, alternate
+    entries in each, ran slower serially (0.23 against 0.18 ms a product at 8.3k vertices)."""
+    si = src[i]
+    acc = ti.Vector([0.0, 0.0, 0.0])
+    for k in range(bend_ptr[i], bend_ptr[i + 1]):
+        acc += bend_val[k] * (src[bend_col[k]] - si)
+    return acc
 
 
 # -- forces -----------------------------------------------------------------------------------
@@ -495,23 +504,12 @@ def add_K_product(src: T, dst: T, scale, c, exact: ti.i32, mesh: T, elems: T):
     """dst += scale * K src, with K = -df/dx (PSD-projected unless ``exact``)."""
     for f in range(c.nf):
         tri = mesh.face_verts[f]
-        A = mesh.face_rest_area[f]
-        fu, fv, E = elems.face_fu[f], elems.face_fv[f], elems.face_E[f]
         wa, wb = elems.face_wa[f], elems.face_wb[f]
-        dfu = wa[0] * src[tri[0]] + wa[1] * src[tri[1]] + wa[2] * src[tri[2]]
-        dfv = wb[0] * src[tri[0]] + wb[1] * src[tri[1]] + wb[2] * src[tri[2]]
-        dE0, dE1 = fu.dot(dfu), fv.dot(dfv)
-        dE2 = 0.5 * (fu.dot(dfv) + fv.dot(dfu))
-        # Curvature terms: kept where they are non-negative (stretch in tension) unless exact.
-        E0, E1, E2 = E[0], E[1], E[2]
-        if exact == 0:
-            E0, E1, E2 = ti.max(E0, 0.0), ti.max(E1, 0.0), 0.0
+        U, W = face_UW(f, src, scale, c.kw, c.kf, c.ks, exact, mesh.face_verts,
+                       mesh.face_rest_area, elems.face_fu, elems.face_fv, elems.face_E,
+                       elems.face_wa, elems.face_wb)
         for n in ti.static(range(3)):
-            out = c.kw * (dE0 * wa[n] * fu + E0 * wa[n] * dfu) \
-                + c.kf * (dE1 * wb[n] * fv + E1 * wb[n] * dfv) \
-                + 2.0 * c.ks * (dE2 * (wa[n] * fv + wb[n] * fu)
-                                + E2 * (wa[n] * dfv + wb[n] * dfu))
-            dst[tri[n]] += scale * A * out
+            dst[tri[n]] += wa[n] * U + wb[n] * W
     for e in range(c.ne):
         if mesh.edge_faces[e][1] >= 0:
             k = c.kb * mesh.edge_bend_weight[e]
@@ -529,6 +527,37 @@ def add_K_product(src: T, dst: T, scale, c, exact: ti.i32, mesh: T, elems: T):
         d = src[a] - src[b]
         dst[a] += scale * c.kst * d
         dst[b] -= scale * c.kst * d
+
+
+@ti.func
+def face_UW(f, src: T, scale, kw, kf, ks, exact, face_verts: T, face_rest_area: T, face_fu: T,
+            face_fv: T, face_E: T, face_wa: T, face_wb: T):
+    """Face f's membrane K src, times ``scale``, as two vectors (U, W): its term at corner n
+    is a_n U + b_n W (a, b the warp and weft weights, ``face_weights``). K = -d2E/dx2 is
+    PSD-projected unless ``exact``. With F_g's columns fu, fv and their changes dfu = sum a_n
+    src_n, dfv = sum b_n src_n, and dE the Green strain's change,
+    U = A (k_w (dE0 fu + E0 dfu) + 2 k_s (dE2 fv + E2 dfv)) and
+    W = A (k_f (dE1 fv + E1 dfv) + 2 k_s (dE2 fu + E2 dfu)).
+    Written this way (U and W once per face, then two products per corner) the serial CG
+    iteration takes 0.56 ms instead of 0.67 at 16k triangles (docs/speed/parallel.md). The
+    one definition for ``add_K_product`` and the parallel CG experiment
+    (benchmarks/dynamics_parallel.py), so the two do the same arithmetic; the arrays are
+    passed one by one, as that kernel holds them in a pack of its own."""
+    tri = face_verts[f]
+    fu, fv, E = face_fu[f], face_fv[f], face_E[f]
+    wa, wb = face_wa[f], face_wb[f]
+    dfu = wa[0] * src[tri[0]] + wa[1] * src[tri[1]] + wa[2] * src[tri[2]]
+    dfv = wb[0] * src[tri[0]] + wb[1] * src[tri[1]] + wb[2] * src[tri[2]]
+    dE0, dE1 = fu.dot(dfu), fv.dot(dfv)
+    dE2 = 0.5 * (fu.dot(dfv) + fv.dot(dfu))
+    # Curvature terms: kept where they are non-negative (stretch in tension) unless exact.
+    E0, E1, E2 = E[0], E[1], E[2]
+    if exact == 0:
+        E0, E1, E2 = ti.max(E0, 0.0), ti.max(E1, 0.0), 0.0
+    sA = scale * face_rest_area[f]
+    U = sA * (kw * (dE0 * fu + E0 * dfu) + 2.0 * ks * (dE2 * fv + E2 * dfv))
+    W = sA * (kf * (dE1 * fv + E1 * dfv) + 2.0 * ks * (dE2 * fu + E2 * dfu))
+    return U, W
 
 
 @ti.func
@@ -721,6 +750,8 @@ def _step(coef: A, mesh: MeshPack, state: StatePack, elems: ElementPack,
     """(relative residual, CG iterations), also left in scalars[0] and scalars[1]."""
     # The whole step runs in one serial kernel: on a 2-core CPU, launching a kernel per CG
     # phase costs more than the work below ~50k triangles (docs/method.md §4, cost notes).
+    # A parallel CG was built and measured twice and lost on this machine
+    # (docs/speed/parallel.md; the second: benchmarks/dynamics_parallel.py).
     # Returning both numbers costs less than reading them back (~0.05 vs ~0.17 ms).
     ti.loop_config(serialize=True)
     for _ in range(1):
