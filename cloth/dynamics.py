@@ -462,7 +462,7 @@ def bend_apply(src: T, dst: T, scale, mesh: T):
 @ti.func
 def bend_row(i, src: T, bend_ptr: T, bend_col: T, bend_val: T):
     """(Q src)_i = sum_k Q_ik (src_k - src_i), one row (``bend_apply``; the parallel CG
-    experiment, benchmarks/dynamics_parallel.py, gathers it per vertex). Two sums, alternate
+    experiment of docs/speed/parallel.md gathered it per vertex). Two sums, alternate
     entries in each, ran slower serially (0.23 against 0.18 ms a product at 8.3k vertices)."""
     si = src[i]
     acc = ti.Vector([0.0, 0.0, 0.0])
@@ -540,9 +540,8 @@ def face_UW(f, src: T, scale, kw, kf, ks, exact, face_verts: T, face_rest_area: 
     W = A (k_f (dE1 fv + E1 dfv) + 2 k_s (dE2 fu + E2 dfu)).
     Written this way (U and W once per face, then two products per corner) the serial CG
     iteration takes 0.56 ms instead of 0.67 at 16k triangles (docs/speed/parallel.md). The
-    one definition for ``add_K_product`` and the parallel CG experiment
-    (benchmarks/dynamics_parallel.py), so the two do the same arithmetic; the arrays are
-    passed one by one, as that kernel holds them in a pack of its own."""
+    arrays are passed one by one: the parallel CG experiment of that page shared this func
+    from a kernel that held them in a pack of its own."""
     tri = face_verts[f]
     fu, fv, E = face_fu[f], face_fv[f], face_E[f]
     wa, wb = face_wa[f], face_wb[f]
@@ -751,7 +750,7 @@ def _step(coef: A, mesh: MeshPack, state: StatePack, elems: ElementPack,
     # The whole step runs in one serial kernel: on a 2-core CPU, launching a kernel per CG
     # phase costs more than the work below ~50k triangles (docs/method.md §4, cost notes).
     # A parallel CG was built and measured twice and lost on this machine
-    # (docs/speed/parallel.md; the second: benchmarks/dynamics_parallel.py).
+    # (docs/speed/parallel.md).
     # Returning both numbers costs less than reading them back (~0.05 vs ~0.17 ms).
     ti.loop_config(serialize=True)
     for _ in range(1):
