@@ -11,6 +11,9 @@ from assets import (ASSET_DIR, load_mannequin, load_tshirt, load_tshirt_mesh, ma
 from assets import make_assets as gen
 from cloth.model import build_edges, signed_material_areas
 
+# One worker runs this file (make test's --dist loadgroup): the finer shirt is built once (8 s).
+pytestmark = pytest.mark.xdist_group("assets")
+
 
 @pytest.fixture(scope="module")
 def saved():

@@ -346,29 +346,30 @@ def test_garment_obj_is_split_stitched_scaled_and_drapes_without_penetration():
 
 @pytest.mark.slow
 def test_the_garment_lands_on_its_form_from_every_start_of_an_ensemble():
-    """The tabard landing on the dress form's shoulders, from eight starts 1 nm apart (a
+    """The tabard landing on the dress form's shoulders, from five starts 1 nm apart (a
     landing is chaotic). From some starts friction held the shoulders past their limits (its
     bound, mu times the contact force, grows with the force the limits' own pull presses into
     the form), the projection locked, and its grown multipliers then threw the tabard off the
-    form at up to 16 m/s (measured: 4 of 9 starts on one CPU). Every start now lands: no vertex
-    faster than a fall from the start could make it, every vertex still over the form."""
+    form at up to 16 m/s (measured: 4 of 9 starts on one CPU, 2 of these 5 with the tests'
+    fast-compiled kernels). Every start now lands: no vertex faster than a fall from the start
+    could make it, every vertex still over the form."""
     import scenes
     from cloth.simulator import Simulator
     from scenes.common import resolve
     module = scenes.get(os.path.join(EXAMPLES, "garment.toml"))
     cfg = resolve(module.DEFAULTS, [])
     fastest = []
-    for seed in range(8):
+    for seed in range(5):
         sim = Simulator(module.build(cfg), cfg)
         x = sim.model.positions()
         sim.model.set_positions(x + 1e-9 * np.random.default_rng(seed).standard_normal(x.shape))
         top = 0.0
-        for frame in range(10):
+        for frame in range(8):            # the throw came at frames 5-6
             sim.step_frame()
             top = max(top, np.linalg.norm(sim.model.velocities(), axis=1).max())
         fastest.append(top)
         assert sim.model.positions()[:, 1].max() > 1.45, f"start {seed}: off the shoulders"
-    # Free fall over the 10 frames reaches 3.3 m/s; the tabard starts on the form.
+    # Free fall over the 8 frames reaches 2.6 m/s; the tabard starts on the form.
     assert max(fastest) < 3.0, [round(v, 2) for v in fastest]
 
 
