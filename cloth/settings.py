@@ -201,7 +201,8 @@ SCHEMA = {
                             "the limits (2 x strain.tol; before it a landing may pass them)",
                             lo=0),
         "drape_over": Key("", "scene files: name of a sphere obstacle the cloth must hang "
-                          "draped over (below its equator on every side it overhangs)"),
+                          "draped over (below its equator on the sides it overhangs; "
+                          "folds may rest above it on 2 of 8)"),
         "touching": Key("", "scene files: names of obstacles the cloth must touch at the end"),
     },
     "camera": {

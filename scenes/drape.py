@@ -53,7 +53,7 @@ def drape_by(cfg):
 
 def check_final(sim, cfg):
     """Finite, outside the sphere and above the ground, the limits held, and from
-    ``drape_by`` on draped over the sphere: on it, and below its equator on every side it
+    ``drape_by`` on draped over the sphere: on it, and below its equator on the sides it
     overhangs (``checks.draped_over_sphere``), not a flat sheet on its top."""
     s = cfg["sphere"]
     tol = cfg["collision"]["thickness"]
