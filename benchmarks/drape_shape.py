@@ -67,18 +67,24 @@ def hem_loop(faces):
     return loop
 
 
-def fold_count(x, loop, axis_xz, prominence=FOLD_PROMINENCE):
-    """Folds of the hem: local maxima, along the closed hem, of its horizontal distance from
-    the sphere's vertical axis that stand ``prominence`` above the minima on both sides (a
-    fold hangs out from the sphere; between two folds the hem comes back in)."""
+def hem_folds(x, loop, axis_xz, prominence=FOLD_PROMINENCE):
+    """The prominences (m) of the hem's folds: local maxima, along the closed hem, of its
+    horizontal distance from the sphere's vertical axis that stand ``prominence`` above the
+    minima on both sides (a fold hangs out from the sphere; between two folds the hem comes
+    back in)."""
     import numpy as np
     from scipy.signal import find_peaks
     p = np.asarray(x)[loop]
     r = np.hypot(p[:, 0] - axis_xz[0], p[:, 2] - axis_xz[1])
     n = len(r)
-    # Three copies so that a fold across the loop's start is seen whole; count the middle one.
-    peaks, _ = find_peaks(np.concatenate([r, r, r]), prominence=prominence)
-    return int(np.sum((peaks >= n) & (peaks < 2 * n)))
+    # Three copies so that a fold across the loop's start is seen whole; keep the middle one.
+    peaks, props = find_peaks(np.concatenate([r, r, r]), prominence=prominence)
+    return props["prominences"][(peaks >= n) & (peaks < 2 * n)]
+
+
+def fold_count(x, loop, axis_xz, prominence=FOLD_PROMINENCE):
+    """How many folds the hem has (``hem_folds``)."""
+    return int(len(hem_folds(x, loop, axis_xz, prominence)))
 
 
 def child(solve, drop, chaos, frames=FRAMES):

@@ -90,18 +90,12 @@ def sampled_shape(run, grid=GRID):
 
 
 def folds(run):
-    """(count, mean prominence in m) of the hem's folds."""
+    """(count, mean prominence in m) of the hem's folds (``drape_shape.hem_folds``)."""
     import numpy as np
-    from scipy.signal import find_peaks
-    from benchmarks.drape_shape import FOLD_PROMINENCE, hem_loop
-    p = np.asarray(run["x"])[hem_loop(run["faces"])]
+    from benchmarks.drape_shape import hem_folds, hem_loop
     c = run["sphere"]
-    r = np.hypot(p[:, 0] - c[0], p[:, 2] - c[2])
-    n = len(r)
-    peaks, props = find_peaks(np.concatenate([r, r, r]), prominence=FOLD_PROMINENCE)
-    mid = (peaks >= n) & (peaks < 2 * n)
-    prom = props["prominences"][mid]
-    return int(mid.sum()), float(prom.mean()) if len(prom) else 0.0
+    prom = hem_folds(run["x"], hem_loop(run["faces"]), (c[0], c[2]))
+    return int(len(prom)), float(np.mean(prom)) if len(prom) else 0.0
 
 
 def surface_samples(x, faces, n=4):

@@ -480,8 +480,7 @@ class StrainLimiter:
         saved = None
         if not warm:
             saved = self.multipliers()
-            for a in (ws.lam, ws.lam_c, ws.lam_s, ws.lam_t):
-                ndarrays.zero(a)
+            self._zero_multipliers()
         use_system = h > 0 and self._system_ready
         rounds, newton, converged, stats = self._solve(mid, K, use_system, contacts)
         if not converged and friction:
@@ -494,8 +493,7 @@ class StrainLimiter:
             # without friction and from zero multipliers.
             al.begin_solve(nv, float(h), 0, 0, *self._start_args[1:], ws.step_pack(m.state),
                            ws.vector_pack(), ws.contact_pack(), ws.stats)
-            for a in (ws.lam, ws.lam_c, ws.lam_s, ws.lam_t):
-                ndarrays.zero(a)
+            self._zero_multipliers()
             more = self._solve(mid, K, use_system, contacts)
             rounds, newton, converged, stats = rounds + more[0], newton + more[1], more[2], more[3]
             self.last_slid = True
@@ -527,6 +525,11 @@ class StrainLimiter:
         self.last_stationarity = float(stats[ST_KKT]) / self._kkt_h if self._exact() else \
             (0.0 if rounds == 0 else float("nan"))
         self.last_ms = 1e3 * (time.perf_counter() - t0)
+
+    def _zero_multipliers(self):
+        ws = self._ws
+        for a in (ws.lam, ws.lam_c, ws.lam_s, ws.lam_t):
+            ndarrays.zero(a)
 
     def _solve(self, mid, K, use_system, contacts):
         """One solve of the projection set up by ``begin_solve``: (rounds, Newton steps,
