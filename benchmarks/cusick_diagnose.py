@@ -4,6 +4,8 @@
     python -m benchmarks.cusick_diagnose energy denim --method none --shear-scale 1 4 0.1
     python -m benchmarks.cusick_diagnose frames denim --method warp-weft --seconds 1
     python -m benchmarks.cusick_diagnose energy denim --method warp-weft --settle-speed 0
+    python -m benchmarks.cusick_diagnose substep wool-suiting --method warp-weft --h 0.005 \
+        --edge-h 0.005 --frame 20
 
 ``energy``: per factor on the shear stiffness, the drape's DC and folds and, at its end, the
 potential energy gravity lost, the bending energy ((B/2) sum x^T Q x, cloth/bending.py), the
@@ -14,7 +16,12 @@ cloth/dynamics.py), the skirt's shear angle (p95, max) and thread strain (p95 of
 rounds, the largest violation where the dynamics put the cloth (x_hat) and after the
 projection, and the RMS speed. ``--settle-speed``: cloth.strain.solver.SETTLE_SPEED for the
 run (the speed below which a vertex's projection starts where the substep began; 0: every
-vertex starts at x_hat); ``--solve exact``: strain.solve for the run.
+vertex starts at x_hat); ``--solve exact``: strain.solve for the run. ``substep``: the drape
+run to ``--frame`` (fast solve), then that frame's next substep projected from the same state
+(``Simulator.substep_state``) by the fast and by the exact solve: how far the dynamics moved
+the free skirt down (x_hat) and how much of that each projection kept, with its rounds and
+time (the exact solve's first projection includes its compile; the solve is run twice and
+the second timed).
 """
 import argparse
 import json
@@ -85,12 +92,64 @@ def frame_logger(log):
     return Logged
 
 
+class _Reached(Exception):
+    """Raised by ``stopping_at``'s simulator at the frame asked for, carrying it."""
+
+
+def stopping_at(frame):
+    """A Simulator subclass that stops the run (``_Reached``, holding the simulator) once
+    ``frame`` frames are done (``substep``)."""
+    from cloth.simulator import Simulator
+
+    class Stopping(Simulator):
+        def step_frame(self):
+            out = super().step_frame()
+            if self.frame >= frame:
+                raise _Reached(self)
+            return out
+    return Stopping
+
+
+def substep_report(sim, log):
+    """The next substep of ``sim`` projected by the fast and by the exact solve from the same
+    state (see the module docstring)."""
+    from cloth import metrics
+    m, lim = sim.model, sim.strain
+    state = sim.substep_state()
+    x0 = m.positions()
+    free = ~m.pinned
+    Dm_inv = metrics.material_Dm_inv(m.uv, m.faces)
+    for solve in ("fast", "exact"):
+        sim._change("strain", solve=solve)
+        for _ in range(2):                      # the second one timed (compile, factor)
+            sim.set_substep_state(state)
+            x_hat = sim.run_substep_through("strain_limit")
+        x = m.positions()
+        g = metrics.own_constraint_values(sim.method, x_hat, m.faces, Dm_inv, m.grain,
+                                          sim.bands(), lim.isotropy)
+        drop_hat = float(np.mean(x0[free, 1] - x_hat[free, 1]))
+        drop = float(np.mean(x0[free, 1] - x[free, 1]))
+        log(json.dumps(dict(
+            solve=solve, frame=sim.frame, faces=int(m.n_faces),
+            faces_past_bands_at_x_hat=int((g > 0).any(axis=1).sum()),
+            largest_violation_at_x_hat=round(float(g.max()), 4),
+            mean_drop_x_hat_mm=round(1e3 * drop_hat, 4), mean_drop_kept_mm=round(1e3 * drop, 4),
+            share_kept=round(drop / drop_hat, 4), rounds=lim.last_iterations,
+            newton=lim.last_newton, cg=lim.last_cg, ms=round(lim.last_ms, 1),
+            violation_after=float(f"{lim.last_violation_max:.2e}"))), flush=True)
+    sim._change("strain", solve="fast")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("what", choices=("energy", "frames"))
+    ap.add_argument("what", choices=("energy", "frames", "substep"))
     ap.add_argument("fabric")
     ap.add_argument("--method", default="none")
     ap.add_argument("--h", type=float, default=0.01)
+    ap.add_argument("--edge-h", type=float, default=None,
+                    help="triangle size at the support's edge (default: half --h, the graded "
+                         "mesh; give --h for a uniform one)")
+    ap.add_argument("--frame", type=int, default=20, help="substep: the frame to stop at")
     ap.add_argument("--shear-scale", type=float, nargs="*", default=[1.0])
     ap.add_argument("--membrane-scale", type=float, default=1.0)
     ap.add_argument("--seconds", type=float, default=4.0)
@@ -114,7 +173,16 @@ def main():
             out["strain"]["solve"] = a.solve
             return out
         fabrics.apply_fabric = with_solve        # cusick.run looks it up at each call
-    edge_h = a.h / 2
+    edge_h = a.h / 2 if a.edge_h is None else a.edge_h
+    if a.what == "substep":
+        simulator.Simulator = stopping_at(a.frame)
+        try:
+            cusick.run(a.fabric, a.h, 0, a.method, seconds=a.seconds, edge_h=edge_h,
+                       log=lambda m: None)
+        except _Reached as reached:
+            substep_report(reached.args[0], print)
+            return
+        raise SystemExit(f"the drape settled before frame {a.frame}")
     if a.what == "frames":
         simulator.Simulator = frame_logger(print)
         cusick.MIN_SECONDS = a.seconds          # log the whole time asked for
