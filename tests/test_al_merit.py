@@ -146,8 +146,9 @@ def test_newton_matrix_is_the_merit_hessian_without_the_margin(method):
     """``al.newton_matrix`` (the matrix both Newton paths solve with) against the central
     difference of the residual: with active_margin 0 it is the merit's Hessian up to the
     curvature model's error (measured here: relative error of H d 2.6 % for mapping, 5e-4 for
-    svd, 1e-9 for warp-weft); with the default margin it is 2-5 times stiffer along every
-    direction tried (the near constraints enter; docs/history/inner_solver.md).
+    svd, 1e-9 for warp-weft); with the default margin it is stiffer along every
+    direction tried (the near constraints enter; docs/history/inner_solver.md; 1.6-3.6 times
+    since their weight is cubic in their closeness, defaults.NEAR_POWER).
     It is symmetric, and the identity on pinned rows."""
     from tests.test_coupling import _hanging
     sim = _hanging(method, res=6)

@@ -26,6 +26,13 @@ MEAN_TOL, OUTLIER_TOL = 0.02, 0.02
 # (mean 0.010-0.015), the other images at most 1.0 %. The plot's frame, panels, box and labels
 # are checked here; that the dots are drawn, in test_teaching_overlays_draw_what_they_say.
 PLOT_OUTLIER_TOL = 0.05
+# The binding map colours the faces that sit at a band, and which ones do in the resting
+# sheet is chaotic too: the fast projection stops once the limits hold, and since the near
+# constraints' weight is cubic (cloth/strain/defaults.py NEAR_POWER) the faces that end at
+# their band are scattered, not a fixed checkerboard. Measured over three starts 1 nm apart:
+# 3.0-4.1 % of pixels far off, mean 0.023-0.033. The key, the colours and that the map paints
+# triangles are checked in test_teaching_overlays_draw_what_they_say.
+BINDING_MEAN_TOL, BINDING_OUTLIER_TOL = 0.05, 0.07
 
 
 RESOLUTION = 11
@@ -370,14 +377,14 @@ def teaching_rendered(rendered):
     return teaching_images(rendered[2])
 
 
-def compare_with_reference(img, name, tmp_path_factory, outlier_tol=OUTLIER_TOL):
-    """``img`` against reference_images/``name`` within MEAN_TOL and ``outlier_tol``; a
+def compare_with_reference(img, name, tmp_path_factory, outlier_tol=OUTLIER_TOL, mean_tol=MEAN_TOL):
+    """``img`` against reference_images/``name`` within ``mean_tol`` and ``outlier_tol``; a
     failing image is kept (a picture is read faster than a number)."""
     import imageio.v2 as imageio
     ref = imageio.imread(os.path.join(REFERENCE_DIR, name))[:, :, :3].astype(float) / 255
     assert img.shape == ref.shape
     diff = np.abs(img.astype(float) / 255 - ref).max(axis=2)
-    ok = diff.mean() < MEAN_TOL and (diff > 0.25).mean() < outlier_tol
+    ok = diff.mean() < mean_tol and (diff > 0.25).mean() < outlier_tol
     if not ok:
         out = os.path.join(tmp_path_factory.getbasetemp(), name.replace(".png", "_rendered.png"))
         imageio.imwrite(out, img)
@@ -389,8 +396,11 @@ def compare_with_reference(img, name, tmp_path_factory, outlier_tol=OUTLIER_TOL)
 
 @pytest.mark.parametrize("view", TEACH_VIEWS)
 def test_teaching_overlay_matches_the_reference_image(teaching_rendered, view, tmp_path_factory):
+    outlier_tol, mean_tol = {"plot": (PLOT_OUTLIER_TOL, MEAN_TOL),
+                             "binding": (BINDING_OUTLIER_TOL, BINDING_MEAN_TOL)}.get(
+                                 view, (OUTLIER_TOL, MEAN_TOL))
     compare_with_reference(teaching_rendered[view], f"hanging_teach_{view}.png", tmp_path_factory,
-                           PLOT_OUTLIER_TOL if view == "plot" else OUTLIER_TOL)
+                           outlier_tol, mean_tol)
 
 
 def test_teaching_overlays_draw_what_they_say(teaching_rendered, rendered):

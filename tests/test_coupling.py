@@ -188,10 +188,15 @@ def _tight_projection(sim, state, precondition, monkeypatch):
     return pc, usable, sim.model.positions()
 
 
-def test_host_loop_and_kernel_newton_give_the_same_projection(monkeypatch):
+@pytest.mark.xdist_group("exact_solve")      # its exact solve compiles with the others'
+def test_host_loop_and_kernel_newton_agree_within_the_fast_solves_error(monkeypatch):
     """The same substep solved by the one-kernel PCG solve and by the host loop with
-    Cholesky steps (the path of Vulkan and Metal, taken here on the CPU) lands on the same
-    constrained positions (within what the tolerance allows)."""
+    Cholesky steps (the path of Vulkan and Metal, taken here on the CPU): both hold the
+    limits and land as close to each other as each lands to the substep's exact projection
+    (the fast solve stops once the limits hold, so where it stops depends on the path;
+    measured: 1.5 mm apart, 3.1 and 2.0 mm from the exact answer)."""
+    exact = _hanging("warp-weft", solve="exact")
+    exact.step_frame()
     ref = _hanging("warp-weft")
     ref.step_frame()
     monkeypatch.setattr(solver.StrainLimiter, "uses_host_loop", lambda self: True)
@@ -200,8 +205,9 @@ def test_host_loop_and_kernel_newton_give_the_same_projection(monkeypatch):
     assert sim.strain.last_converged and ref.strain.last_converged
     assert sim.strain.last_violation_max < 1e-4 and ref.strain.last_violation_max < 1e-4
     assert sim.strain.last_factorizations > 0            # it did take Cholesky steps
-    edge = np.sqrt(np.mean(sim.model.rest_area))
-    assert np.abs(sim.model.positions() - ref.model.positions()).max() < 20 * 1e-4 * edge
+    x_host, x_kernel, x_exact = (s.model.positions() for s in (sim, ref, exact))
+    apart = np.abs(x_host - x_kernel).max()
+    assert apart <= max(np.abs(x_host - x_exact).max(), np.abs(x_kernel - x_exact).max())
 
 
 @pytest.mark.parametrize("method", ["svd", "warp-weft", "mapping"])

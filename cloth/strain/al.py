@@ -17,6 +17,7 @@ from .buffers import (B_FROM_PREV, B_MAX_CG, B_MAX_NEWTON, B_MAX_ROUNDS, B_MU0,
                       VectorPack)
 from . import multigrid
 from .constraints import MAPPING_PAIRS_BY_ALIGNMENT, SVD, face_constraints
+from .defaults import NEAR_POWER
 
 
 # ---- constraint evaluation ---------------------------------------------------------------------
@@ -294,14 +295,17 @@ def residual(K, nv, nf, ns, mu, x: T, mesh: T, cons: T, contacts: T, vec: T):
 @ti.func
 def near_weight(s, near):
     """Weight of a constraint's Gauss-Newton term in the Newton model: 1 when active (s > 0),
-    falling linearly to 0 across the margin. With the full weight on every constraint within
-    the margin the model is stiffer than L_A, and at rest the inner loop stagnated (exact
-    Cholesky steps lowered the residual by ~2 % each); ramped, the model changes continuously
-    as a constraint approaches. Measured on hanging, implicit coupling, mapping, mean KE over
-    frames 120-150: resolution 9 3.3e-7 -> 6.6e-8 J, resolution 25 7.2e-7 -> 1.1e-7 J."""
+    falling to 0 across the margin as the NEAR_POWER-th power of the closeness (s + near) /
+    near. With the full weight on every constraint within the margin the model is stiffer
+    than L_A, and at rest the inner loop stagnated (exact Cholesky steps lowered the residual
+    by ~2 % each); ramped, the model changes continuously as a constraint approaches
+    (measured on hanging, implicit coupling, mapping, mean KE over frames 120-150: resolution
+    9 3.3e-7 -> 6.6e-8 J, resolution 25 7.2e-7 -> 1.1e-7 J). Ramped linearly, faces far inside
+    their bands still stiffened it enough to hold a tight-band cloth where it was
+    (defaults.NEAR_POWER says by how much)."""
     w = 1.0
     if s <= 0.0:
-        w = (s + near) / near if near > 0.0 else 0.0
+        w = ((s + near) / near) ** NEAR_POWER if near > 0.0 else 0.0
     return w
 
 
