@@ -83,15 +83,16 @@ def test_obstacle_contacts_keep_the_strain_limits(name, frames):
 @pytest.mark.slow
 def test_the_drape_lands_without_stopping_dead():
     """The sheet that lands on the sphere keeps falling around it: the part on the sphere
-    stops, the rest does not. Measured at resolution 11 (the default drop): kinetic energy at
-    frame 8 = 0.85 of the largest before it, 44 vertices in contact at frame 12. Its PCG
-    steps start from where each vertex was going (strain.solver.SETTLE_SPEED); from the
-    substep's start they kept 0.20 and touched 9 (exact Newton steps: 0.22 and 37, at frame 8
-    already stopped around the sphere; docs/speed/motion_error.md)."""
+    stops, the rest does not. Measured at resolution 11 (the default drop) over six starts
+    1 nm apart: kinetic energy at frame 8 = 0.61-0.76 of the largest before it, 41-50
+    vertices in contact at frame 16 (29-34 at frame 12: the wrap is under way). Its PCG steps
+    start from where each vertex was going (strain.solver.SETTLE_SPEED); from the substep's
+    start they kept 0.20 of the energy and touched 9 vertices at frame 12 (exact Newton steps:
+    0.22 and 37, at frame 8 already stopped around the sphere; docs/speed/motion_error.md)."""
     from cloth import metrics
     sim, cfg = make_sim("drape", cloth={"resolution": 11})
     ke = []
-    for _ in range(12):
+    for _ in range(16):
         sim.step_frame()
         ke.append(metrics.kinetic_energy(sim.model.velocities(), sim.model.mass))
     assert ke[7] >= 0.5 * max(ke[:8])
