@@ -45,10 +45,9 @@ ACTIVE_MARGIN = 1e-2
 # model 100-fold: a cloth whose faces all sit inside the margin moved only isometrically.
 # Measured (2-core AMD EPYC): a Cusick skirt of wool suiting (bands +-0.94 %, margin 8.9e-3)
 # kept 0.4 % of a substep's fall where the exact solve keeps 40 %, and froze flat (DC 0.98
-# at 0.5 and 0.8 cm; squared, still 0.98); cubed it drapes (0.69, 0.63; membrane only 0.67),
-# and a stiff plate (B = 5 N m) dropped on the sphere stays a plate in 4 of 5 drops where it
-# wrapped in 3 of 5. To the fourth power a resting svd sheet kept 5e-6 J (hanging at
-# resolution 9; it rests below 1e-6 J cubed). docs/fabrics.md, docs/speed/solve_cost.md.
+# at 0.5 and 0.8 cm; squared, still 0.98); cubed it drapes (0.69, 0.63; membrane only 0.67).
+# To the fourth power a resting svd sheet kept 5e-6 J (hanging at resolution 9; it rests below
+# 1e-6 J cubed). docs/fabrics.md, docs/speed/solve_cost.md.
 NEAR_POWER = 3
 # PCG relative residual per Newton step: 0.1 needs as many Newton steps as 1e-3 at half the work.
 CG_RTOL = 0.1
