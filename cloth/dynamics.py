@@ -456,19 +456,11 @@ def bend_apply(src: T, dst: T, scale, mesh: T):
     zero, so row i applies to src_k - src_i: exact for a translated cloth, and without the
     round-off of large positions (1e-16 |x| |Q| per entry)."""
     for i in range(mesh.bend_ptr.shape[0] - 1):
-        dst[i] += scale * bend_row(i, src, mesh.bend_ptr, mesh.bend_col, mesh.bend_val)
-
-
-@ti.func
-def bend_row(i, src: T, bend_ptr: T, bend_col: T, bend_val: T):
-    """(Q src)_i = sum_k Q_ik (src_k - src_i), one row (``bend_apply``; the parallel CG
-    experiment of docs/speed/parallel.md gathered it per vertex). Two sums, alternate
-    entries in each, ran slower serially (0.23 against 0.18 ms a product at 8.3k vertices)."""
-    si = src[i]
-    acc = ti.Vector([0.0, 0.0, 0.0])
-    for k in range(bend_ptr[i], bend_ptr[i + 1]):
-        acc += bend_val[k] * (src[bend_col[k]] - si)
-    return acc
+        si = src[i]
+        acc = ti.Vector([0.0, 0.0, 0.0])
+        for k in range(mesh.bend_ptr[i], mesh.bend_ptr[i + 1]):
+            acc += mesh.bend_val[k] * (src[mesh.bend_col[k]] - si)
+        dst[i] += scale * acc
 
 
 # -- forces -----------------------------------------------------------------------------------
@@ -505,9 +497,7 @@ def add_K_product(src: T, dst: T, scale, c, exact: ti.i32, mesh: T, elems: T):
     for f in range(c.nf):
         tri = mesh.face_verts[f]
         wa, wb = elems.face_wa[f], elems.face_wb[f]
-        U, W = face_UW(f, src, scale, c.kw, c.kf, c.ks, exact, mesh.face_verts,
-                       mesh.face_rest_area, elems.face_fu, elems.face_fv, elems.face_E,
-                       elems.face_wa, elems.face_wb)
+        U, W = face_UW(f, src, scale, c, exact, mesh, elems)
         for n in ti.static(range(3)):
             dst[tri[n]] += wa[n] * U + wb[n] * W
     for e in range(c.ne):
@@ -530,8 +520,7 @@ def add_K_product(src: T, dst: T, scale, c, exact: ti.i32, mesh: T, elems: T):
 
 
 @ti.func
-def face_UW(f, src: T, scale, kw, kf, ks, exact, face_verts: T, face_rest_area: T, face_fu: T,
-            face_fv: T, face_E: T, face_wa: T, face_wb: T):
+def face_UW(f, src: T, scale, c, exact, mesh: T, elems: T):
     """Face f's membrane K src, times ``scale``, as two vectors (U, W): its term at corner n
     is a_n U + b_n W (a, b the warp and weft weights, ``face_weights``). K = -d2E/dx2 is
     PSD-projected unless ``exact``. With F_g's columns fu, fv and their changes dfu = sum a_n
@@ -539,12 +528,10 @@ def face_UW(f, src: T, scale, kw, kf, ks, exact, face_verts: T, face_rest_area: 
     U = A (k_w (dE0 fu + E0 dfu) + 2 k_s (dE2 fv + E2 dfv)) and
     W = A (k_f (dE1 fv + E1 dfv) + 2 k_s (dE2 fu + E2 dfu)).
     Written this way (U and W once per face, then two products per corner) the serial CG
-    iteration takes 0.56 ms instead of 0.67 at 16k triangles (docs/speed/parallel.md). The
-    arrays are passed one by one: the parallel CG experiment of that page shared this func
-    from a kernel that held them in a pack of its own."""
-    tri = face_verts[f]
-    fu, fv, E = face_fu[f], face_fv[f], face_E[f]
-    wa, wb = face_wa[f], face_wb[f]
+    iteration takes 0.56 ms instead of 0.67 at 16k triangles (docs/speed/parallel.md)."""
+    tri = mesh.face_verts[f]
+    fu, fv, E = elems.face_fu[f], elems.face_fv[f], elems.face_E[f]
+    wa, wb = elems.face_wa[f], elems.face_wb[f]
     dfu = wa[0] * src[tri[0]] + wa[1] * src[tri[1]] + wa[2] * src[tri[2]]
     dfv = wb[0] * src[tri[0]] + wb[1] * src[tri[1]] + wb[2] * src[tri[2]]
     dE0, dE1 = fu.dot(dfu), fv.dot(dfv)
@@ -553,9 +540,9 @@ def face_UW(f, src: T, scale, kw, kf, ks, exact, face_verts: T, face_rest_area: 
     E0, E1, E2 = E[0], E[1], E[2]
     if exact == 0:
         E0, E1, E2 = ti.max(E0, 0.0), ti.max(E1, 0.0), 0.0
-    sA = scale * face_rest_area[f]
-    U = sA * (kw * (dE0 * fu + E0 * dfu) + 2.0 * ks * (dE2 * fv + E2 * dfv))
-    W = sA * (kf * (dE1 * fv + E1 * dfv) + 2.0 * ks * (dE2 * fu + E2 * dfu))
+    sA = scale * mesh.face_rest_area[f]
+    U = sA * (c.kw * (dE0 * fu + E0 * dfu) + 2.0 * c.ks * (dE2 * fv + E2 * dfv))
+    W = sA * (c.kf * (dE1 * fv + E1 * dfv) + 2.0 * c.ks * (dE2 * fu + E2 * dfu))
     return U, W
 
 
