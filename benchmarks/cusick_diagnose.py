@@ -18,10 +18,11 @@ projection, and the RMS speed. ``--settle-speed``: cloth.strain.solver.SETTLE_SP
 run (the speed below which a vertex's projection starts where the substep began; 0: every
 vertex starts at x_hat); ``--solve exact``: strain.solve for the run. ``substep``: the drape
 run to ``--frame`` (fast solve), then that frame's next substep projected from the same state
-(``Simulator.substep_state``) by the fast and by the exact solve: how far the dynamics moved
-the free skirt down (x_hat) and how much of that each projection kept, with its rounds and
-time (the exact solve's first projection includes its compile; the solve is run twice and
-the second timed).
+(``Simulator.substep_state``) by the fast and by the exact solve, each in the kernels (PCG
+Newton steps, the default on a CPU) and in the host loop (Newton steps solved exactly by
+sparse Cholesky, ``cloth/strain/direct.py``; the reference): how far the dynamics moved the
+free skirt down (x_hat) and how much of that each projection kept, with its rounds and time
+(a solve's first projection includes its compile; each is run twice and the second timed).
 """
 import argparse
 import json
@@ -119,18 +120,24 @@ def substep_report(sim, log):
     x0 = m.positions()
     free = ~m.pinned
     Dm_inv = metrics.material_Dm_inv(m.uv, m.faces)
-    for solve in ("fast", "exact"):
+    for solve, path in (("fast", "kernels"), ("exact", "kernels"), ("fast", "host loop"),
+                        ("exact", "host loop")):
         sim._change("strain", solve=solve)
+        if path == "host loop":                 # the path Vulkan takes, here on the CPU
+            lim.uses_host_loop = lambda: True
+            lim._upload_params()                # the kernels' parameters for that path
         for _ in range(2):                      # the second one timed (compile, factor)
             sim.set_substep_state(state)
             x_hat = sim.run_substep_through("strain_limit")
+        lim.__dict__.pop("uses_host_loop", None)
+        lim._upload_params()
         x = m.positions()
         g = metrics.own_constraint_values(sim.method, x_hat, m.faces, Dm_inv, m.grain,
                                           sim.bands(), lim.isotropy)
         drop_hat = float(np.mean(x0[free, 1] - x_hat[free, 1]))
         drop = float(np.mean(x0[free, 1] - x[free, 1]))
         log(json.dumps(dict(
-            solve=solve, frame=sim.frame, faces=int(m.n_faces),
+            solve=solve, path=path, frame=sim.frame, faces=int(m.n_faces),
             faces_past_bands_at_x_hat=int((g > 0).any(axis=1).sum()),
             largest_violation_at_x_hat=round(float(g.max()), 4),
             mean_drop_x_hat_mm=round(1e3 * drop_hat, 4), mean_drop_kept_mm=round(1e3 * drop, 4),

@@ -64,12 +64,17 @@ FACTOR_MAX_FACES = 2000
 # PCG iterations with the factor: FACTOR_CG_WORK / faces clipped to [FACTOR_CG, FACTOR_CG_MAX]
 # (an iteration costs ~ the faces, so small meshes afford more; 6 at 1152 faces rested best).
 FACTOR_CG, FACTOR_CG_MAX, FACTOR_CG_WORK = 6, 20, 6000
-# PCG iterations with the multigrid, per method: it finds a fixed share of the step per
-# iteration at every size; warp-weft needs more (4 took 6.5 rounds at 64.8k faces, 8 took 4.5).
-MULTIGRID_CG = {"mapping": 4, "svd": 4, "warp-weft": 8}
+# PCG iterations with the multigrid, one Newton step of them per AL round. A short PCG finds
+# the stiff (stretching) part of a step and little of its soft (bending, isometric) part, and
+# a projection that ends feasible in its first round keeps what it found: a creeping Cusick
+# skirt (denim, 0.5 cm, mapping) kept 5 % of a substep's fall with 2 steps of 4 iterations,
+# 22 % with 1 of 8, where exactly solved Newton steps keep 74 % (the exact projection 83 %), and
+# froze flat (DC 0.97; 0.90 with 12, as at 1 cm). One step of 12 is also no slower than two of
+# 4 (8 for warp-weft) on a hanging sheet at 4k-65k faces (docs/speed/solve_cost.md).
+MULTIGRID_CG, MULTIGRID_NEWTON = 12, 1
 # Newton steps per AL round: block Jacobi 5 (3 shimmered), the factor 4 (finds most of the
-# step per solve), the multigrid 2 (the rounds are set by the multipliers; 2 was fastest).
-MAX_NEWTON, FACTOR_NEWTON, MULTIGRID_NEWTON = 5, 4, 2
+# step per solve).
+MAX_NEWTON, FACTOR_NEWTON = 5, 4
 # "exact" in the kernels: its step predicts the active set from the PCG's answer, so the PCG
 # runs tighter and a round takes more steps (with the fast settings 2 of 8 frames stalled).
 PDAS_CG_RTOL, PDAS_NEWTON = 1e-2, 10

@@ -577,14 +577,14 @@ class StrainLimiter:
 
     def pcg_budget(self, pc_mode):
         """PCG iterations per Newton step for this preconditioner: the factor's
-        (FACTOR_CG_WORK / faces clipped to [FACTOR_CG, FACTOR_CG_MAX]), the multigrid's (the
-        method's MULTIGRID_CG), or block Jacobi's: the method's CG_BUDGET per 1000 faces,
+        (FACTOR_CG_WORK / faces clipped to [FACTOR_CG, FACTOR_CG_MAX]), the multigrid's
+        (MULTIGRID_CG), or block Jacobi's: the method's CG_BUDGET per 1000 faces,
         growing like sqrt(n_faces / 1000) above (corrections travel across the cloth)."""
         n = max(self.model.n_faces, 1)
         if pc_mode == PC_FACTOR:
             return int(np.clip(round(FACTOR_CG_WORK / n), FACTOR_CG, FACTOR_CG_MAX))
         if pc_mode == PC_MULTIGRID:
-            return MULTIGRID_CG[self.method]
+            return MULTIGRID_CG
         return int(round(CG_BUDGET[self.method] * max(1.0, np.sqrt(n / 1000.0))))
 
     def last_velocity(self):
