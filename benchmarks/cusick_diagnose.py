@@ -123,14 +123,10 @@ def substep_report(sim, log):
     for solve, path in (("fast", "kernels"), ("exact", "kernels"), ("fast", "host loop"),
                         ("exact", "host loop")):
         sim._change("strain", solve=solve)
-        if path == "host loop":                 # the path Vulkan takes, here on the CPU
-            lim.uses_host_loop = lambda: True
-            lim._upload_params()                # the kernels' parameters for that path
+        lim.set_host_loop(path == "host loop")  # the path Vulkan takes, here on the CPU
         for _ in range(2):                      # the second one timed (compile, factor)
             sim.set_substep_state(state)
             x_hat = sim.run_substep_through("strain_limit")
-        lim.__dict__.pop("uses_host_loop", None)
-        lim._upload_params()
         x = m.positions()
         g = metrics.own_constraint_values(sim.method, x_hat, m.faces, Dm_inv, m.grain,
                                           sim.bands(), lim.isotropy)
@@ -144,6 +140,7 @@ def substep_report(sim, log):
             share_kept=round(drop / drop_hat, 4), rounds=lim.last_iterations,
             newton=lim.last_newton, cg=lim.last_cg, ms=round(lim.last_ms, 1),
             violation_after=float(f"{lim.last_violation_max:.2e}"))), flush=True)
+    lim.set_host_loop(False)
     sim._change("strain", solve="fast")
 
 

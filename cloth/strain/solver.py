@@ -149,6 +149,7 @@ class StrainLimiter:
         self.mu_scale, self.mu_grow, self.mu_max_scale = MU_SCALE, MU_GROW, MU_MAX_SCALE
         self.cg_rtol, self.inner_rtol, self.active_margin = CG_RTOL, INNER_RTOL, ACTIVE_MARGIN
         self.mapping_delta, self.svd_delta = MAPPING_DELTA, SVD_DELTA
+        self._host_loop_always = False   # set_host_loop: the reference path on any back end
         self._stitches = np.zeros((0, 2), np.int32) if stitches is None else \
             np.asarray(stitches, np.int32).reshape(-1, 2)
         self.method = self.solve = None
@@ -207,8 +208,17 @@ class StrainLimiter:
     def uses_host_loop(self):
         """The AL loop on the host with Cholesky steps (direct.py) instead of the one-kernel
         PCG solve: on Vulkan and Metal, and for the exact solve of a cloth with seams (the
-        kernels' active-set step does not converge at the seams' equalities)."""
-        return _host_loop_only() or (self._exact() and len(self._stitches) > 0)
+        kernels' active-set step does not converge at the seams' equalities); everywhere after
+        ``set_host_loop(True)``."""
+        return self._host_loop_always or _host_loop_only() or \
+            (self._exact() and len(self._stitches) > 0)
+
+    def set_host_loop(self, always):
+        """Solve every projection in the host loop (Newton steps solved exactly by sparse
+        Cholesky) when ``always``, on any back end: the reference a benchmark measures the
+        kernels' PCG steps against (``benchmarks.cusick_diagnose substep``)."""
+        self._host_loop_always = bool(always)
+        self._upload_params()          # the kernels' parameters depend on the path
 
     def _kernel_pdas(self):
         """The exact solve's active-set model in the kernels (PCG, ``al.pdas_resolves``)."""
