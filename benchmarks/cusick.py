@@ -123,7 +123,8 @@ def strain_summary(x, uv, faces, h):
 
 
 def run(fabric, h=0.01, start=0, method="mapping", seconds=4.0, log=print, compression=None,
-        scale=None, edge_h=None, amplitude=1e-9, turn=0.0, band_scale=(1.0, 1.0)):
+        scale=None, edge_h=None, amplitude=1e-9, turn=0.0, band_scale=(1.0, 1.0),
+        solve="fast"):
     """One drape: returns dict(fabric, h, start, DC, folds, frames, seconds, faces, x (the
     final positions), eps_lo, eps_hi, area (``strain_summary``)).
     ``compression``: the bands' lower ends set to -compression (strain) instead of the
@@ -132,7 +133,9 @@ def run(fabric, h=0.01, start=0, method="mapping", seconds=4.0, log=print, compr
     docs/fabrics.md). ``edge_h``: ``disk_mesh``'s finer spacing at the support's edge.
     ``amplitude`` (m): a start's largest displacement per unit of ``start``; ``turn`` (deg): the
     mesh's lattice turned from the warp; ``band_scale``: factors on the warp and weft bands and
-    on the bias band (the drape's locking runs)."""
+    on the bias band (the drape's locking runs); ``solve``: the strain projection's accuracy
+    (``strain.solve``: "exact" for readings that do not depend on the fast solve's
+    preconditioner, docs/fabrics.md)."""
     from cloth import fabrics
     from cloth.model import MeshArrays
     from cloth.simulator import SceneSetup, Simulator
@@ -147,6 +150,7 @@ def run(fabric, h=0.01, start=0, method="mapping", seconds=4.0, log=print, compr
         x[~pinned, 1] += start * amplitude * rng.uniform(-1.0, 1.0, (~pinned).sum())
     cfg = resolve(scene_defaults({"strain": {"method": method}}), [])
     cfg = fabrics.apply_fabric(cfg, fabric)
+    cfg["strain"]["solve"] = solve
     for key, names in (("membrane", ("k_warp", "k_weft")), ("shear", ("k_shear",)),
                        ("bend", ("k_bend", "k_bend_warp", "k_bend_weft"))):
         for k in names:
@@ -182,14 +186,14 @@ def run(fabric, h=0.01, start=0, method="mapping", seconds=4.0, log=print, compr
 
 
 def drape(fabric, h, start, method, seconds, compression, scale, edge_h, amplitude, turn,
-          band_scale, source=None):
+          band_scale, solve="fast", source=None):
     """``run`` in a sweep's worker, without the final positions (``source``: this module's
     source hash, ``module_hash``, for the cache key only)."""
     from cloth import backend
     backend.init("cpu", "f64")
     out = run(fabric, h, start, method, seconds, log=lambda m: None, compression=compression,
               scale=scale, edge_h=edge_h, amplitude=amplitude, turn=turn,
-              band_scale=tuple(band_scale))
+              band_scale=tuple(band_scale), solve=solve)
     out.pop("x")
     return out
 
@@ -215,6 +219,8 @@ def main():
     ap.add_argument("--band-scale", type=float, nargs=2, default=(1.0, 1.0),
                     metavar=("THREADS", "BIAS"), help="factors on the warp and weft bands and on "
                     "the bias band")
+    ap.add_argument("--solve", choices=("fast", "exact"), default="fast",
+                    help="strain.solve of every run (default fast)")
     ap.add_argument("--out", default=None)
     from benchmarks.sweep import add_arguments
     add_arguments(ap)
@@ -228,7 +234,7 @@ def main():
     source = module_hash("benchmarks.cusick")
     sweep = [Run("benchmarks.cusick:drape",
                  [name, h, s, a.method, a.seconds, a.compression, scale, edge[h],
-                  1e-9 * a.amplitude, a.turn, list(a.band_scale), source],
+                  1e-9 * a.amplitude, a.turn, list(a.band_scale), a.solve, source],
                  f"{name} h={100 * h:g} cm start {s}") for name, h, s in plan]
     results = run_sweep(sweep, os.path.join(a.out or "results", "cusick_runs"), a.scheduler,
                         a.workers, a.fresh, name="cusick")

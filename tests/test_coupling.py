@@ -164,7 +164,8 @@ def force_preconditioner(mp, kind):
     if kind == "jacobi":
         mp.setattr(solver.StrainLimiter, "_pcg_preconditioner", lambda self, metric: None)
     else:
-        mp.setattr(solver, "FACTOR_MAX_FACES", 10 ** 9 if kind == "factor" else 0)
+        for name in ("FACTOR_MAX_FACES", "EXACT_FACTOR_MAX_FACES"):
+            mp.setattr(solver, name, 10 ** 9 if kind == "factor" else 0)
 
 
 def _tight_projection(sim, state, precondition, monkeypatch):

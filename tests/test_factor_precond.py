@@ -99,6 +99,27 @@ def test_factor_is_refreshed_every_few_solves_and_only_for_small_meshes(monkeypa
     assert lim._pcg_preconditioner(lim._newton_metric(False)) is None
 
 
+def test_the_exact_solve_keeps_the_factor_up_to_its_own_size(monkeypatch):
+    """Between FACTOR_MAX_FACES and EXACT_FACTOR_MAX_FACES faces the fast solve takes the
+    multigrid and the exact solve the factor (its stop reads its Newton steps' length, which
+    the factor gets right where the multigrid's short PCG does not); switching the solve
+    live switches the preconditioner at the next solve."""
+    from cloth.strain import solver
+    sim = _hanging("mapping", res=6)
+    lim = sim.strain
+    monkeypatch.setattr(solver, "FACTOR_MAX_FACES", sim.model.n_faces - 1)
+    monkeypatch.setattr(solver, "EXACT_FACTOR_MAX_FACES", sim.model.n_faces)
+    assert isinstance(lim._pcg_preconditioner(lim.system_metric()), MultigridPreconditioner)
+    sim._change("strain", solve="exact")
+    assert isinstance(lim._pcg_preconditioner(lim.system_metric()),
+                      factor_precond.FactorPreconditioner)
+    sim._change("strain", solve="fast")
+    assert isinstance(lim._pcg_preconditioner(lim.system_metric()), MultigridPreconditioner)
+    monkeypatch.setattr(solver, "EXACT_FACTOR_MAX_FACES", sim.model.n_faces - 1)
+    sim._change("strain", solve="exact")
+    assert isinstance(lim._pcg_preconditioner(lim.system_metric()), MultigridPreconditioner)
+
+
 def test_rounds_take_fewer_newton_steps_with_the_factor(monkeypatch):
     """FACTOR_NEWTON steps per round with the factor, MULTIGRID_NEWTON with the multigrid,
     MAX_NEWTON with block Jacobi. A solve with the factor stays within its budget (with the

@@ -61,6 +61,13 @@ CG_BUDGET = {"mapping": 15, "svd": 25, "warp-weft": 25}
 # The factor preconditioner (factor_precond.py) up to this many faces, the multigrid above:
 # the factor's serial triangular solves and factorisation grow faster than the mesh.
 FACTOR_MAX_FACES = 2000
+# "exact": the factor up to this many faces. The exact solve stops on its Newton step's
+# length, which the multigrid's short PCG underestimates where the membrane is stiff (its
+# translation aggregates cannot bend without stretching): on a 0.5 cm Cusick skirt of cotton
+# shirting (6.4k faces, mapping) it stopped the skirt early (DC 0.824; 0.781 with the factor,
+# as at 1 cm). The factor was also the faster there and on hanging at 4k faces
+# (docs/speed/solve_cost.md).
+EXACT_FACTOR_MAX_FACES = 10000
 # PCG iterations with the factor: FACTOR_CG_WORK / faces clipped to [FACTOR_CG, FACTOR_CG_MAX]
 # (an iteration costs ~ the faces, so small meshes afford more; 6 at 1152 faces rested best).
 FACTOR_CG, FACTOR_CG_MAX, FACTOR_CG_WORK = 6, 20, 6000

@@ -26,9 +26,10 @@ from .. import system_matrix
 from .constraints import MAPPING_DELTA, METHOD_IDS, N_CONSTRAINTS, SVD_DELTA
 from .families import STRAIN_METHODS
 from . import al, buffers
-from .defaults import (ACTIVE_MARGIN, ACTIVE_SET_MU, CG_BUDGET, CG_RTOL, FACTOR_CG,
-                       FACTOR_CG_MAX, FACTOR_CG_WORK, FACTOR_MAX_FACES, FACTOR_NEWTON,
-                       INNER_RTOL, KKT_VELOCITY, MAX_NEWTON, MU_GROW, MU_MAX_SCALE, MU_SCALE,
+from .defaults import (ACTIVE_MARGIN, ACTIVE_SET_MU, CG_BUDGET, CG_RTOL,
+                       EXACT_FACTOR_MAX_FACES, FACTOR_CG, FACTOR_CG_MAX, FACTOR_CG_WORK,
+                       FACTOR_MAX_FACES, FACTOR_NEWTON, INNER_RTOL, KKT_VELOCITY, MAX_NEWTON,
+                       MU_GROW, MU_MAX_SCALE, MU_SCALE,
                        MULTIGRID_CG, MULTIGRID_NEWTON, PDAS_CG_RTOL, PDAS_NEWTON, SETTLE_SPEED,
                        SOLVES)
 from .factor_precond import FIRST_AFTER, LASTING_SOLVES, FactorPreconditioner, FactorStub
@@ -703,12 +704,14 @@ class StrainLimiter:
         """The preconditioner object of this metric's pattern when the PCG solve uses one
         (the implicit step's metric on a CPU backend, where both run serially in the solve's
         kernel); else None (block Jacobi). The factor (factor_precond.py) up to
-        FACTOR_MAX_FACES faces, the multigrid (multigrid.py) above; the factor needs CHOLMOD
+        FACTOR_MAX_FACES faces (EXACT_FACTOR_MAX_FACES under the exact solve, which needs
+        its Newton steps' length), the multigrid (multigrid.py) above; the factor needs CHOLMOD
         (else the multigrid is taken), the multigrid pyamg and more than MAX_COARSE
         unknowns."""
         if not (metric is self._system and backend.arch() == "cpu"):
             return None
-        kind = "factor" if self.model.n_faces <= FACTOR_MAX_FACES else "multigrid"
+        most = EXACT_FACTOR_MAX_FACES if self._exact() else FACTOR_MAX_FACES
+        kind = "factor" if self.model.n_faces <= most else "multigrid"
         if kind == "factor" and not linalg.HAVE_CHOLMOD:
             kind = "multigrid"
         if kind == "multigrid" and not HAVE_PYAMG:
