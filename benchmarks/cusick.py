@@ -133,9 +133,10 @@ def run(fabric, h=0.01, start=0, method="mapping", seconds=4.0, log=print, compr
     docs/fabrics.md). ``edge_h``: ``disk_mesh``'s finer spacing at the support's edge.
     ``amplitude`` (m): a start's largest displacement per unit of ``start``; ``turn`` (deg): the
     mesh's lattice turned from the warp; ``band_scale``: factors on the warp and weft bands and
-    on the bias band (the drape's locking runs); ``solve``: the strain projection's accuracy
-    (``strain.solve``: "exact" for readings that do not depend on the fast solve's
-    preconditioner, docs/fabrics.md)."""
+    on the bias band (the drape's locking runs); ``solve``: the strain projection's accuracy,
+    ``strain.solve`` ("fast" or "exact") or "reference": the exact solve with every Newton
+    step solved by sparse Cholesky (``StrainLimiter.set_host_loop``), the reading that depends
+    on neither the fast solve's nor the kernels' PCG (docs/fabrics.md)."""
     from cloth import fabrics
     from cloth.model import MeshArrays
     from cloth.simulator import SceneSetup, Simulator
@@ -150,7 +151,7 @@ def run(fabric, h=0.01, start=0, method="mapping", seconds=4.0, log=print, compr
         x[~pinned, 1] += start * amplitude * rng.uniform(-1.0, 1.0, (~pinned).sum())
     cfg = resolve(scene_defaults({"strain": {"method": method}}), [])
     cfg = fabrics.apply_fabric(cfg, fabric)
-    cfg["strain"]["solve"] = solve
+    cfg["strain"]["solve"] = "exact" if solve == "reference" else solve
     for key, names in (("membrane", ("k_warp", "k_weft")), ("shear", ("k_shear",)),
                        ("bend", ("k_bend", "k_bend_warp", "k_bend_weft"))):
         for k in names:
@@ -165,6 +166,8 @@ def run(fabric, h=0.01, start=0, method="mapping", seconds=4.0, log=print, compr
     setup = SceneSetup(mesh=MeshArrays(uv=uv, x=x, faces=faces, pinned=pinned),
                        material=material_from(cfg))
     sim = Simulator(setup, cfg)
+    if solve == "reference" and sim.strain is not None:
+        sim.strain.set_host_loop(True)
     t0 = time.perf_counter()
     calm, frames = 0, int(round(seconds * cfg["sim"]["fps"]))
     for f in range(frames):
@@ -219,8 +222,9 @@ def main():
     ap.add_argument("--band-scale", type=float, nargs=2, default=(1.0, 1.0),
                     metavar=("THREADS", "BIAS"), help="factors on the warp and weft bands and on "
                     "the bias band")
-    ap.add_argument("--solve", choices=("fast", "exact"), default="fast",
-                    help="strain.solve of every run (default fast)")
+    ap.add_argument("--solve", choices=("fast", "exact", "reference"), default="fast",
+                    help="strain.solve of every run (default fast), or the exact solve with "
+                         "Cholesky Newton steps (reference)")
     ap.add_argument("--out", default=None)
     from benchmarks.sweep import add_arguments
     add_arguments(ap)
