@@ -64,9 +64,9 @@ FACTOR_MAX_FACES = 2000
 # "exact": the factor up to this many faces. The exact solve stops on its Newton step's
 # length, which the multigrid's short PCG underestimates where the membrane is stiff (its
 # translation aggregates cannot bend without stretching): on a 0.5 cm Cusick skirt of cotton
-# shirting (6.4k faces, mapping) it stopped the skirt early (DC 0.824; 0.781 with the factor,
-# as at 1 cm). The factor was also the faster there and on hanging at 4k faces
-# (docs/speed/solve_cost.md).
+# shirting (6.4k faces) 12 iterations left 89 % of a Newton step with the multigrid, 7 % with
+# the factor. The factor was also the faster exact solve on hanging at 4k faces (1.9 against
+# 2.9 s a frame), as fast at 16k on the first frame (docs/speed/solve_cost.md).
 EXACT_FACTOR_MAX_FACES = 10000
 # PCG iterations with the factor: FACTOR_CG_WORK / faces clipped to [FACTOR_CG, FACTOR_CG_MAX]
 # (an iteration costs ~ the faces, so small meshes afford more; 6 at 1152 faces rested best).
