@@ -4,9 +4,11 @@ support's and the specimen's circles), with its drape coefficient and fold count
 
     python -m benchmarks.cusick_pictures --out docs/fabrics              # every fabric
     python -m benchmarks.cusick_pictures --fabrics denim --h 0.005 --method none --out DIR
+    python -m benchmarks.cusick_pictures --fabrics cotton-shirting --method mapping --solve reference
 
 One run (start 0) per fabric, written to OUT/cusick_NAME.png (cusick_NAME_METHOD.png for a
-strain-limiting method); the other arguments are benchmarks/cusick.py's.
+strain-limiting method, then _SOLVE for a solve other than fast); the other arguments are
+benchmarks/cusick.py's.
 """
 import argparse
 import os
@@ -60,17 +62,22 @@ def main():
     ap.add_argument("--h", type=float, default=0.005)
     ap.add_argument("--method", default="none")
     ap.add_argument("--compression", type=float, default=None)
+    ap.add_argument("--solve", choices=("fast", "exact", "reference"), default="fast",
+                    help="the strain solve (benchmarks.cusick.run's solve; default fast)")
     ap.add_argument("--out", default=os.path.join("docs", "fabrics"))
     a = ap.parse_args()
     from cloth import backend, fabrics
     backend.init("cpu", "f64")
     os.makedirs(a.out, exist_ok=True)
     for name in a.fabrics or fabrics.names():
-        r = cusick.run(name, a.h, 0, a.method, compression=a.compression)
+        r = cusick.run(name, a.h, 0, a.method, compression=a.compression, solve=a.solve)
         faces = cusick.disk_mesh(a.h)[1]
-        tag = "" if a.method == "none" else f"_{a.method}"
+        tag = ("" if a.method == "none" else f"_{a.method}") + \
+            ("" if a.solve == "fast" else f"_{a.solve}")
+        solve = "" if a.solve == "fast" else f" ({a.solve} solve)"
         path = os.path.join(a.out, f"cusick_{name}{tag}.png")
-        draw(path, r, faces, f"{name}: Cusick drape, {a.method}, {100 * a.h:g} cm triangles")
+        draw(path, r, faces, f"{name}: Cusick drape, {a.method}{solve}, {100 * a.h:g} cm "
+             "triangles")
         print(f"wrote {path}")
 
 
