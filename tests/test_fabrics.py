@@ -534,6 +534,32 @@ def test_a_cusick_skirt_under_a_wovens_tight_bands_falls_from_rest(method):
     assert min(speeds[4:]) > 3e-3                       # m/s: still falling at frames 5-12
 
 
+def test_the_cusick_reference_solve_is_the_exact_solve_with_cholesky_newton_steps():
+    """``cusick.run(..., solve="reference")``, the drape reading that depends on no PCG
+    (docs/fabrics.md): every projection is the exact solve in the host loop, it holds the
+    limits, and the skirt falls."""
+    from benchmarks import cusick
+    from cloth import simulator
+    seen = []
+
+    class Logged(simulator.Simulator):
+        def step_frame(self):
+            super().step_frame()
+            seen.append((self.settings.strain.solve, self.strain.uses_host_loop(),
+                         self.strain.last_violation_max))
+    orig = simulator.Simulator
+    simulator.Simulator = Logged
+    try:
+        out = cusick.run("denim", h=0.02, method="mapping", seconds=0.2, log=lambda s: None,
+                         solve="reference")
+    finally:
+        simulator.Simulator = orig
+    assert len(seen) == 6
+    assert all(solve == "exact" and host for solve, host, _ in seen)
+    assert max(v for _, _, v in seen) <= 1e-4
+    assert out["lowest"] > 0.01                          # m below the support after 0.2 s
+
+
 def test_the_fast_newton_margin_shrinks_only_for_bands_narrower_than_it():
     """``newton_margin``: 1e-2 strain for the scenes' bands (hanging: warp +-1 %, weft
     +-5 %), w^2 / 1e-2 where a band end lies w < 1e-2 from rest (the denim's +-0.57 %, also
