@@ -66,7 +66,7 @@ FACTOR_MAX_FACES = 2000
 # translation aggregates cannot bend without stretching): on a 0.5 cm Cusick skirt of cotton
 # shirting (6.4k faces) 12 iterations left 89 % of a Newton step with the multigrid, 7 % with
 # the factor. The factor was also the faster exact solve on hanging at 4k faces (1.9 against
-# 2.9 s a frame), as fast at 16k on the first frame (docs/speed/solve_cost.md).
+# 2.9 s a frame), about even at 16k (docs/speed/solve_cost.md).
 EXACT_FACTOR_MAX_FACES = 10000
 # PCG iterations with the factor: FACTOR_CG_WORK / faces clipped to [FACTOR_CG, FACTOR_CG_MAX]
 # (an iteration costs ~ the faces, so small meshes afford more; 6 at 1152 faces rested best).
