@@ -243,8 +243,9 @@ def main():
     results = run_sweep(sweep, os.path.join(a.out or "results", "cusick_runs"), a.scheduler,
                         a.workers, a.fresh, name="cusick")
     rows = [r for r in results if "error" not in r]
-    L = ["| fabric | h (cm) | faces | DC per start | median DC | folds | frames | principal "
-         "strain p5 / p95 (%) |", "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+    L = [] if a.solve == "fast" else [f"Strain solve: {a.solve}.", ""]
+    L += ["| fabric | h (cm) | faces | DC per start | median DC | folds | frames | principal "
+          "strain p5 / p95 (%) |", "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     for name in a.fabrics or fabrics.names():
         for h in a.h:
             rs = [r for r in rows if r["fabric"] == name and r["h"] == h]
