@@ -508,6 +508,26 @@ def test_cusick_picture_of_a_flat_specimen(tmp_path):
         assert fh.read(8) == b"\x89PNG\r\n\x1a\n"
 
 
+def _cusick_run_logged(read, fabric, **run_args):
+    """``cusick.run(fabric, **run_args)`` with ``read(sim)`` recorded after every frame:
+    (the records, run's result)."""
+    from benchmarks import cusick
+    from cloth import simulator
+    records = []
+
+    class Logged(simulator.Simulator):
+        def step_frame(self):
+            super().step_frame()
+            records.append(read(self))
+    orig = simulator.Simulator
+    simulator.Simulator = Logged
+    try:
+        out = cusick.run(fabric, log=lambda s: None, **run_args)
+    finally:
+        simulator.Simulator = orig
+    return records, out
+
+
 @pytest.mark.parametrize("method", ["warp-weft", "mapping"])
 def test_a_cusick_skirt_under_a_wovens_tight_bands_falls_from_rest(method):
     """A denim specimen (bands +-0.57 %) released flat on the Cusick support cannot come to
@@ -516,20 +536,9 @@ def test_a_cusick_skirt_under_a_wovens_tight_bands_falls_from_rest(method):
     within the 1e-2 margin of its band, the penalty stiffened every motion, and from frame 5
     each projection put the skirt back where it was (RMS speed 0.1-0.6 mm/s at 2 cm
     triangles); now it keeps falling (10-36 mm/s)."""
-    from benchmarks import cusick
-    from cloth import simulator
-    speeds = []
-
-    class Logged(simulator.Simulator):
-        def step_frame(self):
-            super().step_frame()
-            speeds.append(np.sqrt(np.mean(np.sum(self.model.velocities() ** 2, axis=1))))
-    orig = simulator.Simulator
-    simulator.Simulator = Logged
-    try:
-        cusick.run("denim", h=0.02, method=method, seconds=0.4, log=lambda s: None)
-    finally:
-        simulator.Simulator = orig
+    speeds, _ = _cusick_run_logged(
+        lambda sim: np.sqrt(np.mean(np.sum(sim.model.velocities() ** 2, axis=1))),
+        "denim", h=0.02, method=method, seconds=0.4)
     assert len(speeds) == 12
     assert min(speeds[4:]) > 3e-3                       # m/s: still falling at frames 5-12
 
@@ -538,22 +547,10 @@ def test_the_cusick_reference_solve_is_the_exact_solve_with_cholesky_newton_step
     """``cusick.run(..., solve="reference")``, the drape reading that depends on no PCG
     (docs/fabrics.md): every projection is the exact solve in the host loop, it holds the
     limits, and the skirt falls."""
-    from benchmarks import cusick
-    from cloth import simulator
-    seen = []
-
-    class Logged(simulator.Simulator):
-        def step_frame(self):
-            super().step_frame()
-            seen.append((self.settings.strain.solve, self.strain.uses_host_loop(),
-                         self.strain.last_violation_max))
-    orig = simulator.Simulator
-    simulator.Simulator = Logged
-    try:
-        out = cusick.run("denim", h=0.02, method="mapping", seconds=0.2, log=lambda s: None,
-                         solve="reference")
-    finally:
-        simulator.Simulator = orig
+    seen, out = _cusick_run_logged(
+        lambda sim: (sim.settings.strain.solve, sim.strain.uses_host_loop(),
+                     sim.strain.last_violation_max),
+        "denim", h=0.02, method="mapping", seconds=0.2, solve="reference")
     assert len(seen) == 6
     assert all(solve == "exact" and host for solve, host, _ in seen)
     assert max(v for _, _, v in seen) <= 1e-4
