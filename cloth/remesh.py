@@ -51,6 +51,16 @@ _FLIP_EPS = 1e-6
 # t-shirt (mapping): ordinary splits never made one below 0.14 (1st percentile 0.21-0.29);
 # the chains of splits toward a seam that made slivers go down to 0.
 _SPLIT_QUALITY = 0.5
+# A flip or a collapse is refused when a triangle it makes is deformed more than this (the
+# largest |principal stretch - 1|, ``_stretch_error``) and more than the triangles it
+# replaces. Both change a patch's deformation (a split does not: its vertex is the edge's
+# midpoint in both spaces): across a fold the new edge is a chord of the curved cloth, and
+# the drape's remeshes left triangles 50-100 % compressed, which the projection after each
+# remesh then unfolded (170-1,200 ms, and the kinetic energy of a resting sheet up from 1e-6
+# to 1e-4 J). Measured on drape --remesh, 90 frames, three starts 1 nm apart
+# (docs/remesh/drape.md): 0.1 made the frames cheapest; 0.05 refused so many collapses that
+# the sheet grew past 4,000 faces; 0.15 and 0.2 cost more again.
+_STRETCH_GUARD = 0.1
 
 
 # ---------------------------------------------------------------------------------------------
@@ -275,6 +285,26 @@ def _dot3(a, b):
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
+def _stretch_error(pu, qu, ru, px, qx, rx):
+    """max |s - 1| over the principal stretches s of the triangle mapped from material
+    points (pu, qu, ru) to world points (px, qx, rx): 0 undeformed, 1 collapsed to a line."""
+    a0, a1, b0, b1 = qu[0] - pu[0], qu[1] - pu[1], ru[0] - pu[0], ru[1] - pu[1]
+    det = a0 * b1 - a1 * b0
+    if det == 0.0:
+        return math.inf
+    e = (qx[0] - px[0], qx[1] - px[1], qx[2] - px[2])
+    f = (rx[0] - px[0], rx[1] - px[1], rx[2] - px[2])
+    g00, g01, g11 = _dot3(e, e), _dot3(e, f), _dot3(f, f)
+    # C = Dm^-T G Dm^-1 with Dm^-1 = [[b1, -b0], [-a1, a0]] / det: its trace and determinant.
+    i00, i01, i10, i11 = b1 / det, -b0 / det, -a1 / det, a0 / det
+    c00 = i00 * (g00 * i00 + g01 * i10) + i10 * (g01 * i00 + g11 * i10)
+    c11 = i01 * (g00 * i01 + g01 * i11) + i11 * (g01 * i01 + g11 * i11)
+    dC = max(g00 * g11 - g01 * g01, 0.0) / (det * det)
+    half = 0.5 * (c00 + c11)
+    root = math.sqrt(max(half * half - dC, 0.0))
+    return max(abs(math.sqrt(half + root) - 1.0), abs(math.sqrt(max(half - root, 0.0)) - 1.0))
+
+
 class _FacesAt:
     """vertex -> set of its faces. A set is made on first use from the input incidence, since
     one frame's operations usually touch few vertices; once made, the set is the truth."""
@@ -400,6 +430,16 @@ class _Work:
         dv = self.uv[b][1] - self.uv[a][1]
         return 0.5 * ((ma[0] + mb[0]) * du * du + 2 * (ma[1] + mb[1]) * du * dv
                       + (ma[2] + mb[2]) * dv * dv)
+
+    def stretch_error(self, i, j, k):
+        """``_stretch_error`` of face (i, j, k)."""
+        return _stretch_error(self.uv[i], self.uv[j], self.uv[k], self.x[i], self.x[j], self.x[k])
+
+    def undeformed_enough(self, new_errors, old_faces):
+        """Whether a collapse's new triangles (their ``stretch_error``s) pass the stretch
+        guard against the faces they replace (``_STRETCH_GUARD``)."""
+        old = max((self.stretch_error(*self.faces[f]) for f in old_faces), default=0.0)
+        return max(new_errors, default=0.0) <= max(_STRETCH_GUARD, old)
 
     def area_ok(self, i, j, k):
         """Counter-clockwise and not degenerate in material space."""
@@ -544,6 +584,10 @@ class _Work:
         if _dot3(_normal(x[a], x[d], x[c]), n_old) <= 0 or \
                 _dot3(_normal(x[d], x[b], x[c]), n_old) <= 0:
             return False
+        # Nor deform the patch (``_STRETCH_GUARD``: a flip across a fold cuts it).
+        if max(self.stretch_error(a, d, c), self.stretch_error(d, b, c)) > max(
+                _STRETCH_GUARD, self.stretch_error(a, b, c), self.stretch_error(b, a, d)):
+            return False
         self.set_face(f0, [a, d, c])
         self.set_face(f1, [d, b, c])
         self.vf[b].discard(f0)
@@ -608,6 +652,9 @@ class _Work:
             if _dot3(_normal(x[a], x[q], x[r]), _normal(x[b], x[q], x[r])) <= 0:
                 return False
             changed.append((f, q, r))
+        if not self.undeformed_enough([self.stretch_error(b, q, r) for _, q, r in changed],
+                                      self.vf[a]):
+            return False
         # Apply: drop the faces on the edge, re-point a's other faces to b.
         self._replace_faces(fs, changed, b)
         self.vf[a] = set()
@@ -669,6 +716,9 @@ class _Work:
                 if _dot3(_normal(x[end], x[q], x[r]), _normal(xm, x[q], x[r])) <= 0:
                     return False
                 changed.append((f, q, r))
+        if not self.undeformed_enough([_stretch_error(um, self.uv[q], self.uv[r], xm, x[q], x[r])
+                                       for _, q, r in changed], self.vf[a] | self.vf[b]):
+            return False
         m = self._midpoint_vertex(a, b, len(fs) == 1)
         self._replace_faces(fs, changed, m)
         self.vf[a], self.vf[b] = set(), set()
@@ -730,6 +780,32 @@ def _flip_wanted_np(uv, Mv, a, b, c, d):
     val = sdet * (cross(pc, qc) * dot(pd, qd) + dot(pc, qc) * cross(pd, qd))
     norm = np.sqrt(dot(pc, pc) * dot(qc, qc) * dot(pd, pd) * dot(qd, qd))
     return val < -_FLIP_EPS * norm
+
+
+def _stretch_error_np(uv, x, i, j, k):
+    """Vectorised ``_stretch_error`` of faces (i, j, k) (index arrays)."""
+    a, b = uv[j] - uv[i], uv[k] - uv[i]
+    det = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    det = np.where(det == 0.0, np.nan, det)
+    e, f = x[j] - x[i], x[k] - x[i]
+    g00, g01, g11 = (e * e).sum(1), (e * f).sum(1), (f * f).sum(1)
+    i00, i01, i10, i11 = b[:, 1] / det, -b[:, 0] / det, -a[:, 1] / det, a[:, 0] / det
+    c00 = i00 * (g00 * i00 + g01 * i10) + i10 * (g01 * i00 + g11 * i10)
+    c11 = i01 * (g00 * i01 + g01 * i11) + i11 * (g01 * i01 + g11 * i11)
+    dC = np.maximum(g00 * g11 - g01 * g01, 0.0) / (det * det)
+    half = 0.5 * (c00 + c11)
+    root = np.sqrt(np.maximum(half * half - dC, 0.0))
+    err = np.maximum(np.abs(np.sqrt(half + root) - 1.0),
+                     np.abs(np.sqrt(np.maximum(half - root, 0.0)) - 1.0))
+    return np.where(np.isnan(err), np.inf, err)
+
+
+def _flip_allowed_np(uv, x, a, b, c, d):
+    """Vectorised stretch guard of ``_Work.flip``: the new pair (a, d, c), (d, b, c) no more
+    deformed than ``_STRETCH_GUARD`` allows or than the pair (a, b, c), (b, a, d) it replaces."""
+    new = np.maximum(_stretch_error_np(uv, x, a, d, c), _stretch_error_np(uv, x, d, b, c))
+    old = np.maximum(_stretch_error_np(uv, x, a, b, c), _stretch_error_np(uv, x, b, a, d))
+    return new <= np.maximum(_STRETCH_GUARD, old)
 
 
 def _flip_phase(w, max_rounds=8):
@@ -945,8 +1021,9 @@ def pending_operations(mesh, Mv, frozen_verts=None, edges=None):
     """What a remesh of ``mesh`` in the sizing ``Mv`` would start from, counted over the whole
     mesh at once without making any operation (numpy, a few passes over the edges): the
     edges longer than 1 in the metric (not between two frozen vertices), which the split
-    pass splits, plus the interior edges failing the anisotropic Delaunay test, which the
-    flip pass flips. Collapses are not counted (the candidates' exact check is per edge).
+    pass splits, plus the interior edges failing the anisotropic Delaunay test whose flip
+    the stretch guard allows, which the flip pass flips (a refused flip counted here would
+    be pending for ever: every frame's remesh made, then deferred). Collapses are not counted (the candidates' exact check is per edge).
     Measured on hanging (mapping, ~900 faces, frames 1-40): the split count equals the
     remesh's splits in every frame; the flips counted are 0.3-1 times its flips (splits set
     off more). ``Simulator._remesh`` defers a remesh by this count without making it."""
@@ -958,7 +1035,9 @@ def pending_operations(mesh, Mv, frozen_verts=None, edges=None):
         frozen = np.asarray(frozen_verts, bool)
         long &= ~(frozen[ev[:, 0]] & frozen[ev[:, 1]])
     inner = np.flatnonzero(ef[:, 1] >= 0)
-    bad = _flip_wanted_np(uv, M3, ev[inner, 0], ev[inner, 1], eo[inner, 0], eo[inner, 1])
+    a, b, c, d = ev[inner, 0], ev[inner, 1], eo[inner, 0], eo[inner, 1]
+    bad = _flip_wanted_np(uv, M3, a, b, c, d)
+    bad[bad] &= _flip_allowed_np(uv, mesh.x, a[bad], b[bad], c[bad], d[bad])
     return int(np.count_nonzero(long)) + int(np.count_nonzero(bad))
 
 

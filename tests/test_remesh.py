@@ -5,8 +5,9 @@ import numpy as np
 import pytest
 
 from cloth.model import MeshArrays, ModelError, build_edges, signed_material_areas
-from cloth.remesh import RemeshParams, _Work, _compose, _export, _gram, _sym_eig2, _times, \
-    clamp_metric, face_sizing, remesh, vertex_sizing
+import cloth.remesh as remesh_module
+from cloth.remesh import RemeshParams, _Work, _collapse_phase, _compose, _export, _flip_phase, \
+    _gram, _stretch_error_np, _sym_eig2, _times, clamp_metric, face_sizing, remesh, vertex_sizing
 from cloth.sheet import make_sheet
 
 
@@ -304,6 +305,29 @@ def test_collapse_refused_when_it_inverts_a_world_triangle():
     w = work_on(m, size=1.0)
     assert not w.collapse(12, 7)
 
+
+
+@pytest.mark.parametrize("guard", [remesh_module._STRETCH_GUARD, np.inf])
+def test_flips_and_collapses_do_not_cut_across_a_fold(monkeypatch, guard):
+    """A sheet creased by 150 degrees (every triangle undeformed) under a metric that wants
+    every edge collapsed and flipped: an edge across the crease is a chord, shorter in the
+    world than in the material, so a triangle on it is compressed, which the strain limits
+    would then undo by unfolding the crease. The guard refuses those: no triangle of the
+    result is deformed more than it allows, and away from the crease the sheet still
+    coarsens. Without the guard (inf) the same remesh compresses triangles by over 10 %."""
+    monkeypatch.setattr(remesh_module, "_STRETCH_GUARD", guard)
+    m = sheet(11, x_fn=lambda uv: fold_x(uv, np.radians(150)))
+    w = work_on(m, size=1.0)
+    _collapse_phase(w)
+    _flip_phase(w)
+    out = exported(w, m)
+    check_valid(out)
+    err = _stretch_error_np(out.uv, out.x, *out.faces.T)
+    assert w.n_collapse > 10
+    if np.isfinite(guard):
+        assert err.max() <= guard, err.max()
+    else:
+        assert err.max() > 0.1, err.max()
 
 
 def test_collapse_to_midpoint_keeps_mesh_valid(rng):
