@@ -7,7 +7,8 @@ import pytest
 from cloth.model import MeshArrays, ModelError, build_edges, signed_material_areas
 import cloth.remesh as remesh_module
 from cloth.remesh import RemeshParams, _Work, _collapse_phase, _compose, _export, _flip_phase, \
-    _gram, _stretch_error_np, _sym_eig2, _times, clamp_metric, face_sizing, remesh, vertex_sizing
+    _gram, _stretch_error_np, _sym_eig2, _times, clamp_metric, face_sizing, pending_operations, \
+    remesh, vertex_sizing
 from cloth.sheet import make_sheet
 
 
@@ -328,6 +329,30 @@ def test_flips_and_collapses_do_not_cut_across_a_fold(monkeypatch, guard):
         assert err.max() <= guard, err.max()
     else:
         assert err.max() > 0.1, err.max()
+
+
+@pytest.mark.parametrize("guard", [remesh_module._STRETCH_GUARD, np.inf])
+def test_a_flip_the_guard_refuses_is_not_counted_as_pending(monkeypatch, guard):
+    """Two triangles folded 150 degrees about their shared diagonal (a, b), in a metric long
+    along that diagonal, so the Delaunay test wants the flip to (c, d), a chord across the
+    fold. The guard refuses it, and the count that decides whether a frame's remesh is made
+    must not count it: counted, it stays pending for ever and every frame's remesh is made,
+    then deferred (the drape at rest: 80-100 ms a frame for nothing)."""
+    monkeypatch.setattr(remesh_module, "_STRETCH_GUARD", guard)
+    uv = np.array([[0.0, 0.0], [1.0, 1.0], [1.0, 0.0], [0.0, 1.0]])     # a, b, c, d
+    axis = np.array([1.0, 1.0, 0.0]) / np.sqrt(2.0)
+    t = np.radians(150)
+    c = np.array([1.0, 0.0, 0.0])
+    c = c * np.cos(t) + np.cross(axis, c) * np.sin(t) + axis * (axis @ c) * (1 - np.cos(t))
+    x = np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 0.0], c, [0.0, 1.0, 0.0]])
+    m = MeshArrays(uv=uv, x=x, faces=np.array([[0, 2, 1], [0, 1, 3]]))
+    along = np.array([1.0, 1.0]) / np.sqrt(2.0)
+    Mv = np.tile((np.eye(2) + np.outer(along, along)) / 9.0, (4, 1, 1))   # no edge too long
+    out, _, stats = remesh(m, RemeshParams(), sizing=Mv)
+    if np.isfinite(guard):
+        assert pending_operations(m, Mv) == 0 and stats["flips"] == 0
+    else:
+        assert pending_operations(m, Mv) == 1 and stats["flips"] == 1
 
 
 def test_collapse_to_midpoint_keeps_mesh_valid(rng):
