@@ -7,8 +7,8 @@ import pytest
 from cloth.model import MeshArrays, ModelError, build_edges, signed_material_areas
 import cloth.remesh as remesh_module
 from cloth.remesh import RemeshParams, _Work, _collapse_phase, _compose, _export, _flip_phase, \
-    _gram, _stretch_error_np, _sym_eig2, _times, clamp_metric, face_sizing, pending_operations, \
-    remesh, vertex_sizing
+    _gram, _stretch_error, _stretch_error_np, _sym_eig2, _times, clamp_metric, face_sizing, \
+    pending_operations, remesh, vertex_sizing
 from cloth.sheet import make_sheet
 
 
@@ -323,7 +323,7 @@ def test_flips_and_collapses_do_not_cut_across_a_fold(monkeypatch, guard):
     _flip_phase(w)
     out = exported(w, m)
     check_valid(out)
-    err = _stretch_error_np(out.uv, out.x, *out.faces.T)
+    err = _stretch_error_np(out.uv, out.x, out.faces)
     assert w.n_collapse > 10
     if np.isfinite(guard):
         assert err.max() <= guard, err.max()
@@ -353,6 +353,21 @@ def test_a_flip_the_guard_refuses_is_not_counted_as_pending(monkeypatch, guard):
         assert pending_operations(m, Mv) == 0 and stats["flips"] == 0
     else:
         assert pending_operations(m, Mv) == 1 and stats["flips"] == 1
+
+
+def test_stretch_error_written_out_matches_numpys_svd(rng):
+    """The guard's per-operation stretch error (plain floats) and the whole-mesh one (the
+    metrics' closed form) both equal max |s - 1| over numpy's singular values."""
+    uv, x = rng.normal(size=(40, 2)), rng.normal(size=(40, 3))
+    faces = np.arange(39).reshape(13, 3)
+    want = []
+    for i, j, k in faces:
+        Dm = np.c_[uv[j] - uv[i], uv[k] - uv[i]]
+        F = np.c_[x[j] - x[i], x[k] - x[i]] @ np.linalg.inv(Dm)
+        want.append(np.abs(np.linalg.svd(F, compute_uv=False) - 1.0).max())
+    one = [_stretch_error(*uv[f].tolist(), *x[f].tolist()) for f in faces]
+    assert np.allclose(one, want, rtol=1e-10)
+    assert np.allclose(_stretch_error_np(uv, x, faces), want, rtol=1e-10)
 
 
 def test_collapse_to_midpoint_keeps_mesh_valid(rng):
