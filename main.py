@@ -328,6 +328,9 @@ def run_headless(sim, cfg, args, name, overlays=()):
     misses = run.limit_summary()
     if misses:
         print(f"loom: {misses}", file=sys.stderr)
+    remeshed = run.remesh_summary()
+    if remeshed:
+        print(f"loom: {remeshed}")
     print(f"loom: wrote {sim.frame} frames of '{name}' to {out}/ "
           f"(config.toml, metrics.csv, meshes/"
           + (", frames/" if o["images"] else "") + (", video.mp4" if o["video"] else "")

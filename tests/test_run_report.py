@@ -194,3 +194,25 @@ def test_a_fabric_sets_material_and_bands_and_says_where_they_came_from(capsys, 
     assert_one_line(rc, err, "no-such-cloth")
     rc, out, err = run_main(capsys, "--list")
     assert all(name in out for name in fabrics.names())
+
+
+def test_a_remeshed_run_says_how_often_its_mesh_changed(capsys, tmp_path):
+    """With --remesh the last lines say in how many frames the mesh changed and its face
+    counts at the start, at most and at the end, as metrics.csv has them; without it, nothing
+    of the kind."""
+    import re
+    rc, out, err = run_main(capsys, "hanging", *SMALL, "--remesh", "--frames", 6,
+                            "--out", tmp_path / "r")
+    assert rc == 0, err
+    line = [ln for ln in out.splitlines() if "remeshed in" in ln]
+    assert len(line) == 1, out
+    applied, frames, first, most, last = (int(n.replace(",", "")) for n in re.findall(
+        r"remeshed in (\d+) of (\d+) frames.*?([\d,]+) faces at the start, ([\d,]+) at most, "
+        r"([\d,]+) at the end", line[0])[0])
+    rows = list(csv.DictReader(open(tmp_path / "r" / "metrics.csv")))
+    faces = [int(r["faces"]) for r in rows]
+    assert frames == 6 == len(rows) - 1
+    assert (first, most, last) == (faces[0], max(faces), faces[-1])
+    assert 1 <= applied <= frames and faces[-1] != faces[0]   # the sheet's first remesh is made
+    rc, out, err = run_main(capsys, "hanging", *SMALL, "--frames", 2, "--out", tmp_path / "u")
+    assert rc == 0 and "remeshed in" not in out, out

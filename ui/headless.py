@@ -36,6 +36,7 @@ class HeadlessRun:
         self.renderer = None
         self._video_writer = None
         self.diverged = None
+        self._faces = []
 
     # -- set-up -------------------------------------------------------------------------------
     def _prepare(self):
@@ -142,12 +143,25 @@ class HeadlessRun:
         return (f"{sim.limit_misses} frame(s) ended above strain.tol (largest own violation "
                 f"{worst:.2g} at t = {t:.2f} s)")
 
+    def remesh_summary(self):
+        """'' without remeshing, else how often the run's mesh changed and its face counts:
+        a remesh is computed every frame but applied only when it changes enough
+        (``remesh.defer_ops``), so the frames remeshed are fewer than the frames run."""
+        sim = self.sim
+        if not sim.settings.remesh.enabled or not self._faces:
+            return ""
+        first, most, last = self._faces[0], max(self._faces), self._faces[-1]
+        return (f"remeshed in {sim.remeshes_applied} of {sim.frame} frames (the others kept "
+                f"their mesh: remesh.defer_ops); {first:,} faces at the start, {most:,} at "
+                f"most, {last:,} at the end")
+
     def run(self, frames):
         """Simulate ``frames`` frames. Returns True if all ran; on divergence the folder keeps
         every frame before it and ``self.diverged`` holds the error."""
         self._prepare()
         progress = None if self.quiet else Progress(frames)
         frame_ms = []       # each frame's ms_total (metrics.csv): the progress line's median
+        self._faces = [self.sim.model.n_faces]   # face count at the start and after each frame
         try:
             if progress:      # at once: the first frame may compile for a while
                 progress.update(0, "first frame")
@@ -161,6 +175,7 @@ class HeadlessRun:
                 self._write_frame()
                 self._report_limit_miss(progress)
                 frame_ms.append(self.sim.frame_ms)
+                self._faces.append(self.sim.model.n_faces)
                 if progress:
                     progress.update(k + 1, f"simulation {np.median(frame_ms):.1f} ms a frame "
                                            "(median of metrics.csv ms_total)")
