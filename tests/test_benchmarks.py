@@ -53,3 +53,28 @@ def test_stability_case_passes(stability_results, name):
     for key in ("ke_peak", "violation_peak", "violation_end"):
         assert np.isfinite(r[key])
     assert r["passed"], r["why"]
+
+
+def test_remesh_targets_read_met_only_within_the_target():
+    """benchmarks.remesh_targets: a target reads met exactly when its number is within it
+    (medians after the tenth frame, the landing's energy the largest of frames 1-10)."""
+    from benchmarks import remesh_targets as rt
+
+    def rows(ms, faces=3000, ke_peak=0.15, viol=5e-5):
+        return [{"ms_total": str(ms), "faces": str(faces), "own_violation_max": str(viol),
+                 "kinetic_energy": str(ke_peak if k == 5 else 0.01)} for k in range(40)]
+
+    ok = "final check: ok (seams closed (0.0003 mm))"
+    res = {name: rt.summary(rows(50.0), ok) for name, _ in rt.RUNS}
+    res["tshirt"] = rt.summary(rows(200.0), ok)
+    res["hanging"] = rt.summary(rows(30.0), ok)
+    assert res["drape30"]["landing_ke"] == 0.15 and res["tshirt"]["seams_mm"] == 0.0003
+    assert all(met for *_, met in rt.targets(res))
+    res["drape90"] = rt.summary(rows(81.0), ok)                      # 81 ms > 80
+    res["drape30_plain"] = rt.summary(rows(50.0, ke_peak=0.3), ok)  # kept 0.5x < 0.75x
+    res["hanging"] = rt.summary(rows(50.0), "final check: FAILED (x)")
+    met = {t: m for _, t, _, m in rt.targets(res)}
+    assert not met["at most 80 ms a frame"]
+    assert not met["the landing keeps 0.75x the unremeshed energy"]
+    assert not met["at most 33 ms"]          # 50 ms, whatever its check says
+    assert met["at most 4,000 faces"] and met["limits held to 1e-4"]
