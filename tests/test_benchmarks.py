@@ -78,3 +78,8 @@ def test_remesh_targets_read_met_only_within_the_target():
     assert not met["the landing keeps 0.75x the unremeshed energy"]
     assert not met["at most 33 ms"]          # 50 ms, whatever its check says
     assert met["at most 4,000 faces"] and met["limits held to 1e-4"]
+    # Repeats: the median of the runs' medians; a check holds only if it held in every run.
+    three = rt.combine([rt.summary(rows(ms), ok) for ms in (30.0, 40.0, 90.0)])
+    assert three["median_ms"] == 40.0 and three["ms_range"] == (30.0, 90.0) and three["check_ok"]
+    assert not rt.combine([rt.summary(rows(30.0), ok),
+                           rt.summary(rows(30.0), "final check: FAILED (x)")])["check_ok"]
