@@ -112,6 +112,14 @@ def _get_scalars(n: ti.i32, src: A, out: A):
 
 
 @ti.kernel
+def _get_scalars_2d(n: ti.i32, src: A, out: A):
+    ti.loop_config(serialize=True)
+    for i in range(n):
+        for j in range(src.shape[1]):
+            out[i, j] = src[i, j]
+
+
+@ti.kernel
 def _get_elements(n: ti.i32, src: A, out: A):
     ti.loop_config(serialize=True)
     for i in range(n):
@@ -164,12 +172,18 @@ def put_rows(arr, values, n_clear=0):
 
 
 def get_rows(arr, n):
-    """The first ``n`` rows of the 1-D ndarray ``arr`` as a numpy array (float64 for floats)."""
+    """The first ``n`` rows of the ndarray ``arr`` (1-D, or 2-D of scalars) as a numpy array
+    (float64 for floats)."""
     import numpy as np
     from taichi.lang.util import to_numpy_type
     dtype = to_numpy_type(arr.dtype)
-    shape = tuple(arr.element_shape) if _is_elements(arr) else ()
+    if _is_elements(arr):
+        shape, get = tuple(arr.element_shape), _get_elements
+    elif len(arr.shape) == 2:
+        shape, get = (arr.shape[1],), _get_scalars_2d
+    else:
+        shape, get = (), _get_scalars
     out = np.zeros((max(int(n), 1),) + shape, dtype)
-    (_get_elements if _is_elements(arr) else _get_scalars)(int(n), arr, out)
+    get(int(n), arr, out)
     out = out[: int(n)]
     return out.astype(np.float64) if np.issubdtype(dtype, np.floating) else out

@@ -351,3 +351,22 @@ def test_a_lasting_mesh_gets_its_factor_before_its_first_solve():
                 seen[lasting] += 1
             after_remesh = bool(sim.remesh_stats.get("applied"))
         assert seen[defer_ops > 0] > 0, (defer_ops, seen)
+
+
+def test_rows_in_and_out_of_arrays_with_spare_capacity():
+    """ndarrays.put_rows / get_rows move the first n rows of every kind of array the solvers
+    keep (1-D scalars, 2-D scalars such as the constraint values, vectors) and leave the spare
+    capacity alone: get_rows reads what to_numpy would, without copying the whole array."""
+    import taichi as ti
+    rng = np.random.default_rng(5)
+    for shape, make in (((40,), lambda: ti.ndarray(float, 40)),
+                        ((40, 8), lambda: ti.ndarray(float, (40, 8))),
+                        ((40, 3), lambda: ti.Vector.ndarray(3, float, 40))):
+        arr = make()
+        full = rng.standard_normal(shape)
+        arr.from_numpy(full)
+        rows = rng.standard_normal((7,) + shape[1:])
+        ndarrays.put_rows(arr, rows)
+        np.testing.assert_array_equal(ndarrays.get_rows(arr, 7), rows)
+        np.testing.assert_array_equal(arr.to_numpy()[7:], full[7:])      # spare rows kept
+        assert ndarrays.get_rows(arr, 0).shape == (0,) + shape[1:]

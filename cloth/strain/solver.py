@@ -379,7 +379,7 @@ class StrainLimiter:
         """The per-face solver state a remesh carries to the new faces (``remesh``'s
         ``face_data``): the multipliers and the rest area of the face they belong to."""
         n = self.model.n_faces
-        return {"lam": self._ws.lam.to_numpy()[:n].copy(),
+        return {"lam": ndarrays.get_rows(self._ws.lam, n),
                 "area": np.asarray(self.model.rest_area[:n], np.float64).copy()}
 
     def solve_state(self):
@@ -603,7 +603,7 @@ class StrainLimiter:
         projection's start moves each vertex on to (``al.start_candidate``), for a remesh to
         carry to the new vertices with ``set_last_velocity``."""
         self._sync_mesh()
-        return self._ws.v_last.to_numpy()[:self.model.n_verts].copy(), self._v_last_valid
+        return ndarrays.get_rows(self._ws.v_last, self.model.n_verts), self._v_last_valid
 
     def set_last_velocity(self, v_last, valid):
         """The last velocities for the model's (new) vertices: a remesh renumbers them, and
@@ -741,5 +741,5 @@ class StrainLimiter:
         ws, K = self._ws, N_CONSTRAINTS[self.method]
         al.copy_vectors(self.model.n_verts, self.model.state.x, ws.x_trial)
         self._assemble(METHOD_IDS[self.method], ws.x_trial)
-        g = ws.g.to_numpy()[:n, :K].astype(np.float64)
+        g = ndarrays.get_rows(ws.g, n)[:, :K]        # the active rows only (capacity: remeshing)
         return g / np.sqrt(self.model.rest_area[:n])[:, None]
