@@ -440,9 +440,11 @@ class _Work:
 
     def undeformed_enough(self, new_errors, old_faces):
         """Whether a collapse's new triangles (their ``stretch_error``s) pass the stretch
-        guard against the faces they replace (``_STRETCH_GUARD``)."""
-        old = max((self.stretch_error(*self.faces[f]) for f in old_faces), default=0.0)
-        return max(new_errors, default=0.0) <= max(_STRETCH_GUARD, old)
+        guard against the faces they replace (``_STRETCH_GUARD``). The replaced faces are
+        read only when a new one is past the guard (most collapses make none)."""
+        new = max(new_errors, default=0.0)
+        return new <= _STRETCH_GUARD or \
+            new <= max((self.stretch_error(*self.faces[f]) for f in old_faces), default=0.0)
 
     def area_ok(self, i, j, k):
         """Counter-clockwise and not degenerate in material space."""
@@ -588,8 +590,9 @@ class _Work:
                 _dot3(_normal(x[d], x[b], x[c]), n_old) <= 0:
             return False
         # Nor deform the patch (``_STRETCH_GUARD``: a flip across a fold cuts it).
-        if max(self.stretch_error(a, d, c), self.stretch_error(d, b, c)) > max(
-                _STRETCH_GUARD, self.stretch_error(a, b, c), self.stretch_error(b, a, d)):
+        made = max(self.stretch_error(a, d, c), self.stretch_error(d, b, c))
+        if made > _STRETCH_GUARD and made > max(self.stretch_error(a, b, c),
+                                                 self.stretch_error(b, a, d)):
             return False
         self.set_face(f0, [a, d, c])
         self.set_face(f1, [d, b, c])
