@@ -439,9 +439,10 @@ class _Work:
         return _stretch_error(self.uv[i], self.uv[j], self.uv[k], self.x[i], self.x[j], self.x[k])
 
     def undeformed_enough(self, new_errors, old_faces):
-        """Whether a collapse's new triangles (their ``stretch_error``s) pass the stretch
-        guard against the faces they replace (``_STRETCH_GUARD``). The replaced faces are
-        read only when a new one is past the guard (most collapses make none)."""
+        """Whether a flip's or a collapse's new triangles (their ``stretch_error``s) pass the
+        stretch guard against the faces they replace (``_STRETCH_GUARD``; ``_flip_allowed_np``
+        is the same rule for flips over the whole mesh). The replaced faces are read only
+        when a new one is past the guard (most operations make none)."""
         new = max(new_errors, default=0.0)
         return new <= _STRETCH_GUARD or \
             new <= max((self.stretch_error(*self.faces[f]) for f in old_faces), default=0.0)
@@ -590,9 +591,8 @@ class _Work:
                 _dot3(_normal(x[d], x[b], x[c]), n_old) <= 0:
             return False
         # Nor deform the patch (``_STRETCH_GUARD``: a flip across a fold cuts it).
-        made = max(self.stretch_error(a, d, c), self.stretch_error(d, b, c))
-        if made > _STRETCH_GUARD and made > max(self.stretch_error(a, b, c),
-                                                 self.stretch_error(b, a, d)):
+        if not self.undeformed_enough([self.stretch_error(a, d, c),
+                                       self.stretch_error(d, b, c)], (f0, f1)):
             return False
         self.set_face(f0, [a, d, c])
         self.set_face(f1, [d, b, c])
