@@ -94,17 +94,29 @@ def dihedral_angles(x, edge_verts, edge_opp):
     """Signed dihedral angle per interior edge (0 where flat, 0 for boundary edges), with the
     same convention as the bending kernel in dynamics.py."""
     theta = np.zeros(len(edge_verts))
-    inner = edge_opp[:, 1] >= 0
-    x0, x1 = x[edge_verts[inner, 0]], x[edge_verts[inner, 1]]
-    x2, x3 = x[edge_opp[inner, 0]], x[edge_opp[inner, 1]]
-    e = x1 - x0
-    n1 = np.cross(e, x2 - x0)
-    n2 = np.cross(x3 - x0, e)
-    el = np.linalg.norm(e, axis=1)
-    sin = np.einsum("ij,ij->i", np.cross(n1, n2), e) / el
-    cos = np.einsum("ij,ij->i", n1, n2)
+    inner = np.flatnonzero(edge_opp[:, 1] >= 0)
+    # Coordinate columns gathered once each: numpy's row-wise cross products and einsums on
+    # (N, 3) arrays cost several times this (the remesh's sizing reads it every frame).
+    cols = [np.ascontiguousarray(x[:, c], dtype=np.float64) for c in range(3)]
+    i0, i1 = edge_verts[inner, 0], edge_verts[inner, 1]
+    i2, i3 = edge_opp[inner, 0], edge_opp[inner, 1]
+    x0 = [c.take(i0) for c in cols]
+    e = [c.take(i1) - a for c, a in zip(cols, x0)]
+    a = [c.take(i2) - b for c, b in zip(cols, x0)]
+    b = [c.take(i3) - q for c, q in zip(cols, x0)]
+    n1 = _cross_columns(e, a)
+    n2 = _cross_columns(b, e)
+    m = _cross_columns(n1, n2)
+    el = np.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
+    sin = (m[0] * e[0] + m[1] * e[1] + m[2] * e[2]) / el
+    cos = n1[0] * n2[0] + n1[1] * n2[1] + n1[2] * n2[2]
     theta[inner] = np.arctan2(sin, cos)
     return theta
+
+
+def _cross_columns(a, b):
+    """a x b for vectors given as three coordinate arrays each."""
+    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 
 
 def wrinkle_measures(x, faces, edges, edge_faces, edge_opp, uv):

@@ -102,6 +102,21 @@ def _gram(G):
     return out
 
 
+def _gram_times(c0, c1, B):
+    """(C B)^T (C B) for C = [c0 c1] (columns (N, k)) and B (N, 2, 2): B^T (C^T C) B, from the
+    columns' three dot products (the (N, k, 2) product C B is never formed). (N, 2, 2)."""
+    g00, g11 = np.einsum("ni,ni->n", c0, c0), np.einsum("ni,ni->n", c1, c1)
+    g01 = np.einsum("ni,ni->n", c0, c1)
+    b00, b01, b10, b11 = B[:, 0, 0], B[:, 0, 1], B[:, 1, 0], B[:, 1, 1]
+    t00, t01 = g00 * b00 + g01 * b10, g00 * b01 + g01 * b11      # (C^T C) B
+    t10, t11 = g01 * b00 + g11 * b10, g01 * b01 + g11 * b11
+    out = np.empty((len(B), 2, 2))
+    out[:, 0, 0] = b00 * t00 + b10 * t10
+    out[:, 1, 1] = b01 * t01 + b11 * t11
+    out[:, 0, 1] = out[:, 1, 0] = b00 * t01 + b10 * t11
+    return out
+
+
 def _inv2(A):
     """Inverse of stacked 2x2 matrices."""
     det = A[:, 0, 0] * A[:, 1, 1] - A[:, 0, 1] * A[:, 1, 0]
@@ -110,7 +125,6 @@ def _inv2(A):
     return inv / det[:, None, None]
 
 
-_times = metrics.columns_times
 
 
 SIZING_TERMS = ("curvature", "velocity", "compression", "obstacle")
@@ -184,12 +198,12 @@ def face_sizing_terms(mesh, params, obstacle_distance=None, edges=None):
     S[:, 1, 0] = S[:, 0, 1]
     S /= area[:, None, None]
     for _ in range(params.curvature_smoothing):
-        S = _vertex_mean(S, area, faces, len(x))[faces].mean(axis=1)
+        S = _face_mean(_vertex_mean(S, area, faces, len(x)), faces)
     terms = {"curvature": _gram(S) / params.refine_angle ** 2}   # S S (S symmetric)
 
     # Velocity gradient (3x2): bounds the velocity difference across an edge.
-    Gv = _times(mesh.v[j] - mesh.v[i], mesh.v[k] - mesh.v[i], Dm_inv)
-    terms["velocity"] = _gram(Gv) / params.refine_velocity ** 2
+    terms["velocity"] = _gram_times(mesh.v[j] - mesh.v[i], mesh.v[k] - mesh.v[i], Dm_inv) \
+        / params.refine_velocity ** 2
 
     # Compression: a region compressed (Green strain e = F^T F - I below 0 along a direction)
     # will buckle, and is refined before the wrinkles form: along it, the metric m that
@@ -201,8 +215,7 @@ def face_sizing_terms(mesh, params, obstacle_distance=None, edges=None):
     # c k / sqrt(2). Where the root is complex, the square root of the negative discriminant
     # is taken negative, so that the metric falls continuously to 0 (ARCSim's
     # compression_metric with rib_stiffening 1).
-    F = _times(x[j] - x[i], x[k] - x[i], Dm_inv)
-    e = _gram(F)
+    e = _gram_times(x[j] - x[i], x[k] - x[i], Dm_inv)       # F^T F, F = Ds Dm^-1
     e[:, 0, 0] -= 1.0
     e[:, 1, 1] -= 1.0
     c2 = 2.0 * params.refine_compression * params.size_min ** 2
@@ -242,6 +255,17 @@ def _vertex_mean(face_T, area, faces, n_verts):
     Tv /= np.maximum(wsum, 1e-300)[:, None, None]
     Tv[:, 1, 0] = Tv[:, 0, 1]
     return Tv
+
+
+def _face_mean(vert_T, faces):
+    """Each face's mean of its three vertices' symmetric 2x2 tensors (V, 2, 2): (F, 2, 2)."""
+    out = np.empty((len(faces), 2, 2))
+    for r, c in ((0, 0), (0, 1), (1, 1)):
+        col = np.ascontiguousarray(vert_T[:, r, c])
+        out[:, r, c] = (col.take(faces[:, 0]) + col.take(faces[:, 1])
+                        + col.take(faces[:, 2])) / 3.0
+    out[:, 1, 0] = out[:, 0, 1]
+    return out
 
 
 def vertex_sizing(face_M, area, faces, n_verts, params):
@@ -738,12 +762,6 @@ class _Work:
 # ---------------------------------------------------------------------------------------------
 # Phases (candidate lists in numpy, operations in a Python loop)
 # ---------------------------------------------------------------------------------------------
-def _quad_form(M, p, q):
-    """p^T M q for stacks of metrics M (N, 3) = (m00, m01, m11) and 2-vectors (N, 2)."""
-    return (M[:, 0] * p[:, 0] * q[:, 0] + M[:, 1] * (p[:, 0] * q[:, 1] + p[:, 1] * q[:, 0])
-            + M[:, 2] * p[:, 1] * q[:, 1])
-
-
 def _edge_len2(uv, M, a, b):
     """Metric length^2 of edges (a, b) (index arrays), metric averaged over the two ends.
     Gathers from contiguous columns: several times faster than gathering (N, 2) rows."""
@@ -777,12 +795,24 @@ def _split_phase(w, max_ops):
 
 
 def _flip_wanted_np(uv, Mv, a, b, c, d):
-    """Vectorised ``_Work.flip_wanted`` for arrays of quads (same test, same margin)."""
-    m = Mv[a] + Mv[b] + Mv[c] + Mv[d]
-    pc, qc, pd, qd = uv[a] - uv[c], uv[b] - uv[c], uv[b] - uv[d], uv[a] - uv[d]
-    dot = lambda p, q: _quad_form(m, p, q)
-    cross = lambda p, q: p[:, 0] * q[:, 1] - p[:, 1] * q[:, 0]
-    sdet = np.sqrt(np.maximum(m[:, 0] * m[:, 2] - m[:, 1] ** 2, 0.0))
+    """Vectorised ``_Work.flip_wanted`` for arrays of quads (same test, same margin). Written on
+    coordinate columns gathered with ``take``: gathering (N, 2) and (N, 3) rows cost several
+    times as much (the remesh check runs it over every interior edge each frame)."""
+    a, b, c, d = (np.asarray(q, np.intp) for q in (a, b, c, d))
+    m0, m1, m2 = (np.ascontiguousarray(Mv[:, r]) for r in range(3))
+    m0, m1, m2 = ((col.take(a) + col.take(b) + col.take(c) + col.take(d)) for col in (m0, m1, m2))
+    u, v = np.ascontiguousarray(uv[:, 0]), np.ascontiguousarray(uv[:, 1])
+    ua, ub, uc, ud = u.take(a), u.take(b), u.take(c), u.take(d)
+    va, vb, vc, vd = v.take(a), v.take(b), v.take(c), v.take(d)
+    pc, qc, pd, qd = (ua - uc, va - vc), (ub - uc, vb - vc), (ub - ud, vb - vd), (ua - ud, va - vd)
+
+    def dot(p, q):
+        return m0 * p[0] * q[0] + m1 * (p[0] * q[1] + p[1] * q[0]) + m2 * p[1] * q[1]
+
+    def cross(p, q):
+        return p[0] * q[1] - p[1] * q[0]
+
+    sdet = np.sqrt(np.maximum(m0 * m2 - m1 ** 2, 0.0))
     val = sdet * (cross(pc, qc) * dot(pd, qd) + dot(pc, qc) * cross(pd, qd))
     norm = np.sqrt(dot(pc, pc) * dot(qc, qc) * dot(pd, pd) * dot(qd, qd))
     return val < -_FLIP_EPS * norm

@@ -317,8 +317,7 @@ class StrainLimiter:
             return 0.0
         self._sync_mesh()
         ws, m = self._ws, self.model
-        al.copy_vectors(m.n_verts, m.state.x, ws.x_trial)
-        self._assemble(METHOD_IDS[self.method], ws.x_trial)
+        self._assemble_values()
         return max(float(al.max_violation(N_CONSTRAINTS[self.method], m.n_faces, ws.rest_area,
                                           ws.g)), 0.0)
 
@@ -566,6 +565,14 @@ class StrainLimiter:
         ws = self._ws
         al.assemble(mid, pos, ws.mesh_pack(), ws.constraint_pack(N_CONSTRAINTS[self.method]))
 
+    def _assemble_values(self):
+        """The method's constraint values at the model's positions into ws.g (ws.x_trial
+        holds those positions after)."""
+        ws, m = self._ws, self.model
+        al.copy_vectors(m.n_verts, m.state.x, ws.x_trial)
+        al.assemble_g(METHOD_IDS[self.method], ws.x_trial, ws.mesh_pack(),
+                      ws.constraint_pack(N_CONSTRAINTS[self.method]))
+
     def _solve_direct(self, mid, K, use_system):
         from . import direct
         metric, chol = self._direct_metric(use_system)
@@ -739,7 +746,6 @@ class StrainLimiter:
             return np.zeros((n, 0))
         self._sync_mesh()
         ws, K = self._ws, N_CONSTRAINTS[self.method]
-        al.copy_vectors(self.model.n_verts, self.model.state.x, ws.x_trial)
-        self._assemble(METHOD_IDS[self.method], ws.x_trial)
+        self._assemble_values()
         g = ndarrays.get_rows(ws.g, n)[:, :K]        # the active rows only (capacity: remeshing)
         return g / np.sqrt(self.model.rest_area[:n])[:, None]
