@@ -110,6 +110,9 @@ def parse_args(argv):
                    help="remesh every frame (overrides the scene)")
     p.add_argument("--no-remesh", dest="remesh", action="store_false",
                    help="never remesh (overrides the scene)")
+    p.add_argument("--nudge", type=int, metavar="SEED",
+                   help="start ~1 nm away at random (seed; sim.nudge): another run of a chaotic "
+                        "scene, as another CPU gives")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p.parse_args(argv)
 
@@ -123,6 +126,7 @@ def flag_overrides(args, cfg_keys):
             ov.setdefault(section, {})[key] = value
 
     put("sim", "frames", args.frames)
+    put("sim", "nudge", args.nudge)
     if args.resolution is not None:
         if "cloth" not in cfg_keys or "resolution" not in cfg_keys["cloth"]:
             raise ValueError("--resolution applies to sheet scenes only; this scene has no "

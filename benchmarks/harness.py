@@ -54,11 +54,10 @@ def _plain(v):
 
 def nudge_start(setup, size=1e-9, seed=11):
     """Move the free vertices of a set-up's start by ``size`` m at random (1 nm: far below f32's
-    resolution at 1 m); returns the set-up."""
-    import numpy as np
-    noise = np.random.default_rng(seed).normal(0.0, size, setup.mesh.x.shape)
-    noise[setup.mesh.pinned] = 0.0
-    setup.mesh.x = setup.mesh.x + noise
+    resolution at 1 m), in place (``cloth.simulator.nudged_start``, which settings
+    ``sim.nudge`` applies); returns the set-up."""
+    from cloth.simulator import nudged_start
+    setup.mesh = nudged_start(setup, seed, size).mesh
     return setup
 
 

@@ -6,10 +6,14 @@ target, one run at a time.
 Each row is ``python main.py ... --headless --no-images --remesh`` in a subprocess (the
 kernels as the environment asks: optimised unless ``LOOM_FAST_COMPILE`` says otherwise; run
 it with the machine otherwise idle), read back from the run's ``metrics.csv`` and its last
-line, ``--repeats`` times in turn (one command's runs differ by 20-30 % on this machine:
-hanging at resolution 46 read 26.0 and 35.5 ms in two runs of the same code). ms a frame: the
-median of ``ms_total`` over the frames after the tenth, then the median over the repeats (their
-range beside it); faces and violations: the largest of any run; a final check holds if it
+line, ``--repeats`` times in turn: the first run is the command as given, the k-th adds
+``--nudge k`` (its start moved by 1 nm, seeded), because a landing is chaotic and another
+CPU's last bits land it elsewhere, and where it comes to rest decides what its frames cost (the
+same drape command read a median of 92 ms a frame on one machine and 125-145 ms on another,
+and 130-157 ms over three nudged starts there). Timings also vary by 20-30 % between runs of
+one trajectory on this machine (hanging at resolution 46 read 26.0 and 35.5 ms). ms a frame:
+the median of ``ms_total`` over the frames after the tenth, then the median over the repeats
+(their range beside it); faces and violations: the largest of any run; a final check holds if it
 held in every run. The landing's energy: the largest kinetic energy of frames 1-10 (the fall
 and the landing), median over the repeats, against the same drape unremeshed.
 """
@@ -135,8 +139,10 @@ def targets(res):
 def page(rows, res, cmd, seconds):
     lines = ["# The remeshing targets", "", header(cmd, seconds), "",
              "Each command `python main.py ... --headless --no-images --remesh` run "
-             f"{next(iter(res.values()))['runs']} times, one run at a time "
-             "(`benchmarks/remesh_targets.py` says how each number is read); ms: `ms_total` of "
+             f"{next(iter(res.values()))['runs']} times, one run at a time: as given, then "
+             "with `--nudge 1`, `--nudge 2`, ... (starts 1 nm apart: a landing is chaotic, and "
+             "where the cloth comes to rest decides its frames' cost; "
+             "`benchmarks/remesh_targets.py` says how each number is read); ms: `ms_total` of "
              "`metrics.csv`, median (and mean) over the frames after the tenth, the median of "
              "the runs and their range. "
              "Why the drape's frame is not at 80 ms: `drape.md`.", "",
@@ -149,7 +155,8 @@ def page(rows, res, cmd, seconds):
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--out", default="out/remesh_targets")
-    p.add_argument("--repeats", type=int, default=3, help="runs of each command, in turn")
+    p.add_argument("--repeats", type=int, default=3,
+                   help="runs of each command, in turn: as given, then --nudge 1, 2, ...")
     args = p.parse_args(argv)
     cmd = command("benchmarks.remesh_targets", argv)
     t0 = time.perf_counter()
@@ -157,7 +164,8 @@ def main(argv=None):
     with tempfile.TemporaryDirectory() as tmp:
         for k in range(max(1, args.repeats)):
             for name, run_args in RUNS:
-                rows, last, sec = run_main(run_args, os.path.join(tmp, f"{name}_{k}"))
+                nudge = ["--nudge", str(k)] if k else []
+                rows, last, sec = run_main(run_args + nudge, os.path.join(tmp, f"{name}_{k}"))
                 runs[name].append(summary(rows, last))
                 r = runs[name][-1]
                 print(f"{name} ({k + 1} of {args.repeats}): {sec:.0f} s, median "

@@ -40,6 +40,9 @@ COMMON_DEFAULTS = {
         "cg_iters": 500,          # CG iteration budget per time step
         "linear_solver": "cg",    # cg (matrix-free PCG) | direct (sparse Cholesky)
         "bending": "isotropic",   # isotropic (B in every direction) | hinge (discrete shells)
+        # A start moved by about 1 nm (seeded; 0: the scene's own start): another run of a
+        # chaotic scene, as another CPU's last bits would give (Simulator.nudged_start).
+        "nudge": 0,
     },
     "material": dict(preset="soft", **MATERIAL_PRESETS["soft"]),
     "strain": {
@@ -96,6 +99,8 @@ SCHEMA = {
         "cg_tol": Key("", "relative residual that ends the implicit step's CG", lo=0,
                       lo_open=True),
         "cg_iters": Key("", "CG iteration budget per time step", lo=1),
+        "nudge": Key("seed", "start the free vertices ~1 nm away at random, seeded (0: the "
+                     "scene's own start): another run of a chaotic scene", lo=0),
         "linear_solver": Key("", "implicit step's linear solver: matrix-free PCG or sparse "
                              "Cholesky", choices=("cg", "direct")),
         "bending": Key("", "bending energy: isotropic (k_bend is the plate's B in every "

@@ -20,9 +20,20 @@ f 4 1 5\nf 4 5 8
 
 
 def compiled_kernels():
-    """How many compiled kernel specialisations this process holds."""
+    """{kernel: (name, compiled specialisations)} of Loom's own kernels in this process.
+    (Taichi's internal copy kernels, e.g. for ``to_numpy``, specialise per array kind: a run
+    that reads another kind of array adds one without anything recompiling.)"""
     from taichi.lang.kernel_impl import Kernel
-    return sum(len(k.compiled_kernels) for k in gc.get_objects() if isinstance(k, Kernel))
+    return {id(k): (k.func.__name__, len(k.compiled_kernels)) for k in gc.get_objects()
+            if isinstance(k, Kernel) and not k.func.__module__.startswith("taichi")}
+
+
+def recompiled(before, after):
+    """The kernels compiled before that hold more specialisations after: compiled again.
+    (A kernel first used in the later run, e.g. self-collision impulses that one run's contacts
+    need and the other's do not, is compiled for the first time, not again.)"""
+    return sorted(name for key, (name, n) in after.items()
+                  if before.get(key, ("", 0))[1] > 0 and n > before[key][1])
 
 
 def scene_file(path, n, size):
@@ -98,7 +109,7 @@ def test_a_second_simulator_compiles_nothing(tmp_path):
     second = run_file(scene_file(str(tmp_path / "b.toml"), 12, 1.5))
     assert second.model.n_faces != first.model.n_faces
     assert second.collider.last_contacts >= 0 and np.all(np.isfinite(second.model.positions()))
-    assert compiled_kernels() == before
+    assert recompiled(before, compiled_kernels()) == []
 
 
 def test_a_second_hanging_cloth_compiles_nothing():
@@ -116,4 +127,4 @@ def test_a_second_hanging_cloth_compiles_nothing():
     before = compiled_kernels()
     sim = run(6)
     assert sim.strain.last_converged
-    assert compiled_kernels() == before
+    assert recompiled(before, compiled_kernels()) == []

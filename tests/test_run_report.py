@@ -216,3 +216,38 @@ def test_a_remeshed_run_says_how_often_its_mesh_changed(capsys, tmp_path):
     assert 1 <= applied <= frames and faces[-1] != faces[0]   # the sheet's first remesh is made
     rc, out, err = run_main(capsys, "hanging", *SMALL, "--frames", 2, "--out", tmp_path / "u")
     assert rc == 0 and "remeshed in" not in out, out
+
+
+def test_a_nudged_start_is_another_run_of_the_same_scene(capsys, tmp_path):
+    """``--nudge SEED`` moves the free vertices of the start by about 1 nm (seeded; pins stay
+    on their targets), is written to config.toml (the run reproduces from it), and a reset
+    returns to the nudged start, not the scene's own."""
+    from benchmarks.harness import configure
+    from cloth.simulator import NUDGE_SIZE, Simulator
+    _, cfg, setup = configure("hanging", {"cloth": {"resolution": 6}, "sim": {"nudge": 3}})
+    sim = Simulator(setup, cfg)
+    x0 = setup.mesh.x
+    moved = sim.model.positions() - x0
+    pinned = np.asarray(setup.mesh.pinned, bool)
+    assert pinned.any() and np.all(moved[pinned] == 0.0)
+    assert 0.1 * NUDGE_SIZE < np.sqrt(np.mean(moved[~pinned] ** 2)) < 10 * NUDGE_SIZE
+    again = Simulator(setup, cfg).model.positions()
+    assert np.array_equal(again, sim.model.positions())          # seeded
+    other = configure("hanging", {"cloth": {"resolution": 6}, "sim": {"nudge": 4}})[2]
+    assert not np.array_equal(Simulator(other, cfg | {"sim": cfg["sim"] | {"nudge": 4}})
+                              .model.positions(), again)
+    sim.step_frame()
+    sim.reset()
+    assert np.array_equal(sim.model.positions(), again)
+    rc, _, err = run_main(capsys, "hanging", *SMALL, "--frames", 2, "--nudge", 3,
+                          "--out", tmp_path / "a")
+    assert rc == 0, err
+    config = tmp_path / "a" / "config.toml"
+    assert "nudge = 3" in config.read_text()
+    rc, _, err = run_main(capsys, "--config", config, "--headless", "--quiet",
+                          "--out", tmp_path / "b")
+    assert rc == 0, err
+    first, second = _metrics(tmp_path / "a" / "metrics.csv"), _metrics(tmp_path / "b" /
+                                                                       "metrics.csv")
+    plain = run_main(capsys, "hanging", *SMALL, "--frames", 2, "--out", tmp_path / "c")
+    assert plain[0] == 0 and first == second != _metrics(tmp_path / "c" / "metrics.csv")
