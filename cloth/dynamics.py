@@ -61,6 +61,7 @@ from . import backend, ndarrays
 from .model import ClothModel
 from .ndarrays import A, T
 from .settings import COMMON_DEFAULTS
+from .strain import multigrid
 
 _SIM = COMMON_DEFAULTS["sim"]
 
@@ -91,6 +92,8 @@ SolvePack = ti.types.argpack(force=A, dv=A, rhs=A, res=A, z=A, p=A, Ap=A, precon
                              scalars=A)
 BlockPack = ti.types.argpack(val=A, diag=A, face_slot=A, edge_slot=A, stitch_slot=A,
                              bend_slot=A)
+#   mg      the aggregation multigrid's arrays (cloth/strain/multigrid.py), or its stub.
+MultigridPack = ti.types.argpack(mg_int=A, mg_real=A, mg_block=A)
 
 # The step's scalars: indices into ``coef``, the float array (numpy) every kernel takes
 # (``ImplicitEuler._coef``) and reads once into a ``Constants`` struct (``constants``). They
@@ -100,11 +103,15 @@ BlockPack = ti.types.argpack(val=A, diag=A, face_slot=A, edge_slot=A, stitch_slo
 # struct argument cost ~95 us more per launch (and ~190 us to make the struct on the host).
 # The counts are exact in a float.
 (C_H, C_G, C_KW, C_KF, C_KS, C_KB, C_ALPHA, C_BETA, C_KST, C_TOL, C_MAX_ITERS, C_NV, C_NF,
- C_NE, C_NST) = (0, 1, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16)   # C_G: 3 components
-N_COEF = 17
+ C_NE, C_NST, C_PC) = (0, 1, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17)   # C_G: 3 components
+N_COEF = 18
 Constants = ti.types.struct(h=float, g=ti.types.vector(3, float), kw=float, kf=float, ks=float,
                             kb=float, alpha=float, beta=float, kst=float, tol=float,
-                            max_iters=ti.i32, nv=ti.i32, nf=ti.i32, ne=ti.i32, nst=ti.i32)
+                            max_iters=ti.i32, nv=ti.i32, nf=ti.i32, ne=ti.i32, nst=ti.i32,
+                            pc=ti.i32)
+# CG's preconditioner (``C_PC``): A's 3x3 diagonal blocks, or the aggregation multigrid of A
+# that the strain solve keeps (``ImplicitEuler.set_multigrid``).
+PC_BLOCK_JACOBI, PC_MULTIGRID = 0, 1
 
 
 @ti.func
@@ -118,7 +125,8 @@ def constants(coef: T):
                      alpha=coef[C_ALPHA], beta=coef[C_BETA], kst=coef[C_KST], tol=coef[C_TOL],
                      max_iters=ti.cast(coef[C_MAX_ITERS], ti.i32),
                      nv=ti.cast(coef[C_NV], ti.i32), nf=ti.cast(coef[C_NF], ti.i32),
-                     ne=ti.cast(coef[C_NE], ti.i32), nst=ti.cast(coef[C_NST], ti.i32))
+                     ne=ti.cast(coef[C_NE], ti.i32), nst=ti.cast(coef[C_NST], ti.i32),
+                     pc=ti.cast(coef[C_PC], ti.i32))
 
 
 @dataclass
@@ -181,6 +189,9 @@ class ImplicitEuler:
         self._cg = SolvePack(force=self.force, dv=self.dv, rhs=self.rhs, res=self.res,
                              z=self.z, p=self.p, Ap=self.Ap, precond=self.precond,
                              scalars=self.scalars)
+        self._multigrid = None          # set_multigrid
+        self._mg_stub = multigrid.MultigridStub()
+        self.last_preconditioner = "block Jacobi"
         self.on_mesh_changed()
 
     # -- allocation ---------------------------------------------------------------------------
@@ -203,6 +214,31 @@ class ImplicitEuler:
     def set_warm_start(self, dv):
         """Start the next step's CG from ``dv`` (n_verts, 3) instead of zero."""
         ndarrays.put_rows(self.dv, np.asarray(dv, np.float64).reshape(self.model.n_verts, 3))
+
+    def set_multigrid(self, mg):
+        """Precondition CG with ``mg`` (a strain.multigrid.MultigridPreconditioner of this
+        model's implicit matrix A, pins as the identity: the one the strain solve keeps on a
+        large mesh) while it is ready for the current pins; None: block Jacobi. Its
+        hierarchy may lag A by a few steps (it is remade every few solves): CG stays exact,
+        only its iteration count depends on it. Measured offline on A of a hanging sheet at
+        16.2k faces (rtol 1e-4, scipy CG with the kernel's multigrid applied in numpy):
+        92 iterations against block Jacobi's 345 (docs/speed/parallel.md). The one-launch
+        step only; the host loop (Vulkan, Metal) keeps block Jacobi."""
+        self._multigrid = mg
+
+    def _preconditioner(self):
+        """(mode, its arrays' pack) for this step."""
+        mg = self._multigrid
+        n = self.model.n_verts
+        if mg is not None and not self.host_loop and mg.metric.n == n and \
+                mg.usable(self.model.pinned[:n]):
+            arrays = mg
+            mode = PC_MULTIGRID
+        else:
+            arrays, mode = self._mg_stub, PC_BLOCK_JACOBI
+        self.last_preconditioner = "multigrid" if mode == PC_MULTIGRID else "block Jacobi"
+        return mode, self._packs.get("mg", MultigridPack, mg_int=arrays.ints,
+                                     mg_real=arrays.reals, mg_block=arrays.blocks)
 
     def set_stitches(self, pairs):
         self.stitches_np = np.asarray(pairs, np.int32).reshape(-1, 2)
@@ -234,7 +270,7 @@ class ImplicitEuler:
         self._coef[:] = (h, *s.gravity, mat.k_warp, mat.k_weft, mat.k_shear, mat.bend_scale(),
                          mat.damp_mass, mat.damp_stiff, s.stitch_stiffness, s.cg_tol,
                          s.cg_max_iters, m.n_verts, m.n_faces, self.n_hinges,
-                         self.n_stitches)
+                         self.n_stitches, PC_BLOCK_JACOBI)
         return self._coef
 
     # -- public API ---------------------------------------------------------------------------
@@ -243,8 +279,9 @@ class ImplicitEuler:
         self.model.mark_step_start()
         if self.host_loop:
             return self._step_host_loop(h)
-        rel, iters = _step(self._constants(h), self._mesh(), self._state(), self._elems,
-                           self._cg)
+        coef = self._constants(h)
+        coef[C_PC], mg = self._preconditioner()
+        rel, iters = _step(coef, self._mesh(), self._state(), self._elems, self._cg, mg)
         self.last_cg_iters = int(iters)
         self.last_cg_residual = float(rel)
         return self.last_cg_iters
@@ -657,16 +694,31 @@ def linearise(c, mesh: T, state: T, elems: T, cg: T):
 
 # The step's phases, shared by the one-launch kernel and the host-loop kernels.
 @ti.func
-def cg_begin(c, mesh: T, state: T, elems: T, cg: T):
-    """Linearise, prescribe the pinned dv, and start PCG: returns (r.z, b.P b) (CG's scale:
-    the free rows only)."""
+def cg_begin(with_mg: ti.template(), c, mesh: T, state: T, elems: T, cg: T, mg: T):
+    """Linearise, prescribe the pinned dv, and start PCG: returns ``cg_start``'s (r.z, b.D b,
+    r.D r)."""
     linearise(c, mesh, state, elems, cg)
-    return cg_start(c, mesh, state, elems, cg)
+    return cg_start(with_mg, c, mesh, state, elems, cg, mg)
 
 
 @ti.func
-def cg_start(c, mesh: T, state: T, elems: T, cg: T):
-    """After ``linearise``: prescribe the pinned dv and start PCG."""
+def multigrid_on(with_mg: ti.template(), c):
+    """Whether this launch preconditions with the multigrid: compiled in (``with_mg``: the
+    one-launch step; the host-loop kernels keep block Jacobi) and chosen (``c.pc``)."""
+    on = False
+    if ti.static(with_mg):
+        on = c.pc == PC_MULTIGRID
+    return on
+
+
+@ti.func
+def cg_start(with_mg: ti.template(), c, mesh: T, state: T, elems: T, cg: T, mg: T):
+    """After ``linearise``: prescribe the pinned dv and start PCG. ``mg``: the multigrid's
+    arrays where ``with_mg`` (read only when ``c.pc`` chooses it). Returns (r.z, b.D b, r.D r)
+    with z = P r (CG's own product) and D the inverse diagonal blocks (block Jacobi): CG
+    stops on sqrt(r.D r / b.D b), the free rows only, whichever preconditioner it uses, so
+    that ``cg_tol`` means one accuracy (measured at 4k faces: in the multigrid's own norm the
+    same tolerance left a step 10x further from the tight one)."""
     # Pinned vertices: the dv that lands them on their target at the end of the step.
     # Free vertices start CG from the last step's dv (warm start: near rest, successive
     # velocity changes are alike); on_mesh_changed zeroes it after a remesh.
@@ -677,42 +729,66 @@ def cg_start(c, mesh: T, state: T, elems: T, cg: T):
     # r = b - A dv over the free vertices (pinned dv enters through the coupling).
     apply_A(cg.dv, cg.Ap, c, mesh, elems)
     free_residual(c, mesh, cg)
+    use_mg = multigrid_on(with_mg, c)
+    if ti.static(with_mg):
+        if use_mg:
+            # z = P r, and P b into Ap (free until the first iteration): CG's scale b.P b in
+            # the same preconditioner's norm as its residual.
+            multigrid.apply(c.nv, mg.mg_int, mg.mg_real, mg.mg_block, cg.res, cg.z)
     rz = 0.0
+    rd = 0.0
     bnorm = 0.0
     for i in range(c.nv):
-        cg.z[i] = cg.precond[i] @ cg.res[i]
+        Dr = cg.precond[i] @ cg.res[i]
+        if not use_mg:
+            cg.z[i] = Dr
+        if mesh.vert_pinned[i] != 0:
+            cg.z[i] = ti.Vector([0.0, 0.0, 0.0])
         cg.p[i] = cg.z[i]
         rz += cg.res[i].dot(cg.z[i])
+        rd += cg.res[i].dot(Dr)
         if mesh.vert_pinned[i] == 0:
             bnorm += cg.rhs[i].dot(cg.precond[i] @ cg.rhs[i])
-    return ti.Vector([rz, bnorm])
+    return ti.Vector([rz, bnorm, rd])
 
 
 @ti.func
-def cg_iteration(rz, c, mesh: T, elems: T, cg: T):
+def cg_iteration(with_mg: ti.template(), rz, c, mesh: T, elems: T, cg: T, mg: T):
     """One preconditioned CG iteration on the free vertices: returns (new r.z, 1 if it
-    stalled on p.A p <= 0 and changed nothing)."""
+    stalled on p.A p <= 0 and changed nothing, new r.D r: ``cg_start``)."""
     apply_A(cg.p, cg.Ap, c, mesh, elems)
     pAp = 0.0
     for i in range(c.nv):
         pAp += cg.p[i].dot(cg.Ap[i])
     rz_new = rz
+    rd_new = 0.0
     stalled = 1.0
     if pAp > 0.0:
         stalled = 0.0
         step = rz / pAp
         rz_new = 0.0
+        use_mg = multigrid_on(with_mg, c)
         for i in range(c.nv):
             cg.dv[i] += step * cg.p[i]
             cg.res[i] -= step * cg.Ap[i]
-            cg.z[i] = cg.precond[i] @ cg.res[i]
-            rz_new += cg.res[i].dot(cg.z[i])
+            Dr = cg.precond[i] @ cg.res[i]
+            rd_new += cg.res[i].dot(Dr)
+            if not use_mg:
+                cg.z[i] = Dr
+                rz_new += cg.res[i].dot(Dr)
+        if ti.static(with_mg):
+            if use_mg:
+                multigrid.apply(c.nv, mg.mg_int, mg.mg_real, mg.mg_block, cg.res, cg.z)
+                for i in range(c.nv):
+                    if mesh.vert_pinned[i] != 0:
+                        cg.z[i] = ti.Vector([0.0, 0.0, 0.0])
+                    rz_new += cg.res[i].dot(cg.z[i])
         beta_cg = rz_new / rz
         for i in range(c.nv):
             cg.p[i] = cg.z[i] + beta_cg * cg.p[i]
             if mesh.vert_pinned[i] != 0:
                 cg.p[i] = ti.Vector([0.0, 0.0, 0.0])
-    return ti.Vector([rz_new, stalled])
+    return ti.Vector([rz_new, stalled, rd_new])
 
 
 @ti.func
@@ -732,7 +808,7 @@ def relative(rz, bnorm):
 
 @ti.kernel
 def _step(coef: A, mesh: MeshPack, state: StatePack, elems: ElementPack,
-          cg: SolvePack) -> ti.types.vector(2, float):
+          cg: SolvePack, mg: MultigridPack) -> ti.types.vector(2, float):
     """(relative residual, CG iterations), also left in scalars[0] and scalars[1]."""
     # The whole step runs in one serial kernel: on a 2-core CPU, launching a kernel per CG
     # phase costs more than the work below ~50k triangles (docs/method.md §4, cost notes).
@@ -742,17 +818,17 @@ def _step(coef: A, mesh: MeshPack, state: StatePack, elems: ElementPack,
     ti.loop_config(serialize=True)
     for _ in range(1):
         c = constants(coef)
-        rb = cg_begin(c, mesh, state, elems, cg)
+        rb = cg_begin(True, c, mesh, state, elems, cg, mg)
         rz, bnorm = rb[0], rb[1]
         iters = 0
         stalled = 0.0
-        rel = relative(rz, bnorm)
+        rel = relative(rb[2], bnorm)
         while iters < c.max_iters and rel > c.tol and stalled == 0.0:
-            out = cg_iteration(rz, c, mesh, elems, cg)
+            out = cg_iteration(True, rz, c, mesh, elems, cg, mg)
             stalled = out[1]
             if stalled == 0.0:
                 rz = out[0]
-                rel = relative(rz, bnorm)
+                rel = relative(out[2], bnorm)
                 iters += 1
         cg.scalars[0] = rel
         advance(c, mesh, state, cg)
@@ -790,7 +866,7 @@ def _start(two: int, coef: A, mesh: MeshPack, state: StatePack, elems: ElementPa
     out = ti.Vector([0.0, 0.0, 0.0])
     for _ in range(1):
         c = constants(coef)
-        rb = cg_start(c, mesh, state, elems, cg)
+        rb = cg_start(False, c, mesh, state, elems, cg, cg)
         out = ti.Vector([rb[0], rb[1], backend.loop_probe(two)])
     return out
 
@@ -802,7 +878,7 @@ def _iteration(two: int, rz: float, coef: A, mesh: MeshPack, elems: ElementPack,
     out = ti.Vector([0.0, 0.0, 0.0])
     for _ in range(1):
         c = constants(coef)
-        it = cg_iteration(rz, c, mesh, elems, cg)
+        it = cg_iteration(False, rz, c, mesh, elems, cg, cg)
         out = ti.Vector([it[0], it[1], backend.loop_probe(two)])
     return out
 

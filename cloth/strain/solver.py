@@ -736,6 +736,12 @@ class StrainLimiter:
             self._spare_pc = None
         return self._pc
 
+    def multigrid(self):
+        """The multigrid of the implicit step's matrix this solve keeps (``_pcg_preconditioner``:
+        above FACTOR_MAX_FACES faces, without contacts, on the CPU), for the dynamics' CG
+        (``ImplicitEuler.set_multigrid``); None where it keeps none."""
+        return self._pc if isinstance(self._pc, MultigridPreconditioner) else None
+
     def constraint_values(self):
         """(n_faces, k) constraint values g / sqrt(a) (strain units, <= 0 satisfied) of the
         active method at the current positions, in the order of constraints.py, except that
