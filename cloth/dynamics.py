@@ -92,8 +92,9 @@ SolvePack = ti.types.argpack(force=A, dv=A, rhs=A, res=A, z=A, p=A, Ap=A, precon
                              scalars=A)
 BlockPack = ti.types.argpack(val=A, diag=A, face_slot=A, edge_slot=A, stitch_slot=A,
                              bend_slot=A)
-#   mg      the aggregation multigrid's arrays (cloth/strain/multigrid.py), or its stub.
-MultigridPack = ti.types.argpack(mg_int=A, mg_real=A, mg_block=A)
+#   mg      the aggregation multigrid's level arrays (cloth/strain/multigrid.py), or its stub;
+#           its fine level's diagonal blocks are this step's own (``cg.precond``).
+MultigridPack = ti.types.argpack(mg_int=A, mg_real=A)
 
 # The step's scalars: indices into ``coef``, the float array (numpy) every kernel takes
 # (``ImplicitEuler._coef``) and reads once into a ``Constants`` struct (``constants``). They
@@ -238,7 +239,7 @@ class ImplicitEuler:
             arrays, mode = self._mg_stub, PC_BLOCK_JACOBI
         self.last_preconditioner = "multigrid" if mode == PC_MULTIGRID else "block Jacobi"
         return mode, self._packs.get("mg", MultigridPack, mg_int=arrays.ints,
-                                     mg_real=arrays.reals, mg_block=arrays.blocks)
+                                     mg_real=arrays.reals)
 
     def set_stitches(self, pairs):
         self.stitches_np = np.asarray(pairs, np.int32).reshape(-1, 2)
@@ -732,9 +733,12 @@ def cg_start(with_mg: ti.template(), c, mesh: T, state: T, elems: T, cg: T, mg: 
     use_mg = multigrid_on(with_mg, c)
     if ti.static(with_mg):
         if use_mg:
-            # z = P r, and P b into Ap (free until the first iteration): CG's scale b.P b in
-            # the same preconditioner's norm as its residual.
-            multigrid.apply(c.nv, mg.mg_int, mg.mg_real, mg.mg_block, cg.res, cg.z)
+            # z = P r. The fine level's damped block Jacobi uses this step's diagonal blocks
+            # (cg.precond, inverted above), not the ones the hierarchy was made with: made a
+            # few steps earlier, they slowed the pull scene's CG (4.8k faces, the corner
+            # dragged: 49-183 iterations a step against block Jacobi's 119-164; with these,
+            # 48-90).
+            multigrid.apply(c.nv, mg.mg_int, mg.mg_real, cg.precond, cg.res, cg.z)
     rz = 0.0
     rd = 0.0
     bnorm = 0.0
@@ -778,7 +782,7 @@ def cg_iteration(with_mg: ti.template(), rz, c, mesh: T, elems: T, cg: T, mg: T)
                 rz_new += cg.res[i].dot(Dr)
         if ti.static(with_mg):
             if use_mg:
-                multigrid.apply(c.nv, mg.mg_int, mg.mg_real, mg.mg_block, cg.res, cg.z)
+                multigrid.apply(c.nv, mg.mg_int, mg.mg_real, cg.precond, cg.res, cg.z)
                 for i in range(c.nv):
                     if mesh.vert_pinned[i] != 0:
                         cg.z[i] = ti.Vector([0.0, 0.0, 0.0])
