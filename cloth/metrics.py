@@ -23,6 +23,29 @@ def columns_times(c0, c1, B):
     return c0[:, :, None] * B[:, None, 0, :] + c1[:, :, None] * B[:, None, 1, :]
 
 
+def gram_times(c0, c1, B):
+    """(C B)^T (C B) for C = [c0 c1] (columns (N, k)) and B (N, 2, 2): B^T (C^T C) B, from the
+    columns' three dot products (the (N, k, 2) product C B is never formed). (N, 2, 2). With
+    the edge vectors and Dm^-1 it is F^T F (``cauchy_green``)."""
+    g00, g11 = np.einsum("ni,ni->n", c0, c0), np.einsum("ni,ni->n", c1, c1)
+    g01 = np.einsum("ni,ni->n", c0, c1)
+    b00, b01, b10, b11 = B[:, 0, 0], B[:, 0, 1], B[:, 1, 0], B[:, 1, 1]
+    t00, t01 = g00 * b00 + g01 * b10, g00 * b01 + g01 * b11      # (C^T C) B
+    t10, t11 = g01 * b00 + g11 * b10, g01 * b01 + g11 * b11
+    out = np.empty((len(B), 2, 2))
+    out[:, 0, 0] = b00 * t00 + b10 * t10
+    out[:, 1, 1] = b01 * t01 + b11 * t11
+    out[:, 0, 1] = out[:, 1, 0] = b00 * t01 + b10 * t11
+    return out
+
+
+def cauchy_green(x, faces, Dm_inv):
+    """C = F^T F per face (F, 2, 2), F = Ds Dm^-1, without forming F."""
+    x = np.asarray(x, dtype=np.float64)
+    x0 = x[faces[:, 0]]
+    return gram_times(x[faces[:, 1]] - x0, x[faces[:, 2]] - x0, Dm_inv)
+
+
 def material_Dm_inv(uv, faces):
     Dm = np.stack([uv[faces[:, 1]] - uv[faces[:, 0]], uv[faces[:, 2]] - uv[faces[:, 0]]], axis=2)
     return np.linalg.inv(Dm)
@@ -32,15 +55,22 @@ def face_strains(x, uv, faces, grain, Dm_inv=None):
     """Per-face strains as a dict of (F,) arrays: warp, weft, bias, principal_max,
     principal_min. ``Dm_inv``: the faces' ``material_Dm_inv`` when the caller keeps it (a
     model does: ``ClothModel.material_Dm_inv``)."""
-    F = deformation_gradients(x, faces, material_Dm_inv(uv, faces) if Dm_inv is None
-                              else Dm_inv)
-    Fg = columns_times(F[:, :, 0], F[:, :, 1], grain)  # columns: F e_warp, F e_weft
-    wu, wv = Fg[:, :, 0], Fg[:, :, 1]
-    eta = singular_values(F)
+    # Every strain here is a length |F u| = sqrt(u^T C u) of a material direction u, so
+    # C = F^T F is all it needs (at 16k faces 3x faster than forming F and F [e_warp e_weft]:
+    # metrics.csv reads it every frame).
+    C = cauchy_green(x, faces, material_Dm_inv(uv, faces) if Dm_inv is None else Dm_inv)
+    a, b, d = C[:, 0, 0], C[:, 0, 1], C[:, 1, 1]
+    wu, wv = grain[:, :, 0], grain[:, :, 1]          # warp and weft in material space
+
+    def length(u):
+        return np.sqrt(np.maximum(a * u[:, 0] ** 2 + 2.0 * b * u[:, 0] * u[:, 1]
+                                  + d * u[:, 1] ** 2, 0.0))
+
+    eta = _stretches_of(a, b, d)
     return {
-        "warp": np.linalg.norm(wu, axis=1) - 1.0,
-        "weft": np.linalg.norm(wv, axis=1) - 1.0,
-        "bias": np.linalg.norm(wu + wv, axis=1) / np.sqrt(2.0) - 1.0,
+        "warp": length(wu) - 1.0,
+        "weft": length(wv) - 1.0,
+        "bias": length(wu + wv) / np.sqrt(2.0) - 1.0,
         "principal_max": eta[:, 0] - 1.0,
         "principal_min": eta[:, 1] - 1.0,
     }
@@ -231,11 +261,16 @@ def _stretches(F):
     f0, f1 = F[:, :, 0], F[:, :, 1]
     a, b, d = (np.einsum("ni,ni->n", f0, f0), np.einsum("ni,ni->n", f0, f1),
                np.einsum("ni,ni->n", f1, f1))
+    return _stretches_of(a, b, d), (a, b, d)
+
+
+def _stretches_of(a, b, d):
+    """The singular values (n, 2), descending, of an F with F^T F = [[a, b], [b, d]]."""
     r = np.hypot(0.5 * (a - d), b)
     # m - r by m^2 - r^2 = det C over m + r: no cancellation when the smaller stretch is small.
     lam1 = 0.5 * (a + d) + r
     lam2 = np.where(lam1 > 0, (a * d - b * b) / np.where(lam1 > 0, lam1, 1.0), 0.0)
-    return np.sqrt(np.maximum(np.stack([lam1, lam2], axis=1), 0.0)), (a, b, d)
+    return np.sqrt(np.maximum(np.stack([lam1, lam2], axis=1), 0.0))
 
 
 def singular_values(F):

@@ -102,21 +102,6 @@ def _gram(G):
     return out
 
 
-def _gram_times(c0, c1, B):
-    """(C B)^T (C B) for C = [c0 c1] (columns (N, k)) and B (N, 2, 2): B^T (C^T C) B, from the
-    columns' three dot products (the (N, k, 2) product C B is never formed). (N, 2, 2)."""
-    g00, g11 = np.einsum("ni,ni->n", c0, c0), np.einsum("ni,ni->n", c1, c1)
-    g01 = np.einsum("ni,ni->n", c0, c1)
-    b00, b01, b10, b11 = B[:, 0, 0], B[:, 0, 1], B[:, 1, 0], B[:, 1, 1]
-    t00, t01 = g00 * b00 + g01 * b10, g00 * b01 + g01 * b11      # (C^T C) B
-    t10, t11 = g01 * b00 + g11 * b10, g01 * b01 + g11 * b11
-    out = np.empty((len(B), 2, 2))
-    out[:, 0, 0] = b00 * t00 + b10 * t10
-    out[:, 1, 1] = b01 * t01 + b11 * t11
-    out[:, 0, 1] = out[:, 1, 0] = b00 * t01 + b10 * t11
-    return out
-
-
 def _inv2(A):
     """Inverse of stacked 2x2 matrices."""
     det = A[:, 0, 0] * A[:, 1, 1] - A[:, 0, 1] * A[:, 1, 0]
@@ -202,8 +187,8 @@ def face_sizing_terms(mesh, params, obstacle_distance=None, edges=None):
     terms = {"curvature": _gram(S) / params.refine_angle ** 2}   # S S (S symmetric)
 
     # Velocity gradient (3x2): bounds the velocity difference across an edge.
-    terms["velocity"] = _gram_times(mesh.v[j] - mesh.v[i], mesh.v[k] - mesh.v[i], Dm_inv) \
-        / params.refine_velocity ** 2
+    terms["velocity"] = metrics.gram_times(mesh.v[j] - mesh.v[i], mesh.v[k] - mesh.v[i],
+                                           Dm_inv) / params.refine_velocity ** 2
 
     # Compression: a region compressed (Green strain e = F^T F - I below 0 along a direction)
     # will buckle, and is refined before the wrinkles form: along it, the metric m that
@@ -215,7 +200,7 @@ def face_sizing_terms(mesh, params, obstacle_distance=None, edges=None):
     # c k / sqrt(2). Where the root is complex, the square root of the negative discriminant
     # is taken negative, so that the metric falls continuously to 0 (ARCSim's
     # compression_metric with rib_stiffening 1).
-    e = _gram_times(x[j] - x[i], x[k] - x[i], Dm_inv)       # F^T F, F = Ds Dm^-1
+    e = metrics.gram_times(x[j] - x[i], x[k] - x[i], Dm_inv)       # F^T F, F = Ds Dm^-1
     e[:, 0, 0] -= 1.0
     e[:, 1, 1] -= 1.0
     c2 = 2.0 * params.refine_compression * params.size_min ** 2

@@ -6,8 +6,9 @@ import pytest
 
 from cloth.model import MeshArrays, ModelError, build_edges, signed_material_areas
 import cloth.remesh as remesh_module
+from cloth import metrics
 from cloth.remesh import RemeshParams, _Work, _collapse_phase, _compose, _export, _flip_phase, \
-    _gram, _stretch_error, _stretch_error_np, _sym_eig2, _gram_times, clamp_metric, face_sizing, \
+    _gram, _stretch_error, _stretch_error_np, _sym_eig2, clamp_metric, face_sizing, \
     pending_operations, remesh, vertex_sizing
 from cloth.sheet import make_sheet
 
@@ -130,7 +131,7 @@ def test_written_out_products_match_numpy(rng):
     c0, c1 = rng.standard_normal((50, 3)), rng.standard_normal((50, 3))
     assert np.allclose(_gram(G), np.transpose(G, (0, 2, 1)) @ G, rtol=0, atol=1e-13)
     F = np.stack([c0, c1], axis=2) @ B
-    assert np.allclose(_gram_times(c0, c1, B), np.transpose(F, (0, 2, 1)) @ F, rtol=0,
+    assert np.allclose(metrics.gram_times(c0, c1, B), np.transpose(F, (0, 2, 1)) @ F, rtol=0,
                        atol=1e-12)
     lam = rng.standard_normal((50, 2))
     assert np.allclose(_compose(lam, B), (B * lam[:, None, :]) @ np.transpose(B, (0, 2, 1)),
