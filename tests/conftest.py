@@ -3,14 +3,14 @@
 Jitter mode: ``LOOM_JITTER_SEED=N pytest ...`` moves every simulation's start by about 1 nm
 (``JITTER_M``: a random offset per free vertex, normal, seeded by N and the test's node id),
 so a run with a few seeds shows that no test's verdict hangs on one run's last bits. The hook
-is here, not in the product: every in-process run starts in ``Simulator.__init__``, which
-this file wraps for the session (the scene builders and the set-ups they return stay
-untouched). Within one test every Simulator of the same mesh size gets the same offsets, so
+is here: every in-process run starts in ``Simulator.__init__``, which this file wraps for
+the session to move its start with the product's ``nudged_start`` (what settings
+``sim.nudge`` does; the scene builders and the set-ups they return stay untouched). Within
+one test every Simulator of the same mesh size gets the same offsets, so
 tests that compare two runs bit for bit compare two equally moved runs. Runs in a child
 process (the command line, the window under Xvfb) are not moved; a test comparing such a run
 bit for bit with an in-process one is marked ``no_jitter``.
 """
-import dataclasses
 import os
 import sys
 import zlib
@@ -40,16 +40,6 @@ def jitter_seed():
     return int(value) if value else None
 
 
-def jitter_offsets(shape, pinned):
-    """The current test's offsets for a start of ``shape`` (V, 3): the same for every call
-    within a test; zero at pinned vertices (their targets are the start)."""
-    import numpy as np
-    rng = np.random.default_rng([_jitter["seed"], _jitter["key"], *shape])
-    offsets = rng.normal(0.0, JITTER_M, shape)
-    offsets[np.asarray(pinned, bool)] = 0.0
-    return offsets
-
-
 def pytest_configure(config):
     config.addinivalue_line(
         "markers", "no_jitter: compares an in-process run bit for bit with one in a child "
@@ -57,14 +47,15 @@ def pytest_configure(config):
     _jitter["seed"] = jitter_seed()
     if _jitter["seed"] is None:
         return
-    from cloth.simulator import Simulator
+    from cloth.simulator import Simulator, nudged_start
     original = Simulator.__init__
 
     def moved_start(self, setup, settings):
+        # The product's own nudge (settings sim.nudge), seeded by the test and the mesh size:
+        # the same offsets for every call within a test; none at pinned vertices.
         if _jitter["seed"] is not None and _jitter["key"] is not None:
-            mesh = setup.mesh
-            mesh = dataclasses.replace(mesh, x=mesh.x + jitter_offsets(mesh.x.shape, mesh.pinned))
-            setup = dataclasses.replace(setup, mesh=mesh)
+            setup = nudged_start(setup, [_jitter["seed"], _jitter["key"], *setup.mesh.x.shape],
+                                 JITTER_M)
         original(self, setup, settings)
     moved_start.__wrapped__ = original
     Simulator.__init__ = moved_start
