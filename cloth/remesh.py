@@ -110,8 +110,6 @@ def _inv2(A):
     return inv / det[:, None, None]
 
 
-
-
 SIZING_TERMS = ("curvature", "velocity", "compression", "obstacle")
 
 
