@@ -5,6 +5,7 @@ Regenerate the reference images (after an intended change of the look or of the 
 
     .venv/bin/python -m tests.test_app --regenerate
 """
+import contextlib
 import os
 import sys
 
@@ -458,10 +459,47 @@ def test_heat_map_marks_the_band_edges():
     assert legend.marks == [-0.01, 0.0, 0.01] and legend.lo < -0.01 < 0.01 < legend.hi
 
 
-def xvfb_run():
-    """xvfb-run on a free display, searched from a number of this process's own: two test
-    workers starting xvfb-run -a at once can both take the first free number."""
-    return ["xvfb-run", "-a", "-n", str(100 + os.getpid() % 800)]
+@contextlib.contextmanager
+def virtual_display(screen):
+    """A virtual X server (Xvfb) of the given screen size: yields its display name, ready for
+    clients. Xvfb picks the number itself (-displayfd): it takes the first display whose every
+    socket it can bind, the abstract one included, so neither test workers nor other jobs on
+    the same host can share it. xvfb-run -a looks only at lock files in /tmp, so a server of
+    another job on the host with the same number can answer our client and refuse it (CI
+    once failed so: "cannot connect to the X display")."""
+    import shutil
+    import subprocess
+    if shutil.which("Xvfb") is None:
+        pytest.skip("Xvfb is not installed (apt-get install xvfb)")
+    read, write = os.pipe()
+    server = subprocess.Popen(["Xvfb", "-displayfd", str(write), "-screen", "0", f"{screen}x24",
+                               "-nolisten", "tcp"], pass_fds=(write,),
+                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    os.close(write)
+    with os.fdopen(read) as numbers:
+        number = numbers.readline().strip()     # written once the server accepts clients
+    try:
+        assert number, f"Xvfb did not start: {server.stderr.read().decode()[-1000:]}"
+        yield f":{number}"
+    finally:
+        server.terminate()
+        server.wait(timeout=30)
+
+
+def run_in_window(code, screen, **env):
+    """Run a driver script in a fresh process on a virtual screen (a window needs its own
+    GGUI context); skip when there is no Vulkan device for a window."""
+    import subprocess
+    with virtual_display(screen) as display:
+        env = dict(os.environ, DISPLAY=display, **env)
+        env.pop("WAYLAND_DISPLAY", None)
+        env.pop("XAUTHORITY", None)
+        proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                              timeout=300, env=env)
+    if "cannot open" in proc.stderr and "Vulkan" in proc.stderr:
+        pytest.skip("no Vulkan device for a window")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return proc
 
 
 WINDOW_DRIVER = """
@@ -524,20 +562,11 @@ def test_window_app_runs_under_xvfb(tmp_path, screen):
     README's screen and a laptop's; a separate process, since a window needs its own GGUI
     context. Every panel fits the window it opens in: inside it, and without a scroll bar,
     with each section of the control column opened in turn and with the teaching plot."""
-    import shutil
-    import subprocess
-    if shutil.which("xvfb-run") is None:
-        pytest.skip("xvfb-run is not installed (apt-get install xvfb)")
     full = screen == "1280x800"
     code = WINDOW_DRIVER.format(root=ROOT, out=str(tmp_path), full=full, scene="hanging")
     # No other method prepared in the background (tests/test_compile_notice.py tests that):
     # compiling two more strain solvers cold was most of this test's time.
-    env = dict(os.environ, LOOM_PREPARE_METHODS="0")
-    proc = subprocess.run([*xvfb_run(), "-s", f"-screen 0 {screen}x24", sys.executable,
-                           "-c", code], capture_output=True, text=True, timeout=300, env=env)
-    if "cannot open" in proc.stderr and "Vulkan" in proc.stderr:
-        pytest.skip("no Vulkan device for a window")
-    assert proc.returncode == 0, proc.stderr[-2000:]
+    proc = run_in_window(code, screen, LOOM_PREPARE_METHODS="0")
     fit = [line.split()[1:] for line in proc.stdout.splitlines() if line.startswith("fit ")]
     assert len(fit) == 6, proc.stdout
     width, height = (int(v) for v in screen.split("x"))
@@ -618,20 +647,13 @@ print("hover-off", app.teach.hover)
 def teach_window(tmp_path_factory):
     """The teaching-view driver's output lines (first word -> the rest), one window run
     shared by the selection and the hover tests."""
-    import shutil
-    import subprocess
-    if shutil.which("xvfb-run") is None:
-        pytest.skip("xvfb-run is not installed (apt-get install xvfb)")
     code = TEACH_DRIVER.format(root=ROOT, out=str(tmp_path_factory.mktemp("teach_window")))
-    proc = subprocess.run([*xvfb_run(), "-s", "-screen 0 1280x800x24", sys.executable,
-                           "-c", code], capture_output=True, text=True, timeout=300)
-    if "cannot open" in proc.stderr and "Vulkan" in proc.stderr:
-        pytest.skip("no Vulkan device for a window")
-    assert proc.returncode == 0, proc.stderr[-2000:]
+    proc = run_in_window(code, "1280x800")
     return dict(line.split(" ", 1) for line in proc.stdout.splitlines() if " " in line)
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group("teach_window")     # one worker: the window runs once
 def test_window_teaching_view_selects_a_triangle_in_both_views(teach_window):
     """In the real window (Xvfb): with the axes and the plot on, a click on a cloth face
     selects that face; a click on its point in the plot selects a face at that point (faces
@@ -644,6 +666,7 @@ def test_window_teaching_view_selects_a_triangle_in_both_views(teach_window):
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group("teach_window")     # one worker: the window runs once
 def test_window_teaching_view_highlights_the_hovered_triangle(teach_window):
     """The cursor over a cloth face (read each frame, no click) marks that face; over its
     point in the plot, a face at that point; both draw magenta marks (outline and ring)
