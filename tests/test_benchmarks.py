@@ -29,6 +29,7 @@ def stability_results(tmp_path_factory):
     return out, {r["case"]: r for r in results}
 
 
+@pytest.mark.xdist_group("stability_results")     # one worker: the stability runs happen once
 def test_stability_report_lists_every_fast_case(stability_results):
     out, by_name = stability_results
     md = open(os.path.join(out, "stability.md")).read()
@@ -47,6 +48,7 @@ def test_stability_report_lists_every_fast_case(stability_results):
 @pytest.mark.parametrize("name", [
     pytest.param(c.name, marks=pytest.mark.xfail(strict=True, reason=KNOWN[c.name]))
     if c.name in KNOWN else c.name for c in FAST])
+@pytest.mark.xdist_group("stability_results")     # one worker: the stability runs happen once
 def test_stability_case_passes(stability_results, name):
     r = stability_results[1][name]
     assert r["finite"], r.get("error")

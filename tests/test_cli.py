@@ -111,6 +111,7 @@ def headless_run(tmp_path_factory):
     return res, out
 
 
+@pytest.mark.xdist_group("cli_run")     # one worker: the command-line run happens once
 @pytest.mark.no_jitter     # the child process's run is not moved: the library's must not be
 def test_the_command_line_simulates_in_f64_like_the_library(headless_run):
     """``main.py`` starts Taichi before it imports the scenes, so the module-level Taichi
@@ -135,6 +136,7 @@ def test_the_command_line_simulates_in_f64_like_the_library(headless_run):
     assert np.abs(cli - sim.model.positions()).max() < 1e-7
 
 
+@pytest.mark.xdist_group("cli_run")     # one worker: the command-line run happens once
 def test_headless_writes_the_documented_folder(headless_run):
     import trimesh
     res, out = headless_run

@@ -69,6 +69,7 @@ def table():
     return rows
 
 
+@pytest.mark.xdist_group("table1")     # one worker: the table's runs happen once
 @pytest.mark.parametrize("bands", list(BANDS))
 @pytest.mark.parametrize("method", METHODS)
 def test_every_run_meets_its_own_constraints_and_settles(table, bands, method):
@@ -84,6 +85,7 @@ def test_every_run_meets_its_own_constraints_and_settles(table, bands, method):
     assert r["height_range"] < 1e-2
 
 
+@pytest.mark.xdist_group("table1")     # one worker: the table's runs happen once
 @pytest.mark.parametrize("bands", list(BANDS))
 def test_svd_is_isotropic_within_each_setting(table, bands):
     r = table[bands, "svd"]
@@ -104,6 +106,7 @@ def test_svd_is_isotropic_within_each_setting(table, bands):
     assert abs(r["warp_max"] - r["weft_max"]) < 0.1 * first
 
 
+@pytest.mark.xdist_group("table1")     # one worker: the table's runs happen once
 @pytest.mark.parametrize("bands", list(BANDS))
 def test_warp_weft_follows_the_material_bands(table, bands):
     r = table[bands, "warp-weft"]
@@ -116,6 +119,7 @@ def test_warp_weft_follows_the_material_bands(table, bands):
     assert r[f"{loose}_max"] > LOOSE - 1e-3
 
 
+@pytest.mark.xdist_group("table1")     # one worker: the table's runs happen once
 @pytest.mark.parametrize("bands", list(BANDS))
 def test_mapping_stretches_the_tight_direction_beyond_its_band(table, bands):
     r = table[bands, "mapping"]
@@ -139,6 +143,7 @@ def test_mapping_stretches_the_tight_direction_beyond_its_band(table, bands):
     assert LOOSE - 1e-3 < r[f"{loose}_max"] < LOOSE + 5e-4
 
 
+@pytest.mark.xdist_group("table1")     # one worker: the table's runs happen once
 @pytest.mark.parametrize("bands", list(BANDS))
 def test_material_methods_swap_with_the_bands_svd_does_not(table, bands):
     tight, loose = _tight_loose(bands)
@@ -154,6 +159,7 @@ def test_material_methods_swap_with_the_bands_svd_does_not(table, bands):
     assert abs(svd["warp_max"] - svd["weft_max"]) < 0.005
 
 
+@pytest.mark.xdist_group("table1")     # one worker: the table's runs happen once
 def test_wrinkle_measures_differ_between_methods(table):
     curv = {k: v["curvature"] for k, v in table.items()}
     # The folds follow how far the horizontal (weft) direction may stretch, whichever
