@@ -205,6 +205,8 @@ def main(argv=None):
             return fail(str(err))
         except Exception as err:  # Taichi could not start this arch (no driver, no device)
             return fail(f"Taichi could not start on --arch {args.arch} ({err}); use --arch cpu")
+        for note in backend.start_notes():
+            print(note, file=sys.stderr, flush=True)
         from cloth import warm
         line = warm.after_init()
         if line:

@@ -17,7 +17,13 @@ F32_ONLY = ("vulkan", "metal")
 # (Taichi's other SPIR-V back end) was not available to test and is treated the same way.
 HOST_LOOP_AL = ("vulkan", "metal")
 
-_state = {"arch": None, "precision": None, "fast": None, "reason": None}
+# Back ends on which Loom's serial launches (a whole solve in one kernel thread: ``for _ in
+# range(1)`` under ``serialize=True``) run on a single GPU thread; said once at start-up
+# (``start_notes``; docs/speed/gpu_plan.md: what a parallel version would need and give).
+ONE_GPU_THREAD = ("cuda", "amdgpu")
+
+_state = {"arch": None, "precision": None, "fast": None, "reason": None, "requested": None}
+_gpu = {"resolved": None}
 
 
 class BackendError(RuntimeError):
@@ -163,12 +169,19 @@ def init(arch="cpu", precision=None, debug=False, first_run_fast=False):
     offline cache has no optimised kernels of this code (``choose_compile_mode``)."""
     if arch not in ARCHES:
         raise BackendError(f"unknown --arch '{arch}': use one of {', '.join(ARCHES)}")
+    requested = arch
+    if arch == "gpu":
+        # The device decides the rules (f32 only, the host-loop solve), so they follow the
+        # back end Taichi picks, not the word "gpu": on a machine whose GPU back end was
+        # Vulkan, --arch gpu compiled f64 kernels for it and stopped in a SPIR-V error.
+        arch = resolve_gpu()
     if precision is None:
         precision = default_precision(arch)
     if precision not in PRECISIONS:
         raise BackendError(f"unknown --precision '{precision}': use f64 or f32")
     if arch in F32_ONLY and precision == "f64":
-        raise BackendError(f"--arch {arch} has no 64-bit float kernels in Taichi (its SPIR-V "
+        device = arch if requested == arch else f"{requested} (Taichi's {arch} here)"
+        raise BackendError(f"--arch {device} has no 64-bit float kernels in Taichi (its SPIR-V "
                            f"back end cannot compile f64 atan2): use --precision f32, or "
                            f"--arch cpu / cuda for f64")
     if _state["arch"] == arch and _state["precision"] == precision:
@@ -179,10 +192,40 @@ def init(arch="cpu", precision=None, debug=False, first_run_fast=False):
     fp = ti.f64 if precision == "f64" else ti.f32
     _use_plain_debug_info()
     fast, reason = choose_compile_mode(arch, precision, first_run_fast)
-    ti.init(arch=getattr(ti, ARCHES[arch]), default_fp=fp, log_level=ti.ERROR,
+    ti.init(arch=getattr(ti, ARCHES.get(arch, arch)), default_fp=fp, log_level=ti.ERROR,
             debug=debug, offline_cache=True, offline_cache_max_size_of_files=CACHE_BYTES,
             advanced_optimization=not fast)
-    _state.update(arch=arch, precision=precision, fast=fast, reason=reason)
+    _state.update(arch=arch, precision=precision, fast=fast, reason=reason,
+                  requested=requested)
+
+
+def resolve_gpu():
+    """The back end Taichi starts for ``ti.gpu`` on this machine ("cuda", "vulkan", "metal",
+    ..., or "cpu" when it finds no GPU back end), probed once per process with a throwaway
+    ``ti.init``."""
+    if _gpu["resolved"] is None:
+        from taichi._lib import core as ti_core
+        from taichi.lang import impl
+        ti.init(arch=ti.gpu, log_level=ti.ERROR, offline_cache=False)
+        name = ti_core.arch_name(impl.current_cfg().arch)
+        ti.reset()
+        _state["arch"] = None           # nothing runs until init starts the real one
+        _gpu["resolved"] = "cpu" if name in ("x64", "arm64") else name
+    return _gpu["resolved"]
+
+
+def start_notes():
+    """Lines main.py prints after ``init``: which device ``--arch gpu`` started on, and that
+    on a GPU of ``ONE_GPU_THREAD`` the solves run as serial kernels."""
+    notes = []
+    if _state["requested"] == "gpu":
+        notes.append(f"loom: --arch gpu started on {_state['arch']} "
+                     f"({_state['precision']})")
+    if _state["arch"] in ONE_GPU_THREAD:
+        notes.append(f"loom: on {_state['arch']} each solve still runs as one serial kernel, "
+                     "on a single GPU thread: expect it to be slower than --arch cpu "
+                     "(docs/speed/gpu_plan.md)")
+    return notes
 
 
 def _float_types(value):

@@ -68,3 +68,36 @@ def test_types_made_on_import_are_all_checked_and_the_benchmarks_import_none():
     r = run("".join(f"import benchmarks.{n}\n" for n in names if n != "__init__")
             + "import cloth.settings\nimport scenes\n" + init)
     assert "started" in r.stdout, r.stdout + r.stderr
+
+
+def test_arch_gpu_follows_the_device_taichi_starts():
+    """``--arch gpu`` takes the rules of the back end Taichi picks: where that is Vulkan or
+    Metal the run is f32 (an f64 kernel stopped in a SPIR-V error there), and start-up says
+    which device it got; an explicit f64 on such a device is refused with the fix. In a child
+    process: a second ti.init would reset this one's fields."""
+    import os
+    import subprocess
+    import sys
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    code = ("from cloth import backend\n"
+            "backend.init('gpu')\n"
+            "print('started', backend.arch(), backend.precision())\n"
+            "print('notes', backend.start_notes())\n"
+            "try:\n"
+            "    backend.init('gpu', 'f64')\n"
+            "    print('f64 ok')\n"
+            "except backend.BackendError as err:\n"
+            "    print('refused:', err)\n")
+    r = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 0, r.stderr
+    lines = dict(line.split(" ", 1) for line in r.stdout.splitlines() if " " in line)
+    arch, precision = lines["started"].split()
+    assert arch != "gpu" and f"started on {arch} ({precision})" in lines["notes"]
+    from cloth import backend
+    if arch in backend.F32_ONLY:
+        assert precision == "f32"
+        assert "--arch gpu (Taichi's" in lines["refused:"] and "--precision f32" in \
+            lines["refused:"]
+    else:
+        assert precision == "f64" and "f64" in lines
