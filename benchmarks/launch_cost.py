@@ -1,0 +1,184 @@
+"""What a GPU run would pay per kernel launch, and how many launches a frame needs
+(docs/speed/gpu_plan.md).
+
+Two measurements on this machine's CPU back end:
+
+1. **The cost of one launch**, with almost no work in it: a kernel without arguments, with
+   one ndarray, with the dynamics step's arguments (four argpacks and the coefficient array,
+   built by ``ImplicitEuler`` for a ``--n`` x ``--n`` sheet), each launched from Python; and
+   the same one-ndarray kernel dispatched from a Taichi compute graph (``ti.graph``: the
+   launches are recorded once and replayed without Python). The host-side cost does not
+   depend on the device, so it is what each launch of a parallel design would cost on top of
+   its work on a GPU too (plus the driver's own launch).
+2. **A hanging frame's counts** at each ``--res``: Python launches a frame, the dynamics' CG
+   iterations, the strain solve's AL rounds, Newton steps and PCG iterations, the multigrid's
+   levels, the bytes of the arrays the solves stream, and ms a frame by stage: what a
+   parallel design's launch count and memory traffic follow from.
+
+    python -m benchmarks.launch_cost --res 46 91 181 --out docs/speed
+"""
+import argparse
+import json
+import os
+import platform
+import statistics
+import sys
+import time
+
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+if ROOT not in sys.path:
+    sys.path.insert(0, ROOT)
+
+
+def _timed(call, repeats):
+    """Microseconds a call, the median of five batches of ``repeats`` (after a warm-up)."""
+    import taichi as ti
+    for _ in range(20):
+        call()
+    ti.sync()
+    batches = []
+    for _ in range(5):
+        t = time.perf_counter()
+        for _ in range(repeats):
+            call()
+        ti.sync()
+        batches.append(1e6 * (time.perf_counter() - t) / repeats)
+    return statistics.median(batches)
+
+
+def launch_costs(n, repeats=400):
+    """Microseconds a launch: {what: us}."""
+    import taichi as ti
+    from cloth import dynamics as D
+    from cloth.model import ClothModel, Material, MeshArrays
+    from cloth.sheet import make_sheet
+
+    @ti.kernel
+    def no_arguments():
+        pass
+
+    @ti.kernel
+    def one_array(a: D.A):
+        a[0] = 1.0
+
+    @ti.kernel
+    def one_loop(a: D.A):
+        for i in range(a.shape[0]):
+            a[i] += 1.0
+
+    @ti.kernel
+    def step_arguments(coef: D.A, mesh: D.MeshPack, state: D.StatePack,
+                       elems: D.ElementPack, cg: D.SolvePack):
+        cg.scalars[0] = coef[0]
+
+    uv, faces = make_sheet(1.0, 1.0, n, n)
+    model = ClothModel(MeshArrays(uv=uv, x=np.c_[uv, np.zeros(len(uv))], faces=faces),
+                       Material())
+    dyn = D.ImplicitEuler(model)
+    coef = dyn._constants(1 / 30)
+    mesh, state = dyn._mesh(), dyn._state()
+    arr = ti.ndarray(float, 4)
+    sym = ti.graph.Arg(ti.graph.ArgKind.NDARRAY, "a", dtype=ti.f64, ndim=1)
+    graphs = {}
+    for name, kernel in (("one_array", one_array), ("one_loop", one_loop)):
+        builder = ti.graph.GraphBuilder()
+        for _ in range(100):
+            builder.dispatch(kernel, sym)
+        graphs[name] = builder.compile()
+    return {
+        "python, no arguments": _timed(no_arguments, repeats),
+        "python, one ndarray": _timed(lambda: one_array(arr), repeats),
+        "python, the dynamics step's arguments (the coefficients and 4 argpacks)":
+            _timed(lambda: step_arguments(coef, mesh, state, dyn._elems, dyn._cg), repeats),
+        "python, one ndarray, a parallel loop over 4 elements":
+            _timed(lambda: one_loop(arr), repeats),
+        "compute graph, one ndarray (a graph of 100 launches, per launch)":
+            _timed(lambda: graphs["one_array"].run({"a": arr}), max(repeats // 40, 5)) / 100,
+        "compute graph, one ndarray, a parallel loop over 4 elements (per launch)":
+            _timed(lambda: graphs["one_loop"].run({"a": arr}), max(repeats // 40, 5)) / 100,
+    }
+
+
+def frame_counts(res, frames=20, skip=2):
+    """One hanging run at ``res``: medians over frames ``skip``.. of the counts and times."""
+    import taichi as ti
+    from taichi.lang import kernel_impl
+    import scenes
+    from cloth.simulator import Simulator
+    from scenes.common import resolve
+    mod = scenes.get("hanging")
+    cfg = resolve(mod.DEFAULTS, [{"cloth": {"resolution": res}}])
+    cfg["output"] = dict(cfg["output"], images=False, meshes=False)
+    sim = Simulator(mod.build(cfg), cfg)
+    launches = [0]
+    original = kernel_impl.Kernel.__call__
+
+    def counted(self, *args, **kwargs):
+        launches[0] += 1
+        return original(self, *args, **kwargs)
+    kernel_impl.Kernel.__call__ = counted
+    rows = []
+    try:
+        for f in range(frames):
+            launches[0] = 0
+            t = time.perf_counter()
+            sim.step_frame()
+            ms = 1e3 * (time.perf_counter() - t)
+            s, d = sim.strain, sim.dynamics
+            rows.append(dict(launches=launches[0], ms=ms, dynamics_cg=d.last_cg_iters,
+                             al_rounds=s.last_iterations, newton=s.last_newton,
+                             pcg=s.last_cg, strain_ms=s.last_ms))
+    finally:
+        kernel_impl.Kernel.__call__ = original
+    med = {k: statistics.median(r[k] for r in rows[skip:]) for k in rows[0]}
+    nbytes = 0
+    for owner in (sim.model, sim.dynamics, sim.strain._ws):
+        for value in vars(owner).values():
+            if isinstance(value, (ti.Ndarray, ti.Field)) and hasattr(value, "to_numpy"):
+                nbytes += value.to_numpy().nbytes
+    mg = sim.strain.multigrid()
+    return dict(res=res, faces=sim.model.n_faces, vertices=sim.model.n_verts,
+                array_mb=nbytes / 1e6, multigrid_levels=list(getattr(mg, "levels", []) or []),
+                **med)
+
+
+def cpu_name():
+    try:
+        with open("/proc/cpuinfo") as fh:
+            names = [line.split(":", 1)[1].strip() for line in fh if line.startswith("model name")]
+        return f"{names[0]} ({len(names)} cores)"
+    except (OSError, IndexError):
+        return platform.machine()
+
+
+def main():
+    from cloth import backend, provenance
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--res", type=int, nargs="+", default=[46, 91, 181])
+    ap.add_argument("--n", type=int, default=91, help="sheet size for the launch costs")
+    ap.add_argument("--frames", type=int, default=20)
+    ap.add_argument("--out", default=None, help="folder for launch_cost.json")
+    args = ap.parse_args()
+    os.environ.setdefault(backend.FAST_COMPILE_ENV, "0")
+    backend.init("cpu", "f64")
+    costs = launch_costs(args.n)
+    for what, us in costs.items():
+        print(f"{us:8.1f} us  {what}", flush=True)
+    counts = []
+    for res in args.res:
+        c = frame_counts(res, args.frames)
+        counts.append(c)
+        print(json.dumps(c), flush=True)
+    if args.out:
+        with open(os.path.join(args.out, "launch_cost.json"), "w") as fh:
+            json.dump(dict(command="python -m benchmarks.launch_cost " + " ".join(sys.argv[1:]),
+                           commit=provenance.commit(), date=time.strftime("%Y-%m-%d"),
+                           machine=cpu_name(),
+                           threads=os.environ.get("TI_CPU_MAX_NUM_THREADS", "all"),
+                           launch_us=costs, frames=counts), fh, indent=1)
+
+
+if __name__ == "__main__":
+    main()
