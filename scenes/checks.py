@@ -49,6 +49,11 @@ def finite(sim):
     return True, ""
 
 
+def seconds(t):
+    """A time for a check's line: at most two decimals, no trailing zeros (5, 0.5, 0.76)."""
+    return f"{t:.2f}".rstrip("0").rstrip(".")
+
+
 def limits_held(sim, factor=LIMIT_FACTOR, after=0.0):
     """The current method's own constraints held to ``factor`` x strain.tol now and at the end
     of every frame from ``after`` seconds on (the simulator's watch, ``own_violation_log``;
@@ -58,13 +63,13 @@ def limits_held(sim, factor=LIMIT_FACTOR, after=0.0):
     if own is None:
         return True, ""
     if before(sim, after):
-        return True, f"limits not checked before {after:g} s"
+        return True, f"limits not checked before {seconds(after)} s"
     worst, at = (float(own.max()) if own.size else 0.0), sim.time
     for t, value in sim.own_violation_log:
         if t >= after - 1e-6 and value > worst:
             worst, at = value, t
     limit = factor * sim.settings.strain.tol
-    since = f" from {after:g} s" if after > 0 else ""
+    since = f" from {seconds(after)} s" if after > 0 else ""
     if not worst <= limit:
         return False, (f"the {sim.method} limits are not held: own violation {worst:.2g} > "
                        f"{limit:.2g} (strain) at t = {at:.2f} s")
@@ -80,7 +85,7 @@ def rms_speed(sim):
 def at_rest(sim, after, speed=REST_SPEED):
     """From ``after`` seconds on, the cloth is at rest (RMS speed under ``speed``)."""
     if before(sim, after):
-        return True, f"rest not checked before {after:g} s"
+        return True, f"rest not checked before {seconds(after)} s"
     s = rms_speed(sim)
     if not s < speed:
         return False, (f"not at rest after {sim.time:.1f} s: RMS speed {1e3 * s:.1f} mm/s "
