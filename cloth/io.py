@@ -7,7 +7,7 @@ import numpy as np
 
 def _rows(fmt, values):
     """Every row of ``values`` through the line format ``fmt``, as one string. One %
-    operation over the whole array: np.savetxt formats row by row in Python, 3-5x slower
+    operation over the whole array: np.savetxt formats row by row in Python, 2.5-5x slower
     (a 16k-triangle frame's OBJ took 85-120 ms, now 22-41 ms on a 2-core AMD EPYC; the same
     bytes)."""
     values = np.asarray(values)
