@@ -24,21 +24,26 @@ def test_compile_error_names_the_file_line_and_code():
     assert f"line {line}" in msg
 
 
-def test_init_refuses_types_created_in_the_other_precision():
-    """Module-level Taichi types made before ti.init are f32; starting f64 afterwards would
-    run them in f32 silently (main.py did). backend.init stops with the fix instead."""
+def run_child(code):
+    """``code`` in a fresh Python process at the repository's root (a second ti.init in this
+    one would reset its fields)."""
     import os
     import subprocess
     import sys
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    code = ("import cloth.simulator\n"
-            "from cloth import backend\n"
-            "try:\n"
-            "    backend.init('cpu', 'f64')\n"
-            "except backend.BackendError as err:\n"
-            "    print('refused:', err)\n")
-    r = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True,
-                       timeout=300)
+    return subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True,
+                          text=True, timeout=300)
+
+
+def test_init_refuses_types_created_in_the_other_precision():
+    """Module-level Taichi types made before ti.init are f32; starting f64 afterwards would
+    run them in f32 silently (main.py did). backend.init stops with the fix instead."""
+    r = run_child("import cloth.simulator\n"
+                  "from cloth import backend\n"
+                  "try:\n"
+                  "    backend.init('cpu', 'f64')\n"
+                  "except backend.BackendError as err:\n"
+                  "    print('refused:', err)\n")
     assert "refused:" in r.stdout and "call cloth.backend.init first" in r.stdout, r.stderr
 
 
@@ -73,23 +78,16 @@ def test_types_made_on_import_are_all_checked_and_the_benchmarks_import_none():
 def test_arch_gpu_follows_the_device_taichi_starts():
     """``--arch gpu`` takes the rules of the back end Taichi picks: where that is Vulkan or
     Metal the run is f32 (an f64 kernel stopped in a SPIR-V error there), and start-up says
-    which device it got; an explicit f64 on such a device is refused with the fix. In a child
-    process: a second ti.init would reset this one's fields."""
-    import os
-    import subprocess
-    import sys
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    code = ("from cloth import backend\n"
-            "backend.init('gpu')\n"
-            "print('started', backend.arch(), backend.precision())\n"
-            "print('notes', backend.start_notes())\n"
-            "try:\n"
-            "    backend.init('gpu', 'f64')\n"
-            "    print('f64 ok')\n"
-            "except backend.BackendError as err:\n"
-            "    print('refused:', err)\n")
-    r = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True,
-                       timeout=120)
+    which device it got; an explicit f64 on such a device is refused with the fix."""
+    r = run_child("from cloth import backend\n"
+                  "backend.init('gpu')\n"
+                  "print('started', backend.arch(), backend.precision())\n"
+                  "print('notes', backend.start_notes())\n"
+                  "try:\n"
+                  "    backend.init('gpu', 'f64')\n"
+                  "    print('f64 ok')\n"
+                  "except backend.BackendError as err:\n"
+                  "    print('refused:', err)\n")
     assert r.returncode == 0, r.stderr
     lines = dict(line.split(" ", 1) for line in r.stdout.splitlines() if " " in line)
     arch, precision = lines["started"].split()
