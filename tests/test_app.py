@@ -483,7 +483,11 @@ def virtual_display(screen):
         yield f":{number}"
     finally:
         server.terminate()
-        server.wait(timeout=30)
+        try:
+            server.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            server.kill()
+            server.wait()
 
 
 def run_in_window(code, screen, **env):
