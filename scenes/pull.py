@@ -1,6 +1,6 @@
 """The paper's motivating case: a user stretches the garment. A sheet hangs pinned along its
-top edge and its bottom-left corner is dragged out and sideways, then held; strain limiting
-decides how far the cloth gives."""
+top edge and its bottom-left corner is dragged out towards the viewer and up, then held; the
+sheet is pulled taut and strain limiting decides how far it gives."""
 import numpy as np
 
 from cloth.model import MeshArrays
@@ -19,7 +19,12 @@ DEFAULTS = scene_defaults({
         "top": 2.0,               # m, height of the pinned edge
     },
     "pull": {
-        "displacement": [-0.1, 0.15, 0.45],  # m, where the corner ends up relative to rest
+        # m, where the corner ends up relative to rest. Every method can meet it: each pin's
+        # distance to the corner grows by 0.3-0.6 % (``pin_stretch``), inside svd's 1 % in
+        # every direction. The earlier [-0.1, 0.15, 0.45] asked 3.3 % along the diagonal from
+        # the top-right pin: svd failed its check from every start (own violation 0.47 at
+        # resolution 25), mapping from resolution 35.
+        "displacement": [0.0, 0.1, 0.45],
         "duration": 2.0,                     # s to get there (smooth ramp), then held
     },
     "strain": {"method": "mapping"},
@@ -55,6 +60,21 @@ def build(cfg):
         mesh=mesh, material=material_from(cfg), pin_motion=pin_motion,
         camera={"position": [1.6, c["top"] - 0.3, 2.2], "lookat": [0.0, c["top"] - 0.55, 0.2]},
         check_final=lambda sim: check_final(sim, cfg))
+
+
+def pin_stretch(cfg):
+    """The largest and smallest ratio, minus 1, of a pinned pair's distance at the end of the
+    drag to its distance in the material (the top edge's pins against the dragged corner):
+    no state meets the limits where this exceeds what a method lets any direction stretch."""
+    c, p = cfg["cloth"], cfg["pull"]
+    uv = np.array([[0.0, v] for v in np.linspace(0.0, c["width"], 201)])
+    corner_uv = np.array([c["height"], 0.0])
+    corner = np.array([-0.5 * c["width"], c["top"] - c["height"], 0.0]) + np.asarray(
+        p["displacement"], dtype=np.float64)
+    top = np.stack([uv[:, 1] - 0.5 * c["width"], np.full(len(uv), c["top"]),
+                    np.zeros(len(uv))], axis=1)
+    ratio = np.linalg.norm(top - corner, axis=1) / np.linalg.norm(uv - corner_uv, axis=1)
+    return float(ratio.max() - 1.0), float(ratio.min() - 1.0)
 
 
 def check_final(sim, cfg):

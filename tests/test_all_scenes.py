@@ -136,3 +136,16 @@ def test_the_default_drape_drapes():
     assert np.isfinite(lowest).sum() >= 6                 # it overhangs on (nearly) every side
     assert (lowest >= 0.0).sum() <= 1, lowest             # and hangs below the equator there
     assert sim.own_violation().max() <= checks.LIMIT_FACTOR * sim.settings.strain.tol
+
+def test_the_pull_target_is_within_every_methods_bands():
+    """The dragged corner's target asks no pinned pair to stretch past svd's bound (svd, the
+    strictest method, holds every direction to the warp band's upper end): each pin's distance
+    to the corner grows, by less than that. The earlier target asked 3.3 % along the diagonal
+    from the top-right pin; no state met svd's limits, and its runs failed their check."""
+    from scenes import pull
+    from scenes.common import resolve
+    cfg = resolve(scenes.get("pull").DEFAULTS, [])
+    most, least = pull.pin_stretch(cfg)
+    assert 0.0 < least <= most < cfg["strain"]["warp"][1]
+    old = resolve(scenes.get("pull").DEFAULTS, [{"pull": {"displacement": [-0.1, 0.15, 0.45]}}])
+    assert pull.pin_stretch(old)[0] > 0.03
