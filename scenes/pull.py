@@ -38,6 +38,14 @@ def ramp(t, duration):
     return s * s * (3.0 - 2.0 * s)
 
 
+def rest_positions(uv, c):
+    """Where material points ``uv`` hang at rest: the sheet upright, its top edge (u = 0) at
+    height ``c["top"]``, centred on x = 0 (``c``: the cloth settings)."""
+    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+    return np.stack([uv[:, 1] - 0.5 * c["width"], c["top"] - uv[:, 0], np.zeros(len(uv))],
+                    axis=1)
+
+
 def build(cfg):
     from .common import material_from
     c, p = cfg["cloth"], cfg["pull"]
@@ -45,7 +53,7 @@ def build(cfg):
         raise ValueError(f"pull.duration must be > 0 (got {p['duration']})")
     n = int(c["resolution"])
     uv, faces = make_sheet(c["height"], c["width"], n, n, c["pattern"])
-    x = np.stack([uv[:, 1] - 0.5 * c["width"], c["top"] - uv[:, 0], np.zeros(len(uv))], axis=1)
+    x = rest_positions(uv, c)
     top = np.isclose(uv[:, 0], 0.0)
     corner = np.isclose(uv[:, 0], c["height"]) & np.isclose(uv[:, 1], 0.0)
     mesh = MeshArrays(uv=uv, x=x, faces=faces, pinned=top | corner)
@@ -67,13 +75,11 @@ def pin_stretch(cfg):
     drag to its distance in the material (the top edge's pins against the dragged corner):
     no state meets the limits where this exceeds what a method lets any direction stretch."""
     c, p = cfg["cloth"], cfg["pull"]
-    uv = np.array([[0.0, v] for v in np.linspace(0.0, c["width"], 201)])
+    uv = np.c_[np.zeros(201), np.linspace(0.0, c["width"], 201)]
     corner_uv = np.array([c["height"], 0.0])
-    corner = np.array([-0.5 * c["width"], c["top"] - c["height"], 0.0]) + np.asarray(
-        p["displacement"], dtype=np.float64)
-    top = np.stack([uv[:, 1] - 0.5 * c["width"], np.full(len(uv), c["top"]),
-                    np.zeros(len(uv))], axis=1)
-    ratio = np.linalg.norm(top - corner, axis=1) / np.linalg.norm(uv - corner_uv, axis=1)
+    corner = rest_positions(corner_uv, c)[0] + np.asarray(p["displacement"], dtype=np.float64)
+    ratio = np.linalg.norm(rest_positions(uv, c) - corner, axis=1) / \
+        np.linalg.norm(uv - corner_uv, axis=1)
     return float(ratio.max() - 1.0), float(ratio.min() - 1.0)
 
 
@@ -84,7 +90,7 @@ def check_final(sim, cfg):
         uv = sim.model.uv
         c = cfg["cloth"]
         corner = np.isclose(uv[:, 0], c["height"]) & np.isclose(uv[:, 1], 0.0)
-        rest = np.array([-0.5 * c["width"], c["top"] - c["height"], 0.0])
+        rest = rest_positions([c["height"], 0.0], c)[0]
         want = rest + np.asarray(cfg["pull"]["displacement"]) * ramp(sim.time,
                                                                      cfg["pull"]["duration"])
         err = np.abs(sim.model.positions()[corner][0] - want).max()

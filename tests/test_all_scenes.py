@@ -137,6 +137,7 @@ def test_the_default_drape_drapes():
     assert (lowest >= 0.0).sum() <= 1, lowest             # and hangs below the equator there
     assert sim.own_violation().max() <= checks.LIMIT_FACTOR * sim.settings.strain.tol
 
+
 def test_the_pull_target_is_within_every_methods_bands():
     """The dragged corner's target asks no pinned pair to stretch past svd's bound (svd, the
     strictest method, holds every direction to the warp band's upper end): each pin's distance
