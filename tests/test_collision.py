@@ -448,28 +448,61 @@ def test_capsule_union_reports_its_two_nearest_parts():
         np.testing.assert_allclose(planes[k, 3], n @ centre + 0.1 + 0.004, atol=1e-9)
 
 
+def _thrown_shirt(substeps):
+    """The shirt's front and back panels thrown at each other for ``substeps`` substeps of
+    self-collision alone (no obstacles, no dynamics): thousands of pairs, on a mesh large
+    enough to be split across threads. Returns (model, collider)."""
+    from assets import load_tshirt_mesh
+    mesh = load_tshirt_mesh()
+    rng = np.random.default_rng(0)
+    mesh.v = np.zeros_like(mesh.x)
+    mesh.v[:, 2] = -2.0 * np.sign(mesh.x[:, 2]) + rng.normal(0.0, 0.2, len(mesh.x))
+    model = ClothModel(mesh, Material())
+    col = Collider(model, [], thickness=0.004, self_collision=True, self_thickness=0.004)
+    h = 1 / 60
+    for s in range(substeps):
+        x = model.state.x.to_numpy()
+        x[:model.n_verts] += h * model.state.v.to_numpy()[:model.n_verts]
+        model.state.x.from_numpy(x)
+        col.resolve(h, s * h)
+    return model, col
+
+
 @pytest.mark.slow
 def test_self_collision_is_deterministic():
     """Two identical runs give the same bits: the impulses are applied in the order of the
-    pair list, which must not follow thread scheduling. (With parallel bucket fills, this
-    case found 7228 and 7147 pairs in two runs and ended 0.2 m apart; on the tshirt scene two
-    runs were 8 mm apart after 10 frames.) The shirt's front and back panels are thrown at
-    each other: thousands of pairs, on a mesh large enough to be split across threads."""
-    from assets import load_tshirt_mesh
+    pair list, which must not follow thread scheduling. (With an order that did, this case
+    found 7228 and 7147 pairs in two runs and ended 0.2 m apart; on the tshirt scene two runs
+    were 8 mm apart after 10 frames.)"""
     finals = []
     for _ in range(2):
-        mesh = load_tshirt_mesh()
-        rng = np.random.default_rng(0)
-        mesh.v = np.zeros_like(mesh.x)
-        mesh.v[:, 2] = -2.0 * np.sign(mesh.x[:, 2]) + rng.normal(0.0, 0.2, len(mesh.x))
-        model = ClothModel(mesh, Material())
-        col = Collider(model, [], thickness=0.004, self_collision=True, self_thickness=0.004)
-        h = 1 / 60
-        for s in range(10):
-            x = model.state.x.to_numpy()
-            x[:model.n_verts] += h * model.state.v.to_numpy()[:model.n_verts]
-            model.state.x.from_numpy(x)
-            col.resolve(h, s * h)
+        model, col = _thrown_shirt(10)
         assert col.last_self_pairs > 1000
         finals.append(model.positions())
     assert np.array_equal(finals[0], finals[1])
+
+
+@pytest.mark.slow
+def test_self_collision_pairs_come_in_the_primitives_order():
+    """The pair list, searched in parallel, comes in one order whatever the threads did: the
+    vertex-triangle pairs by vertex, then the edge-edge pairs by edge (each unordered edge pair
+    once, from its lower edge); no pair twice."""
+    model, col = _thrown_shirt(6)
+    sc = col.self_solver
+    n = sc.last_pairs
+    assert n > 1000
+    idx = sc.pairs.idx.to_numpy()[:n]
+    w = sc.pairs.w.to_numpy()[:n]
+    nv, ne = model.n_verts, model.n_edges
+    n_vt = int(sc.slots.count.to_numpy()[:nv].sum())
+    assert 0 < n_vt < n
+    face_id = {tuple(f): k for k, f in enumerate(model.face_verts.to_numpy()[:model.n_faces])}
+    edge_id = {tuple(e): k for k, e in enumerate(model.edge_verts.to_numpy()[:ne])}
+    vt = [(i[0], face_id[tuple(i[1:])]) for i in idx[:n_vt]]
+    ee = [(edge_id[(i[0], i[1])], edge_id[(i[2], i[3])]) for i in idx[n_vt:]]
+    np.testing.assert_array_equal(w[:n_vt, 0], 1.0)       # a vertex's own weight
+    for keys in (vt, ee):
+        assert len(set(keys)) == len(keys)
+        primaries = [k[0] for k in keys]
+        assert primaries == sorted(primaries)
+    assert all(e < e2 for e, e2 in ee)
