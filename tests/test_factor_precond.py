@@ -137,3 +137,59 @@ def test_rounds_take_fewer_newton_steps_with_the_factor(monkeypatch):
     assert lim._pc.usable(sim.model.pinned)
     sim.step_frame()
     assert lim.last_newton == FACTOR_NEWTON * lim.last_iterations
+
+
+def test_long_multigrid_solves_take_more_newton_steps_a_round(monkeypatch):
+    """With the multigrid a round takes MULTIGRID_NEWTON Newton steps up to LATE_ROUND rounds
+    and MAX_NEWTON after (with the inner stop off every round runs its budget in full): one
+    step a round left svd's projections on the pulled sheet at the round budget."""
+    from cloth.strain import solver
+    from cloth.strain.defaults import MAX_NEWTON, MULTIGRID_NEWTON
+    sim = _hanging("svd", res=6)
+    lim = sim.strain
+    monkeypatch.setattr(solver, "FACTOR_MAX_FACES", sim.model.n_faces - 1)
+    monkeypatch.setattr(solver, "LATE_ROUND", 1)
+    monkeypatch.setattr(lim, "inner_rtol", 0.0)
+    lim._upload_params()
+    seen = 0
+    for _ in range(10):
+        ready = isinstance(lim._pc, MultigridPreconditioner) and lim._pc.usable(sim.model.pinned)
+        sim.step_frame()
+        if ready:
+            rounds = lim.last_iterations
+            early = min(rounds, 1)
+            assert lim.last_newton == MULTIGRID_NEWTON * early + MAX_NEWTON * (rounds - early)
+            seen += rounds > 1
+    assert seen > 0
+
+
+def test_an_unconverged_multigrid_solve_is_solved_again_with_more_newton_steps(monkeypatch):
+    """A fast solve on the multigrid that ends unconverged is solved again from its start with
+    MAX_NEWTON Newton steps in every round (``last_fallback``); one that converges is not.
+    (Odd frames ask a tolerance of 1e-9 in one round: out of reach.)"""
+    from cloth.strain import solver
+    from cloth.strain.defaults import MAX_NEWTON, MULTIGRID_NEWTON
+    sim = _hanging("svd", res=6)
+    lim = sim.strain
+    monkeypatch.setattr(solver, "FACTOR_MAX_FACES", sim.model.n_faces - 1)
+    monkeypatch.setattr(lim, "inner_rtol", 0.0)
+    lim._upload_params()
+    tol = lim.tol
+    retried = converged = 0
+    for frame in range(10):
+        ready = isinstance(lim._pc, MultigridPreconditioner) and lim._pc.usable(sim.model.pinned)
+        hard = ready and frame % 2 == 1
+        monkeypatch.setattr(lim, "max_rounds", 1 if hard else 100)
+        monkeypatch.setattr(lim, "tol", 1e-9 if hard else tol)
+        sim.step_frame()
+        if not ready:
+            continue
+        if hard:
+            retried += 1
+            assert lim.last_fallback and lim.last_iterations == 2
+            assert lim.last_newton == MULTIGRID_NEWTON + MAX_NEWTON
+        else:
+            converged += 1
+            assert lim.last_converged and not lim.last_fallback
+            assert lim.last_newton == MULTIGRID_NEWTON * lim.last_iterations
+    assert retried > 0 and converged > 0

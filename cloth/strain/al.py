@@ -6,15 +6,14 @@ Why one kernel and ndarray arguments: ``buffers.py``.
 """
 import taichi as ti
 
-from .buffers import (B_FROM_PREV, B_MAX_CG, B_MAX_NEWTON, B_MAX_ROUNDS, B_MU0,
-                      B_MU_GROW, B_MU_MAX, B_PC_MODE, B_RTOL, B_STEP_TOL, B_TOL, CONTACT_SLOTS,
-                      CONVERGED, FEASIBLE_AS_GIVEN, LAST_TRY, N_STATS, NO_CONTACT, NO_SKIP,
-                      P_CONTACT_SCALE, P_DELTA, P_INNER_RTOL, P_ISO, P_KKT_TOL,
-                      P_MARGIN, P_PDAS, P_SHEAR, P_SVD_DELTA, P_WARP, P_WEFT,
-                      PC_FACTOR, PC_JACOBI, PC_MULTIGRID, RUNNING, ST_CG, ST_COMP, ST_CONVERGED,
-                      ST_ITERS, ST_KKT, ST_NEWTON, ST_START_VIOL, ST_TRIALS, ST_VIOL, A, T,
-                      ConstraintPack, ContactPack, MeshPack, MetricPack, PrecondPack, StepPack,
-                      VectorPack)
+from .buffers import (B_FROM_PREV, B_LATE_NEWTON, B_LATE_ROUND, B_MAX_CG, B_MAX_NEWTON,
+                      B_MAX_ROUNDS, B_MU0, B_MU_GROW, B_MU_MAX, B_PC_MODE, B_RTOL, B_STEP_TOL,
+                      B_TOL, CONTACT_SLOTS, CONVERGED, FEASIBLE_AS_GIVEN, LAST_TRY, N_STATS,
+                      NO_CONTACT, NO_SKIP, P_CONTACT_SCALE, P_DELTA, P_INNER_RTOL, P_ISO, P_KKT_TOL,
+                      P_MARGIN, P_PDAS, P_SHEAR, P_SVD_DELTA, P_WARP, P_WEFT, PC_FACTOR, PC_JACOBI,
+                      PC_MULTIGRID, RUNNING, ST_CG, ST_COMP, ST_CONVERGED, ST_ITERS, ST_KKT,
+                      ST_NEWTON, ST_START_VIOL, ST_TRIALS, ST_VIOL, A, T, ConstraintPack,
+                      ContactPack, MeshPack, MetricPack, PrecondPack, StepPack, VectorPack)
 from . import multigrid
 from .constraints import MAPPING_PAIRS_BY_ALIGNMENT, SVD, face_constraints
 from .defaults import NEAR_POWER
@@ -849,6 +848,8 @@ def solve_al(method: ti.template(), with_pdas: ti.template(), budget: A,
         mu_grow, mu_max = budget[B_MU_GROW], budget[B_MU_MAX]
         max_rounds = ti.cast(budget[B_MAX_ROUNDS], ti.i32)
         max_newton = ti.cast(budget[B_MAX_NEWTON], ti.i32)
+        late_round = ti.cast(budget[B_LATE_ROUND], ti.i32)
+        late_newton = ti.cast(budget[B_LATE_NEWTON], ti.i32)
         max_cg = ti.cast(budget[B_MAX_CG], ti.i32)
         rtol, tol, step_tol = budget[B_RTOL], budget[B_TOL], budget[B_STEP_TOL]
         from_prev = ti.cast(budget[B_FROM_PREV], ti.i32)
@@ -881,7 +882,10 @@ def solve_al(method: ti.template(), with_pdas: ti.template(), budget: A,
             inner = 0
             rr_first = 0.0
             d_max = 0.0
-            while inner < max_newton:
+            newton_cap = max_newton
+            if rounds >= late_round:
+                newton_cap = late_newton
+            while inner < newton_cap:
                 slope, cg_it = 0.0, 0
                 L0 = 0.0
                 if first == 0:

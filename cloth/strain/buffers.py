@@ -63,9 +63,10 @@ N_PARAMS = 14
 # host before each launch. Why an array and not kernel arguments: solve_al had 65 parameters,
 # and Taichi counts every scalar, ndarray and argpack member against one limit of 64 per
 # launch; the integers are exact in a float.
+# B_MAX_NEWTON Newton steps a round up to round B_LATE_ROUND, B_LATE_NEWTON after it.
 (B_MU0, B_MU_GROW, B_MU_MAX, B_MAX_ROUNDS, B_MAX_NEWTON, B_MAX_CG, B_RTOL, B_TOL, B_STEP_TOL,
- B_FROM_PREV, B_PC_MODE) = range(11)
-N_BUDGET = 11
+ B_FROM_PREV, B_PC_MODE, B_LATE_ROUND, B_LATE_NEWTON) = range(13)
+N_BUDGET = 13
 # A vertex without a contact half-space: n = 0 and d far below any position, so d - n.x never
 # comes near activating.
 NO_CONTACT = -1e30

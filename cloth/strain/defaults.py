@@ -71,14 +71,26 @@ EXACT_FACTOR_MAX_FACES = 10000
 # PCG iterations with the factor: FACTOR_CG_WORK / faces clipped to [FACTOR_CG, FACTOR_CG_MAX]
 # (an iteration costs ~ the faces, so small meshes afford more; 6 at 1152 faces rested best).
 FACTOR_CG, FACTOR_CG_MAX, FACTOR_CG_WORK = 6, 20, 6000
-# PCG iterations with the multigrid, one Newton step of them per AL round. A short PCG finds
-# the stiff (stretching) part of a step and little of its soft (bending, isometric) part, and
-# a projection that ends feasible in its first round keeps what it found: a creeping Cusick
-# skirt (denim, 0.5 cm, mapping) kept 5 % of a substep's fall with 2 steps of 4 iterations,
-# 22 % with 1 of 8, where exactly solved Newton steps keep 74 % (the exact projection 83 %), and
-# froze flat (DC 0.97; 0.90 with 12, as at 1 cm). One step of 12 is also no slower than two of
-# 4 (8 for warp-weft) on a hanging sheet at 4k-65k faces (docs/speed/solve_cost.md).
+# PCG iterations with the multigrid, one Newton step of them per AL round (up to MAX_NEWTON
+# past LATE_ROUND, below). A short PCG finds the stiff (stretching) part of a step and little
+# of its soft (bending, isometric) part, and a projection that ends feasible in its first round
+# keeps what it found: a creeping Cusick skirt (denim, 0.5 cm, mapping) kept 5 % of a substep's
+# fall with 2 steps of 4 iterations, 22 % with 1 of 8, where exactly solved Newton steps keep
+# 74 % (the exact projection 83 %), and froze flat (DC 0.97; 0.90 with 12, as at 1 cm). One
+# step of 12 is also no slower than two of 4 (8 for warp-weft) on a hanging sheet at 4k-65k
+# faces (docs/speed/solve_cost.md).
 MULTIGRID_CG, MULTIGRID_NEWTON = 12, 1
+# A projection still running after LATE_ROUND rounds takes up to MAX_NEWTON Newton steps a
+# round with the multigrid (a round ends sooner once its inner stop is met), and one that ends
+# unconverged is solved again from its start with MAX_NEWTON steps in every round
+# (solver._solve_al_with_fallback). With one step a round, svd's projections on the pulled
+# sheet (pull, resolution 35 and 50, most faces at a band) kept stopping at the 100-round
+# budget while the corner moved (at 50 the corner's faces 60 % past their limit, the final
+# check failed): one step did not minimise a round's function far enough for its multiplier
+# update. Five steps in every round met the limits there but made a hanging svd sheet at 4k
+# faces 1.6-1.9x slower (its 3-6 rounds a frame); the late steps alone still failed 2-6
+# frames at 50; with the second solve every frame met them. docs/speed/solve_cost.md.
+LATE_ROUND = 10
 # Newton steps per AL round: block Jacobi 5 (3 shimmered), the factor 4 (finds most of the
 # step per solve).
 MAX_NEWTON, FACTOR_NEWTON = 5, 4

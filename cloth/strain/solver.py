@@ -28,8 +28,8 @@ from .families import STRAIN_METHODS
 from . import al, buffers
 from .defaults import (ACTIVE_MARGIN, ACTIVE_SET_MU, CG_BUDGET, CG_RTOL,
                        EXACT_FACTOR_MAX_FACES, FACTOR_CG, FACTOR_CG_MAX, FACTOR_CG_WORK,
-                       FACTOR_MAX_FACES, FACTOR_NEWTON, INNER_RTOL, KKT_VELOCITY, MAX_NEWTON,
-                       MU_GROW, MU_MAX_SCALE, MU_SCALE,
+                       FACTOR_MAX_FACES, FACTOR_NEWTON, INNER_RTOL, KKT_VELOCITY, LATE_ROUND,
+                       MAX_NEWTON, MU_GROW, MU_MAX_SCALE, MU_SCALE,
                        MULTIGRID_CG, MULTIGRID_NEWTON, PDAS_CG_RTOL, PDAS_NEWTON, SETTLE_SPEED,
                        SOLVES)
 from .factor_precond import FIRST_AFTER, LASTING_SOLVES, FactorPreconditioner, FactorStub
@@ -585,8 +585,8 @@ class StrainLimiter:
 
     def newton_budget(self, pc_mode):
         """Newton steps per AL round: PDAS_NEWTON for the exact solve in the kernels, else
-        FACTOR_NEWTON with the factor, MULTIGRID_NEWTON with the multigrid and MAX_NEWTON with
-        block Jacobi."""
+        FACTOR_NEWTON with the factor, MULTIGRID_NEWTON with the multigrid (up to MAX_NEWTON
+        in rounds past LATE_ROUND: ``_solve_al``) and MAX_NEWTON with block Jacobi."""
         if self._kernel_pdas():
             return PDAS_NEWTON
         if pc_mode == PC_MULTIGRID:
@@ -633,12 +633,15 @@ class StrainLimiter:
 
     def restart_from(self, multipliers):
         """A projection solved again from its start: x back to x_start, the multipliers to
-        ``multipliers`` (``multipliers()`` taken before), ``last_fallback`` set."""
+        ``multipliers`` (``multipliers()`` taken before; None: zero), ``last_fallback`` set."""
         ws = self._ws
         self.last_fallback = True
         al.copy_vectors(self.model.n_verts, ws.x_start, ws.x)
         al.reset_start(self.model.n_verts, *self._start_args, ws.step_pack(self.model.state),
                        ws.vector_pack(), ws.contact_pack())
+        if multipliers is None:
+            self._zero_multipliers()
+            return
         for a, val in zip((ws.lam, ws.lam_c, ws.lam_s, ws.lam_t), multipliers):
             a.from_numpy(val)
 
@@ -646,10 +649,17 @@ class StrainLimiter:
         """``_solve_al``; under the exact solve in the kernels (``_kernel_pdas``) a projection
         not converged in ``direct.ACTIVE_SET_ROUNDS`` rounds is solved again from its start
         with the fast (margin) model (``last_fallback``), as the host loop does
-        (direct.solve)."""
+        (direct.solve). Under the fast solve, one that did not converge on the multigrid is
+        solved again from its start and zero multipliers with MAX_NEWTON Newton steps in
+        every round (LATE_ROUND in defaults.py says why)."""
         self.last_fallback, self.last_solves = False, 0      # (host solves: direct.py)
         if not self._kernel_pdas():
-            return self._solve_al(mid, K, metric, contacts)
+            out = self._solve_al(mid, K, metric, contacts)
+            if out[2] or self._last_pc_mode != PC_MULTIGRID:
+                return out
+            self.restart_from(None)
+            more = self._solve_al(mid, K, metric, contacts, late_round=0)
+            return out[0] + more[0], out[1] + more[1], more[2], more[3]
         from .direct import ACTIVE_SET_ROUNDS
         multipliers_in = self.multipliers()
         out = self._solve_al(mid, K, metric, contacts,
@@ -667,10 +677,12 @@ class StrainLimiter:
             self.mu_scale = mu_scale
         return out[0] + rounds, out[1] + newton, converged, stats
 
-    def _solve_al(self, mid, K, metric, contacts=False, rounds=None):
+    def _solve_al(self, mid, K, metric, contacts=False, rounds=None, late_round=None):
         """The AL loop (docs/method.md §4), one kernel launch (al.solve_al): rounds of inexact
         minimisation of L_A by projected Newton with a backtracking line search, then the
-        multiplier step and mu *= mu_grow, at most ``rounds`` (None: ``max_rounds``) of them.
+        multiplier step and mu *= mu_grow, at most ``rounds`` (None: ``max_rounds``) of them;
+        on the multigrid, rounds from ``late_round`` (None: LATE_ROUND) on take up to
+        MAX_NEWTON Newton steps.
         Returns (rounds, Newton steps, converged, the stats array)."""
         ws, m = self._ws, self.model
         mean_mass = self._mean_mass(metric)
@@ -682,6 +694,7 @@ class StrainLimiter:
         pc = None if contacts else self._pcg_preconditioner(metric)
         made_before = pc is not None and pc.before_solve(m.pinned[: m.n_verts])
         pc_mode = pc.mode if pc is not None and pc.usable(m.pinned[: m.n_verts]) else PC_JACOBI
+        self._last_pc_mode = pc_mode
         if self._stubs is None:
             self._stubs = {PC_FACTOR: FactorStub(), PC_MULTIGRID: MultigridStub()}
         fp = pc if pc_mode == PC_FACTOR else self._stubs[PC_FACTOR]
@@ -690,7 +703,10 @@ class StrainLimiter:
         budget[buffers.B_MU0], budget[buffers.B_MU_GROW] = mu, self.mu_grow
         budget[buffers.B_MU_MAX], budget[buffers.B_MAX_ROUNDS] = mu_max, \
             self.max_rounds if rounds is None else rounds
-        budget[buffers.B_MAX_NEWTON] = self.newton_budget(pc_mode)
+        budget[buffers.B_MAX_NEWTON] = newton = self.newton_budget(pc_mode)
+        budget[buffers.B_LATE_ROUND] = LATE_ROUND if late_round is None else late_round
+        budget[buffers.B_LATE_NEWTON] = max(newton, MAX_NEWTON) if pc_mode == PC_MULTIGRID \
+            and not self._kernel_pdas() else newton
         budget[buffers.B_MAX_CG] = self.pcg_budget(pc_mode)
         budget[buffers.B_RTOL] = min(self.cg_rtol, PDAS_CG_RTOL) if self._kernel_pdas() \
             else self.cg_rtol
