@@ -143,6 +143,7 @@ class StrainLimiter:
         self._last_pattern_solves = 0   # solves the last mesh's preconditioner saw
         self._spare_pc = None
         self._stubs = None         # placeholder arrays for the preconditioners not in use
+        self._last_pc_mode = PC_JACOBI   # the last AL solve's preconditioner (PC_*)
         self._v_last_valid = False    # v_last belongs to this mesh's vertices
         self._start_args = (0.0, 0, 0.0, 0)   # (h, extrapolate, settle, step_start)
         self.kkt_length = 0.0          # metres, this projection's stationarity tolerance
@@ -163,7 +164,8 @@ class StrainLimiter:
         self.last_converged, self.last_ms = True, 0.0
         self.last_newton = self.last_cg = self.last_factorizations = self.last_trials = 0
         self.last_solves = 0          # linear solves (exact: several per Newton step)
-        self.last_fallback = False    # exact: solved again with the fast model
+        self.last_fallback = False    # solved again: exact with the fast model, fast on the
+        #                               multigrid with five Newton steps a round
         self.last_stationarity, self._kkt_h = 0.0, 1.0 / 30.0
         self.last_reverted, self.reverted_count = False, 0
         self.last_slid, self.slid_count = False, 0   # solved again without friction
