@@ -21,9 +21,7 @@ DEFAULTS = scene_defaults({
     "pull": {
         # m, where the corner ends up relative to rest. Every method can meet it: each pin's
         # distance to the corner grows by 0.3-0.6 % (``pin_stretch``), inside svd's 1 % in
-        # every direction. The earlier [-0.1, 0.15, 0.45] asked 3.3 % along the diagonal from
-        # the top-right pin: svd failed its check from every start (own violation 0.47 at
-        # resolution 25), mapping from resolution 35.
+        # every direction (a target past it leaves no state within the limits).
         "displacement": [0.0, 0.1, 0.45],
         "duration": 2.0,                     # s to get there (smooth ramp), then held
     },

@@ -83,13 +83,11 @@ MULTIGRID_CG, MULTIGRID_NEWTON = 12, 1
 # A projection still running after LATE_ROUND rounds takes up to MAX_NEWTON Newton steps a
 # round with the multigrid (a round ends sooner once its inner stop is met), and one that ends
 # unconverged is solved again from its start with MAX_NEWTON steps in every round
-# (solver._solve_al_with_fallback). With one step a round, svd's projections on the pulled
-# sheet (pull, resolution 35 and 50, most faces at a band) kept stopping at the 100-round
-# budget while the corner moved (at 50 the corner's faces 60 % past their limit, the final
-# check failed): one step did not minimise a round's function far enough for its multiplier
-# update. Five steps in every round met the limits there but made a hanging svd sheet at 4k
-# faces 1.6-1.9x slower (its 3-6 rounds a frame); the late steps alone still failed 2-6
-# frames at 50; with the second solve every frame met them. docs/speed/solve_cost.md.
+# (solver._solve_al_with_fallback). Why: one step may not minimise a round's function far
+# enough for its multiplier update; on svd's pulled sheet (pull, resolution 35 and 50, most
+# faces at a band) the rounds then piled up to the budget and the sheet stretched 60 % past
+# its limit. Five steps in every round would make a resting svd sheet (3-6 rounds a frame)
+# 1.6-1.9x slower. docs/speed/solve_cost.md.
 LATE_ROUND = 10
 # Newton steps per AL round: block Jacobi 5 (3 shimmered), the factor 4 (finds most of the
 # step per solve).
