@@ -600,44 +600,56 @@ def pdas_resolves(K, nv, nf, mu, max_cg, rtol, it, pc_mode, mesh: T, metric: T, 
     the line search) are scratch. Returns (slope, CG iterations)."""
     total = it
     k = 1
-    while k < PDAS_SOLVES:
-        if pdas_changes(K, nv, nf, mu, mesh, cons, contacts, vec, prev, k == 1, flip) == 0:
-            break
-        for n in range(nv):
-            prev[n] = vec.d[n]
-        # rhs = b - mu sum_c flip_c t_c J_c^T (faces; contacts' J = -n).
-        for n in range(nv):
-            vec.r[n] = vec.b[n]
-        for f in range(nf):
-            ids = mesh.face_verts[f]
-            for c in range(K):
-                if flip[f, c] != 0.0:
-                    t = cons.g[f, c] + cons.lam[f, c] / mu
-                    scatter(vec.r, ids, pair_grad(cons.grad, f, c), -mu * flip[f, c] * t)
-        for n in range(nv):
-            if mesh.pinned[n] == 1:
-                vec.r[n] = ti.Vector([0.0, 0.0, 0.0])
-            else:
-                for j in ti.static(range(CONTACT_SLOTS)):
-                    fl, t = pdas_contact_flip(mu, contacts.contact, contacts.lam_c, vec.x,
-                                              prev, n, j)
-                    if fl != 0.0:
-                        vec.r[n] += (mu * fl * t) * contact_normal(contacts.contact, n, j)
+    back = False             # solving the first solve's system again (one PCG call site)
+    slope = 0.0
+    while True:
+        if not back:
+            changed = 0
+            if k < PDAS_SOLVES:
+                changed = pdas_changes(K, nv, nf, mu, mesh, cons, contacts, vec, prev, k == 1,
+                                       flip)
+            if changed == 0:
+                slope = -dot(vec.b, vec.d, nv)
+                if k > 1 and not slope < 0.0:
+                    back = True
+                else:
+                    break
+        if back:
+            # Back to the first solve: the set active at x (no flips).
+            for f in range(nf):
+                for c in range(K):
+                    flip[f, c] = 0.0
+            for n in range(nv):
+                prev[n] = ti.Vector([0.0, 0.0, 0.0])
+                vec.r[n] = vec.b[n]
+        else:
+            for n in range(nv):
+                prev[n] = vec.d[n]
+            # rhs = b - mu sum_c flip_c t_c J_c^T (faces; contacts' J = -n).
+            for n in range(nv):
+                vec.r[n] = vec.b[n]
+            for f in range(nf):
+                ids = mesh.face_verts[f]
+                for c in range(K):
+                    if flip[f, c] != 0.0:
+                        t = cons.g[f, c] + cons.lam[f, c] / mu
+                        scatter(vec.r, ids, pair_grad(cons.grad, f, c),
+                                -mu * flip[f, c] * t)
+            for n in range(nv):
+                if mesh.pinned[n] == 1:
+                    vec.r[n] = ti.Vector([0.0, 0.0, 0.0])
+                else:
+                    for j in ti.static(range(CONTACT_SLOTS)):
+                        fl, t = pdas_contact_flip(mu, contacts.contact, contacts.lam_c, vec.x,
+                                                  prev, n, j)
+                        if fl != 0.0:
+                            vec.r[n] += (mu * fl * t) * contact_normal(contacts.contact, n, j)
         total += pdas_pcg(K, nv, nf, mu, max_cg, rtol, pc_mode, mesh, metric, cons, contacts,
                           vec, pc, prev, flip)
         k += 1
-    slope = -dot(vec.b, vec.d, nv)
-    if k > 1 and not slope < 0.0:
-        # Back to the first solve: the set active at x (no flips).
-        for f in range(nf):
-            for c in range(K):
-                flip[f, c] = 0.0
-        for n in range(nv):
-            prev[n] = ti.Vector([0.0, 0.0, 0.0])
-            vec.r[n] = vec.b[n]
-        total += pdas_pcg(K, nv, nf, mu, max_cg, rtol, pc_mode, mesh, metric, cons, contacts,
-                          vec, pc, prev, flip)
-        slope = -dot(vec.b, vec.d, nv)
+        if back:
+            slope = -dot(vec.b, vec.d, nv)
+            break
     return slope, total
 
 
@@ -660,12 +672,24 @@ def pcg_loop(flipped: ti.template(), K, nv, nf, mu, max_cg, rtol, rr, pc_mode, m
     to |r| <= rtol |r0| (d, r and the work vectors z, p, Ap in ``vec``): on H, or with
     ``flipped`` on ``pdas_times``' matrix (H with the predicted set's Gauss-Newton terms;
     ``prev``, ``flip``). Returns the iterations."""
-    rz = precondition(pc_mode, nv, pc, vec.r, vec.z)
-    for n in range(nv):
-        vec.p[n] = vec.z[n]
+    # One call site of the preconditioner (it is inlined where it is called, and the
+    # multigrid's cycle is large): z = P r at the top of every pass, the first pass's p = z.
     stop = rtol * rtol * rr
-    it = 0
-    while it < max_cg and rr > stop:
+    it = -1
+    rz = 0.0
+    while True:
+        rz_new = precondition(pc_mode, nv, pc, vec.r, vec.z)
+        if it < 0:
+            for n in range(nv):
+                vec.p[n] = vec.z[n]
+        else:
+            beta = rz_new / rz
+            for n in range(nv):
+                vec.p[n] = vec.z[n] + beta * vec.p[n]
+        rz = rz_new
+        it += 1
+        if it >= max_cg or rr <= stop:
+            break
         pAp = 0.0
         if ti.static(flipped):
             pdas_times(K, nv, nf, mu, mesh, metric, cons, contacts, vec, prev, flip)
@@ -683,12 +707,6 @@ def pcg_loop(flipped: ti.template(), K, nv, nf, mu, max_cg, rtol, rr, pc_mode, m
             vec.d[n] += alpha * vec.p[n]
             vec.r[n] -= alpha * vec.Ap[n]
             rr += vec.r[n].dot(vec.r[n])
-        rz_new = precondition(pc_mode, nv, pc, vec.r, vec.z)
-        it += 1
-        beta = rz_new / rz
-        rz = rz_new
-        for n in range(nv):
-            vec.p[n] = vec.z[n] + beta * vec.p[n]
     return it
 
 
