@@ -695,14 +695,6 @@ def linearise(c, mesh: T, state: T, elems: T, cg: T):
 
 # The step's phases, shared by the one-launch kernel and the host-loop kernels.
 @ti.func
-def cg_begin(with_mg: ti.template(), c, mesh: T, state: T, elems: T, cg: T, mg: T):
-    """Linearise, prescribe the pinned dv, and start PCG: returns ``cg_start``'s (r.z, b.D b,
-    r.D r)."""
-    linearise(c, mesh, state, elems, cg)
-    return cg_start(with_mg, c, mesh, state, elems, cg, mg)
-
-
-@ti.func
 def multigrid_on(with_mg: ti.template(), c):
     """Whether this launch preconditions with the multigrid: compiled in (``with_mg``: the
     one-launch step; the host-loop kernels keep block Jacobi) and chosen (``c.pc``)."""
@@ -713,13 +705,9 @@ def multigrid_on(with_mg: ti.template(), c):
 
 
 @ti.func
-def cg_start(with_mg: ti.template(), c, mesh: T, state: T, elems: T, cg: T, mg: T):
-    """After ``linearise``: prescribe the pinned dv and start PCG. ``mg``: the multigrid's
-    arrays where ``with_mg`` (read only when ``c.pc`` chooses it). Returns (r.z, b.D b, r.D r)
-    with z = P r (CG's own product) and D the inverse diagonal blocks (block Jacobi): CG
-    stops on sqrt(r.D r / b.D b), the free rows only, whichever preconditioner it uses, so
-    that ``cg_tol`` means one accuracy (measured at 4k faces: in the multigrid's own norm the
-    same tolerance left a step 10x further from the tight one)."""
+def cg_prepare(c, mesh: T, state: T, cg: T):
+    """After ``linearise``: prescribe the pinned dv, invert the diagonal blocks, and leave dv
+    in p for ``cg_pass``'s first pass (r = b - A dv)."""
     # Pinned vertices: the dv that lands them on their target at the end of the step.
     # Free vertices start CG from the last step's dv (warm start: near rest, successive
     # velocity changes are alike); on_mesh_changed zeroes it after a remesh.
@@ -727,72 +715,72 @@ def cg_start(with_mg: ti.template(), c, mesh: T, state: T, elems: T, cg: T, mg: 
         if mesh.vert_pinned[i] != 0:
             cg.dv[i] = (mesh.vert_pin_target[i] - state.x[i]) / c.h - state.v[i]
         cg.precond[i] = cg.precond[i].inverse()
-    # r = b - A dv over the free vertices (pinned dv enters through the coupling).
-    apply_A(cg.dv, cg.Ap, c, mesh, elems)
-    free_residual(c, mesh, cg)
-    use_mg = multigrid_on(with_mg, c)
-    if ti.static(with_mg):
-        if use_mg:
-            # z = P r. The fine level's damped block Jacobi uses this step's diagonal blocks
-            # (cg.precond, inverted above), not the ones the hierarchy was made with: made a
-            # few steps earlier, they slowed the pull scene's CG (4.8k faces, the corner
-            # dragged: 49-183 iterations a step against block Jacobi's 119-164; with these,
-            # 48-90).
-            multigrid.apply(c.nv, mg.mg_int, mg.mg_real, cg.precond, cg.res, cg.z)
-    rz = 0.0
-    rd = 0.0
-    bnorm = 0.0
-    for i in range(c.nv):
-        Dr = cg.precond[i] @ cg.res[i]
-        if not use_mg:
-            cg.z[i] = Dr
-        if mesh.vert_pinned[i] != 0:
-            cg.z[i] = ti.Vector([0.0, 0.0, 0.0])
-        cg.p[i] = cg.z[i]
-        rz += cg.res[i].dot(cg.z[i])
-        rd += cg.res[i].dot(Dr)
-        if mesh.vert_pinned[i] == 0:
-            bnorm += cg.rhs[i].dot(cg.precond[i] @ cg.rhs[i])
-    return ti.Vector([rz, bnorm, rd])
+        cg.p[i] = cg.dv[i]
 
 
 @ti.func
-def cg_iteration(with_mg: ti.template(), rz, c, mesh: T, elems: T, cg: T, mg: T):
-    """One preconditioned CG iteration on the free vertices: returns (new r.z, 1 if it
-    stalled on p.A p <= 0 and changed nothing, new r.D r: ``cg_start``)."""
+def cg_pass(with_mg: ti.template(), first, rz, c, mesh: T, elems: T, cg: T, mg: T):
+    """One pass of preconditioned CG on the free vertices. The first (``first`` = 1, after
+    ``cg_prepare``) starts CG: r = b - A dv over the free vertices (pinned dv enters through
+    the coupling); the others are an iteration: p.A p, then dv and r updated. Both end with
+    z = P r and the next p. ``mg``: the multigrid's arrays where ``with_mg`` (read only when
+    ``c.pc`` chooses it).
+
+    Returns (new r.z, 1 if the iteration stalled on p.A p <= 0 and changed nothing, new
+    r.D r, b.D b on the first pass) with D the inverse diagonal blocks (block Jacobi): CG
+    stops on sqrt(r.D r / b.D b), the free rows only, whichever preconditioner it uses, so
+    that ``cg_tol`` means one accuracy (measured at 4k faces: in the multigrid's own norm the
+    same tolerance left a step 10x further from the tight one).
+
+    One pass for both, so that the product with A and the preconditioner have one call site
+    each: a ti.func is inlined wherever it is called, and each copy made the step's compile
+    longer."""
     apply_A(cg.p, cg.Ap, c, mesh, elems)
-    pAp = 0.0
-    for i in range(c.nv):
-        pAp += cg.p[i].dot(cg.Ap[i])
-    rz_new = rz
-    rd_new = 0.0
-    stalled = 1.0
-    if pAp > 0.0:
-        stalled = 0.0
-        step = rz / pAp
-        rz_new = 0.0
-        use_mg = multigrid_on(with_mg, c)
+    rz_new, rd_new, bnorm, stalled = rz, 0.0, 0.0, 0.0
+    if first == 1:
+        free_residual(c, mesh, cg)
+    else:
+        pAp = 0.0
         for i in range(c.nv):
-            cg.dv[i] += step * cg.p[i]
-            cg.res[i] -= step * cg.Ap[i]
-            Dr = cg.precond[i] @ cg.res[i]
-            rd_new += cg.res[i].dot(Dr)
-            if not use_mg:
-                cg.z[i] = Dr
-                rz_new += cg.res[i].dot(Dr)
+            pAp += cg.p[i].dot(cg.Ap[i])
+        if pAp > 0.0:
+            step = rz / pAp
+            for i in range(c.nv):
+                cg.dv[i] += step * cg.p[i]
+                cg.res[i] -= step * cg.Ap[i]
+        else:
+            stalled = 1.0
+    if stalled == 0.0:
+        use_mg = multigrid_on(with_mg, c)
         if ti.static(with_mg):
             if use_mg:
+                # z = P r. The fine level's damped block Jacobi uses this step's diagonal
+                # blocks (cg.precond, inverted by cg_prepare), not the ones the hierarchy was
+                # made with: made a few steps earlier, they slowed the pull scene's CG (4.8k
+                # faces, the corner dragged: 49-183 iterations a step against block Jacobi's
+                # 119-164; with these, 48-90).
                 multigrid.apply(c.nv, mg.mg_int, mg.mg_real, cg.precond, cg.res, cg.z)
-                for i in range(c.nv):
-                    if mesh.vert_pinned[i] != 0:
-                        cg.z[i] = ti.Vector([0.0, 0.0, 0.0])
-                    rz_new += cg.res[i].dot(cg.z[i])
-        beta_cg = rz_new / rz
+        rz_new = 0.0
+        for i in range(c.nv):
+            Dr = cg.precond[i] @ cg.res[i]
+            if not use_mg:
+                cg.z[i] = Dr
+            if mesh.vert_pinned[i] != 0:
+                cg.z[i] = ti.Vector([0.0, 0.0, 0.0])
+            rz_new += cg.res[i].dot(cg.z[i])
+            rd_new += cg.res[i].dot(Dr)
+            if first == 1 and mesh.vert_pinned[i] == 0:
+                bnorm += cg.rhs[i].dot(cg.precond[i] @ cg.rhs[i])
+        beta_cg = 0.0
+        if first == 0:
+            beta_cg = rz_new / rz
         for i in range(c.nv):
             cg.p[i] = cg.z[i] + beta_cg * cg.p[i]
+            if first == 1:
+                cg.p[i] = cg.z[i]
             if mesh.vert_pinned[i] != 0:
                 cg.p[i] = ti.Vector([0.0, 0.0, 0.0])
-    return ti.Vector([rz_new, stalled, rd_new])
+    return ti.Vector([rz_new, stalled, rd_new, bnorm])
 
 
 @ti.func
@@ -822,18 +810,27 @@ def _step(coef: A, mesh: MeshPack, state: StatePack, elems: ElementPack,
     ti.loop_config(serialize=True)
     for _ in range(1):
         c = constants(coef)
-        rb = cg_begin(True, c, mesh, state, elems, cg, mg)
-        rz, bnorm = rb[0], rb[1]
+        linearise(c, mesh, state, elems, cg)
+        cg_prepare(c, mesh, state, cg)
+        first = 1
+        rz, bnorm, rel = 0.0, 0.0, 0.0
         iters = 0
         stalled = 0.0
-        rel = relative(rb[2], bnorm)
-        while iters < c.max_iters and rel > c.tol and stalled == 0.0:
-            out = cg_iteration(True, rz, c, mesh, elems, cg, mg)
-            stalled = out[1]
-            if stalled == 0.0:
+        while True:
+            out = cg_pass(True, first, rz, c, mesh, elems, cg, mg)
+            if first == 1:
+                first = 0
+                bnorm = out[3]
                 rz = out[0]
                 rel = relative(out[2], bnorm)
-                iters += 1
+            else:
+                stalled = out[1]
+                if stalled == 0.0:
+                    rz = out[0]
+                    rel = relative(out[2], bnorm)
+                    iters += 1
+            if not (iters < c.max_iters and rel > c.tol and stalled == 0.0):
+                break
         cg.scalars[0] = rel
         advance(c, mesh, state, cg)
         cg.scalars[1] = iters
@@ -845,7 +842,7 @@ def _step(coef: A, mesh: MeshPack, state: StatePack, elems: ElementPack,
 # the one-launch step computed dv but never wrote v and x once it ran 14 CG iterations or more
 # (13 were fine; KE stayed exactly 0 and the cloth never fell), like the strain solver's
 # one-launch solve, which crashed that driver.
-# Two launches where the one-launch step has cg_begin: Vulkan and Metal bind at most ~31
+# Two launches where the one-launch step has linearise and cg_prepare with its first pass: Vulkan and Metal bind at most ~31
 # arrays per kernel (measured on lavapipe: with 32 loose ndarray arguments one was silently
 # dropped, 33 crashed). What counts is the arrays a kernel uses, not the pack members it is
 # given (measured: a 40-member pack of which 31 are used runs right, 32 used does not, with
@@ -870,8 +867,9 @@ def _start(two: int, coef: A, mesh: MeshPack, state: StatePack, elems: ElementPa
     out = ti.Vector([0.0, 0.0, 0.0])
     for _ in range(1):
         c = constants(coef)
-        rb = cg_start(False, c, mesh, state, elems, cg, cg)
-        out = ti.Vector([rb[0], rb[1], backend.loop_probe(two)])
+        cg_prepare(c, mesh, state, cg)
+        rb = cg_pass(False, 1, 0.0, c, mesh, elems, cg, cg)
+        out = ti.Vector([rb[0], rb[3], backend.loop_probe(two)])
     return out
 
 
@@ -882,7 +880,7 @@ def _iteration(two: int, rz: float, coef: A, mesh: MeshPack, elems: ElementPack,
     out = ti.Vector([0.0, 0.0, 0.0])
     for _ in range(1):
         c = constants(coef)
-        it = cg_iteration(False, rz, c, mesh, elems, cg, cg)
+        it = cg_pass(False, 0, rz, c, mesh, elems, cg, cg)
         out = ti.Vector([it[0], it[1], backend.loop_probe(two)])
     return out
 
