@@ -480,13 +480,14 @@ def newton_direction(method: ti.template(), pdas: ti.template(), K, nv, nf, ns, 
         vec.b[n] = vec.r[n]
         vec.d[n] = ti.Vector([0.0, 0.0, 0.0])
         rr += vec.r[n].dot(vec.r[n])
-    it = pcg_loop(False, K, nv, nf, mu, max_cg, rtol, rr, pc_mode, mesh, metric, cons,
-                  contacts, vec, pc, vec.x_trial, cons.kappa)
-    slope = -dot(vec.b, vec.d, nv)
+    slope, it = 0.0, 0
     if ti.static(pdas):
-        if mesh.params[P_PDAS] > 0.0:
-            slope, it = pdas_resolves(K, nv, nf, mu, max_cg, rtol, it, pc_mode, mesh, metric,
-                                      cons, contacts, vec, pc, cons.kappa, vec.x_trial)
+        slope, it = pdas_resolves(K, nv, nf, mu, max_cg, rtol, rr, pc_mode, mesh, metric,
+                                  cons, contacts, vec, pc, cons.kappa, vec.x_trial)
+    else:
+        it = pcg_loop(False, 0, K, nv, nf, mu, max_cg, rtol, rr, pc_mode, mesh, metric, cons,
+                      contacts, vec, pc, vec.x_trial, cons.kappa)
+        slope = -dot(vec.b, vec.d, nv)
     return slope, it
 
 
@@ -589,64 +590,80 @@ def pdas_times(K, nv, nf, mu, mesh: T, metric: T, cons: T, contacts: T, vec: T, 
 
 
 @ti.func
-def pdas_resolves(K, nv, nf, mu, max_cg, rtol, it, pc_mode, mesh: T, metric: T, cons: T,
+def pdas_resolves(K, nv, nf, mu, max_cg, rtol, rr, pc_mode, mesh: T, metric: T, cons: T,
                   contacts: T, vec: T, pc: T, flip: T, prev: T):
-    """The active-set Newton step (cloth/strain/active_set.py, here in the kernels with PCG):
-    d holds the step with the set active at x (H's own, margin 0) and b = -grad L_A. While
-    the step switches constraints on or off, solve again with the Gauss-Newton terms and
-    forces of the set it predicts, t + J d > 0 (t = g + lambda / mu), at most PDAS_SOLVES
-    times; a re-solved step that is not a descent direction is replaced by the first solve's.
-    ``flip`` (kappa's storage, free once H is assembled) and ``prev`` (x_trial's, free until
-    the line search) are scratch. Returns (slope, CG iterations)."""
-    total = it
-    k = 1
-    back = False             # solving the first solve's system again (one PCG call site)
+    """The Newton step's PCG solves in a kernel compiled with the active-set step
+    (cloth/strain/active_set.py, here in the kernels with PCG). The first solves with the set
+    active at x (H's own, margin 0) from d = 0, b = -grad L_A in r (|r|^2 = rr). When
+    params[P_PDAS] is set, then, while the step switches constraints on or off, solve again
+    with the Gauss-Newton terms and forces of the set it predicts, t + J d > 0 (t = g +
+    lambda / mu), at most PDAS_SOLVES times; a re-solved step that is not a descent direction
+    is replaced by the first solve's. ``flip`` (kappa's storage, free once H is assembled)
+    and ``prev`` (x_trial's, free until the line search) are scratch. Every solve goes
+    through one PCG call (a ti.func is inlined at each call site). Returns (slope, CG
+    iterations)."""
+    total = 0
+    k = 0                    # solves made
+    back = False             # solving the first solve's system again
     slope = 0.0
     while True:
-        if not back:
-            changed = 0
-            if k < PDAS_SOLVES:
-                changed = pdas_changes(K, nv, nf, mu, mesh, cons, contacts, vec, prev, k == 1,
-                                       flip)
-            if changed == 0:
-                slope = -dot(vec.b, vec.d, nv)
-                if k > 1 and not slope < 0.0:
-                    back = True
-                else:
-                    break
-        if back:
-            # Back to the first solve: the set active at x (no flips).
-            for f in range(nf):
-                for c in range(K):
-                    flip[f, c] = 0.0
+        flipped = 0
+        if k > 0:
+            flipped = 1
+            if not back:
+                changed = 0
+                if k < PDAS_SOLVES:
+                    changed = pdas_changes(K, nv, nf, mu, mesh, cons, contacts, vec, prev,
+                                           k == 1, flip)
+                if changed == 0:
+                    slope = -dot(vec.b, vec.d, nv)
+                    if k > 1 and not slope < 0.0:
+                        back = True
+                    else:
+                        break
+            if back:
+                # Back to the first solve: the set active at x (no flips).
+                for f in range(nf):
+                    for c in range(K):
+                        flip[f, c] = 0.0
+                for n in range(nv):
+                    prev[n] = ti.Vector([0.0, 0.0, 0.0])
+                    vec.r[n] = vec.b[n]
+            else:
+                for n in range(nv):
+                    prev[n] = vec.d[n]
+                # rhs = b - mu sum_c flip_c t_c J_c^T (faces; contacts' J = -n).
+                for n in range(nv):
+                    vec.r[n] = vec.b[n]
+                for f in range(nf):
+                    ids = mesh.face_verts[f]
+                    for c in range(K):
+                        if flip[f, c] != 0.0:
+                            t = cons.g[f, c] + cons.lam[f, c] / mu
+                            scatter(vec.r, ids, pair_grad(cons.grad, f, c),
+                                    -mu * flip[f, c] * t)
+                for n in range(nv):
+                    if mesh.pinned[n] == 1:
+                        vec.r[n] = ti.Vector([0.0, 0.0, 0.0])
+                    else:
+                        for j in ti.static(range(CONTACT_SLOTS)):
+                            fl, t = pdas_contact_flip(mu, contacts.contact, contacts.lam_c,
+                                                      vec.x, prev, n, j)
+                            if fl != 0.0:
+                                vec.r[n] += (mu * fl * t) * contact_normal(contacts.contact,
+                                                                           n, j)
+            # PCG from d = 0 on pdas_times' matrix with the rhs in r (H's preconditioner).
+            rr = 0.0
             for n in range(nv):
-                prev[n] = ti.Vector([0.0, 0.0, 0.0])
-                vec.r[n] = vec.b[n]
-        else:
-            for n in range(nv):
-                prev[n] = vec.d[n]
-            # rhs = b - mu sum_c flip_c t_c J_c^T (faces; contacts' J = -n).
-            for n in range(nv):
-                vec.r[n] = vec.b[n]
-            for f in range(nf):
-                ids = mesh.face_verts[f]
-                for c in range(K):
-                    if flip[f, c] != 0.0:
-                        t = cons.g[f, c] + cons.lam[f, c] / mu
-                        scatter(vec.r, ids, pair_grad(cons.grad, f, c),
-                                -mu * flip[f, c] * t)
-            for n in range(nv):
-                if mesh.pinned[n] == 1:
-                    vec.r[n] = ti.Vector([0.0, 0.0, 0.0])
-                else:
-                    for j in ti.static(range(CONTACT_SLOTS)):
-                        fl, t = pdas_contact_flip(mu, contacts.contact, contacts.lam_c, vec.x,
-                                                  prev, n, j)
-                        if fl != 0.0:
-                            vec.r[n] += (mu * fl * t) * contact_normal(contacts.contact, n, j)
-        total += pdas_pcg(K, nv, nf, mu, max_cg, rtol, pc_mode, mesh, metric, cons, contacts,
-                          vec, pc, prev, flip)
+                vec.d[n] = ti.Vector([0.0, 0.0, 0.0])
+                rr += vec.r[n].dot(vec.r[n])
+        total += pcg_loop(True, flipped, K, nv, nf, mu, max_cg, rtol, rr, pc_mode, mesh,
+                          metric, cons, contacts, vec, pc, prev, flip)
         k += 1
+        if k == 1:
+            slope = -dot(vec.b, vec.d, nv)
+            if not mesh.params[P_PDAS] > 0.0:
+                break
         if back:
             slope = -dot(vec.b, vec.d, nv)
             break
@@ -654,24 +671,12 @@ def pdas_resolves(K, nv, nf, mu, max_cg, rtol, it, pc_mode, mesh: T, metric: T, 
 
 
 @ti.func
-def pdas_pcg(K, nv, nf, mu, max_cg, rtol, pc_mode, mesh: T, metric: T, cons: T, contacts: T,
-             vec: T, pc: T, prev: T, flip: T):
-    """PCG from d = 0 on ``pdas_times``' matrix with the rhs in r (H's preconditioner)."""
-    rr = 0.0
-    for n in range(nv):
-        vec.d[n] = ti.Vector([0.0, 0.0, 0.0])
-        rr += vec.r[n].dot(vec.r[n])
-    return pcg_loop(True, K, nv, nf, mu, max_cg, rtol, rr, pc_mode, mesh, metric, cons,
-                    contacts, vec, pc, prev, flip)
-
-
-@ti.func
-def pcg_loop(flipped: ti.template(), K, nv, nf, mu, max_cg, rtol, rr, pc_mode, mesh: T,
-             metric: T, cons: T, contacts: T, vec: T, pc: T, prev: T, flip: T):
+def pcg_loop(pdas: ti.template(), flipped, K, nv, nf, mu, max_cg, rtol, rr, pc_mode,
+             mesh: T, metric: T, cons: T, contacts: T, vec: T, pc: T, prev: T, flip: T):
     """The PCG iterations of a Newton step, from d = 0 with the residual in r (|r|^2 = rr)
-    to |r| <= rtol |r0| (d, r and the work vectors z, p, Ap in ``vec``): on H, or with
-    ``flipped`` on ``pdas_times``' matrix (H with the predicted set's Gauss-Newton terms;
-    ``prev``, ``flip``). Returns the iterations."""
+    to |r| <= rtol |r0| (d, r and the work vectors z, p, Ap in ``vec``): on H, or, with
+    ``flipped`` = 1 in a kernel compiled with ``pdas``, on ``pdas_times``' matrix (H with the
+    predicted set's Gauss-Newton terms; ``prev``, ``flip``). Returns the iterations."""
     # One call site of the preconditioner (it is inlined where it is called, and the
     # multigrid's cycle is large): z = P r at the top of every pass, the first pass's p = z.
     stop = rtol * rtol * rr
@@ -691,14 +696,17 @@ def pcg_loop(flipped: ti.template(), K, nv, nf, mu, max_cg, rtol, rr, pc_mode, m
         if it >= max_cg or rr <= stop:
             break
         pAp = 0.0
-        if ti.static(flipped):
-            pdas_times(K, nv, nf, mu, mesh, metric, cons, contacts, vec, prev, flip)
-            for n in range(nv):
-                pAp += vec.p[n].dot(vec.Ap[n])
+        if ti.static(pdas):
+            if flipped == 1:
+                pdas_times(K, nv, nf, mu, mesh, metric, cons, contacts, vec, prev, flip)
+            else:
+                for n in range(nv):
+                    vec.Ap[n] = metric_times(n, metric.w_ptr, metric.w_col, metric.H, vec.p)
         else:
             for n in range(nv):
                 vec.Ap[n] = metric_times(n, metric.w_ptr, metric.w_col, metric.H, vec.p)
-                pAp += vec.p[n].dot(vec.Ap[n])
+        for n in range(nv):
+            pAp += vec.p[n].dot(vec.Ap[n])
         if pAp <= 0.0:
             break
         alpha = rz / pAp
