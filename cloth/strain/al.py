@@ -693,7 +693,7 @@ def pcg_loop(pdas: ti.template(), flipped, K, nv, nf, mu, max_cg, rtol, rr, pc_m
                 vec.p[n] = vec.z[n] + beta * vec.p[n]
         rz = rz_new
         it += 1
-        if it >= max_cg or rr <= stop:
+        if not (it < max_cg and rr > stop):       # (a NaN residual stops too)
             break
         pAp = 0.0
         if ti.static(pdas):
