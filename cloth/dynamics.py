@@ -771,15 +771,15 @@ def cg_pass(with_mg: ti.template(), first, rz, c, mesh: T, elems: T, cg: T, mg: 
             rd_new += cg.res[i].dot(Dr)
             if first == 1 and mesh.vert_pinned[i] == 0:
                 bnorm += cg.rhs[i].dot(cg.precond[i] @ cg.rhs[i])
-        beta_cg = 0.0
-        if first == 0:
+        if first == 1:
+            for i in range(c.nv):
+                cg.p[i] = cg.z[i]          # pinned z is 0
+        else:
             beta_cg = rz_new / rz
-        for i in range(c.nv):
-            cg.p[i] = cg.z[i] + beta_cg * cg.p[i]
-            if first == 1:
-                cg.p[i] = cg.z[i]
-            if mesh.vert_pinned[i] != 0:
-                cg.p[i] = ti.Vector([0.0, 0.0, 0.0])
+            for i in range(c.nv):
+                cg.p[i] = cg.z[i] + beta_cg * cg.p[i]
+                if mesh.vert_pinned[i] != 0:
+                    cg.p[i] = ti.Vector([0.0, 0.0, 0.0])
     return ti.Vector([rz_new, stalled, rd_new, bnorm])
 
 
@@ -842,11 +842,12 @@ def _step(coef: A, mesh: MeshPack, state: StatePack, elems: ElementPack,
 # the one-launch step computed dv but never wrote v and x once it ran 14 CG iterations or more
 # (13 were fine; KE stayed exactly 0 and the cloth never fell), like the strain solver's
 # one-launch solve, which crashed that driver.
-# Two launches where the one-launch step has linearise and cg_prepare with its first pass: Vulkan and Metal bind at most ~31
-# arrays per kernel (measured on lavapipe: with 32 loose ndarray arguments one was silently
-# dropped, 33 crashed). What counts is the arrays a kernel uses, not the pack members it is
-# given (measured: a 40-member pack of which 31 are used runs right, 32 used does not, with
-# one loose array besides); _linearise uses 27 (with ``coef``), _start 29, _iteration 25.
+# Two launches where the one-launch step has linearise, cg_prepare and the first cg_pass:
+# Vulkan and Metal bind at most ~31 arrays per kernel (measured on lavapipe: with 32 loose
+# ndarray arguments one was silently dropped, 33 crashed). What counts is the arrays a kernel
+# uses, not the pack members it is given (measured: a 40-member pack of which 31 are used
+# runs right, 32 used does not, with one loose array besides); _linearise uses 27 (with
+# ``coef``), _start 29, _iteration 25.
 # Each launch ends with ``backend.loop_probe`` and returns it (``ImplicitEuler._check_loops``).
 @ti.kernel
 def _linearise(two: int, coef: A, mesh: MeshPack, state: StatePack, elems: ElementPack,
