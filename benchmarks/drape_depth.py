@@ -17,7 +17,7 @@ process per core, or ``--scheduler tcp://HOST:PORT``; runs cached in --out/drape
 --fresh runs them again): ``strain.solve = "fast"`` (the default) and ``"exact"`` (each
 projection solved to its minimiser). A solve that stops before the minimiser keeps x near
 where it starts; each moving vertex starts where the dynamics put it (cloth/strain/al.py,
-``choose_start``), so a landing sheet keeps its motion, and a stiff plate (``MATERIALS``,
+``START_CANDIDATE``), so a landing sheet keeps its motion, and a stiff plate (``MATERIALS``,
 B = 5 N m: a bending length of ~1.5 m) keeps the bending that stops its rim from wrapping the
 sphere: its lowest point should lie where the exact solve's does.
 """

@@ -2,15 +2,15 @@
 
 Cold, on a 2-core machine, full optimisation compiles the strain solve (strain/al.py
 ``solve_al``) in about 2 minutes per method; fast compilation (Taichi's advanced
-optimisation off) in about 4-12 s, and the solve then runs up to 1.4x slower. So main.py's
+optimisation off) in about 20 s, and the solve then runs up to 1.4x slower. So main.py's
 first run on a machine (no marker below for this code) compiles fast and starts this module
 as a detached, low-priority process:
 
     python -m scenes.warm --arch cpu --precision f64     (scenes/warm.py: it runs scenes)
 
-It compiles, with full optimisation, what the scenes use: a small hanging sheet per strain
-method (mapping, svd, warp-weft) and a frame of each other built-in scene (dynamics, obstacles,
-self-collision, exact steps), into the same Taichi offline cache (Taichi's cache key holds the
+It compiles, with full optimisation, what the scenes use: a small hanging sheet (the strain
+solve, one kernel for the three methods) and a frame of each other built-in scene (dynamics,
+obstacles, self-collision, exact steps), into the same Taichi offline cache (Taichi's cache key holds the
 compile configuration, so fast and optimised kernels sit side by side), and then writes the
 marker ``loom_optimised.json`` there, keyed by ``compile_notice.fingerprint`` (Taichi version,
 arch, precision, optimisation, the cloth source). Runs that find it compile nothing and run at
@@ -33,9 +33,9 @@ BACKGROUND_ENV = "LOOM_BACKGROUND_COMPILE"
 STALE_LOCK_S = 3 * 3600
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
-# What the warmer runs: (scene, strain method or None for the scene's own, overrides).
-PLAN = [("hanging", "mapping"), ("hanging", "svd"), ("hanging", "warp-weft"),
-        ("pull", None), ("drape", None), ("tshirt", None)]
+# What the warmer runs: (scene, strain method or None for the scene's own). One hanging sheet
+# builds the strain solve of all three methods (one kernel: strain/al.py ``assemble_face``).
+PLAN = [("hanging", None), ("pull", None), ("drape", None), ("tshirt", None)]
 
 
 def _read(path):

@@ -10,8 +10,8 @@ from cloth.strain import active_set, direct, solver
 from cloth.strain.constraints import N_CONSTRAINTS
 from tests.test_coupling import _hanging
 
-# The exact solve compiles its own kernel per method (about 35 s cold each, fast compile): its
-# tests run in one xdist worker (make test: --dist loadgroup), which compiles them once.
+# The exact solve compiles its own kernel (about 25 s cold, fast compile): its tests run in one
+# xdist worker (make test: --dist loadgroup), which compiles it once.
 pytestmark = pytest.mark.xdist_group("exact_solve")
 
 

@@ -13,7 +13,7 @@ from cloth.strain.constraints import METHOD_IDS, N_CONSTRAINTS
 
 
 @ti.kernel
-def _merit_at(method: ti.template(), mu: float, pos: A, mesh: MeshPack, metric: MetricPack,
+def _merit_at(method: ti.i32, mu: float, pos: A, mesh: MeshPack, metric: MetricPack,
               cons: ConstraintPack, contacts: ContactPack, vec: VectorPack) -> float:
     total = 0.0
     ti.loop_config(serialize=True)
@@ -25,7 +25,7 @@ def _merit_at(method: ti.template(), mu: float, pos: A, mesh: MeshPack, metric: 
 
 
 @ti.kernel
-def _residual_at(method: ti.template(), mu: float, pos: A, mesh: MeshPack, metric: MetricPack,
+def _residual_at(method: ti.i32, mu: float, pos: A, mesh: MeshPack, metric: MetricPack,
                  cons: ConstraintPack, contacts: ContactPack, vec: VectorPack):
     ti.loop_config(serialize=True)
     for _ in range(1):
@@ -36,7 +36,7 @@ def _residual_at(method: ti.template(), mu: float, pos: A, mesh: MeshPack, metri
 
 
 @ti.kernel
-def _line_merits(method: ti.template(), mu: float, a: float, pos: A, moved: A, mesh: MeshPack,
+def _line_merits(method: ti.i32, mu: float, a: float, pos: A, moved: A, mesh: MeshPack,
                  metric: MetricPack, cons: ConstraintPack, contacts: ContactPack,
                  vec: VectorPack) -> ti.types.vector(2, float):
     """The merit at pos + a d (d = vec.d) two ways: directly, and as solve_al's line search
@@ -96,7 +96,7 @@ def test_residual_is_minus_the_merit_gradient(method):
         assert abs(fd - analytic) <= 1e-4 * max(abs(analytic), 1e-12), (trial, fd, analytic)
     # The line search's merit (quadratic term from W d once, solve_al) is the merit. Its
     # pieces do not depend on the method (assemble_all feeds both sides alike), so one
-    # method checks it: each method compiles its own kernel, ~10 s cold.
+    # method checks it.
     if method != "mapping":
         return
     ws.d.from_numpy(d)

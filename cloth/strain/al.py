@@ -15,7 +15,8 @@ from .buffers import (B_FROM_PREV, B_LATE_NEWTON, B_LATE_ROUND, B_MAX_CG, B_MAX_
                       ST_NEWTON, ST_START_VIOL, ST_TRIALS, ST_VIOL, A, T, ConstraintPack,
                       ContactPack, MeshPack, MetricPack, PrecondPack, StepPack, VectorPack)
 from . import multigrid
-from .constraints import MAPPING_PAIRS_BY_ALIGNMENT, SVD, face_constraints
+from .constraints import MAPPING_PAIRS_BY_ALIGNMENT, face_constraints
+from .families import MAPPING, SVD, WARP_WEFT
 from .defaults import NEAR_POWER
 
 
@@ -35,17 +36,18 @@ def eval_face(method: ti.template(), f, pos: T, mesh: T):
 
 
 @ti.func
-def assemble_all(method: ti.template(), nf, pos: T, mesh: T, cons: T):
-    """Values, gradients and curvature models of every constraint at ``pos``. The
-    constraints come in bound pairs (c even, c + 1) with opposite gradients and the same cm
-    and w^ (constraints.py): only the even member's are stored (``pair_grad``). Why: writing
-    the arrays, not computing them, was most of an assembly's cost (measured at 1.2k faces,
+def store_face(method: ti.template(), with_grad: ti.template(), f, pos: T, mesh: T, cons: T):
+    """Face f's constraints under the family ``method`` (a compile-time id) at ``pos``: the
+    values, and with ``with_grad`` their gradients and curvature models. The constraints come
+    in bound pairs (c even, c + 1) with opposite gradients and the same cm and w^
+    (constraints.py): only the even member's are stored (``pair_grad``). Why: writing the
+    arrays, not computing them, was most of an assembly's cost (measured at 1.2k faces,
     mapping: 0.35 ms, of which 0.15 ms with the stores left out), and an assembly runs at
     every line-search trial."""
-    for f in range(nf):
-        out = eval_face(method, f, pos, mesh)
-        for c in ti.static(range(out.g.n)):
-            cons.g[f, c] = out.g[c]
+    out = eval_face(method, f, pos, mesh)
+    for c in ti.static(range(out.g.n)):
+        cons.g[f, c] = out.g[c]
+        if ti.static(with_grad):
             cons.kappa[f, c] = out.kappa[c]
             if ti.static(c % 2 == 0):
                 grad_c = ti.Vector([0.0] * 9)
@@ -65,22 +67,41 @@ def assemble_all(method: ti.template(), nf, pos: T, mesh: T, cons: T):
                 cons.twist[f, c] = tw_c
 
 
+@ti.func
+def assemble_face(method, with_grad: ti.template(), f, pos: T, mesh: T, cons: T):
+    """``store_face`` under the family whose id ``method`` is at run time. Why run time: one
+    kernel serves the three families, so a switch of method compiles nothing, and a process
+    that uses all three (the test suite, the comparison view) compiles the solve once, not
+    three times (a family's constraints are a small part of the solve's code)."""
+    if method == SVD:
+        store_face(SVD, with_grad, f, pos, mesh, cons)
+    elif method == WARP_WEFT:
+        store_face(WARP_WEFT, with_grad, f, pos, mesh, cons)
+    else:
+        store_face(MAPPING, with_grad, f, pos, mesh, cons)
+
+
+@ti.func
+def assemble_all(method, nf, pos: T, mesh: T, cons: T):
+    """Values, gradients and curvature models of every constraint at ``pos`` (``store_face``)."""
+    for f in range(nf):
+        assemble_face(method, True, f, pos, mesh, cons)
+
+
 @ti.kernel
-def assemble(method: ti.template(), pos: A, mesh: MeshPack, cons: ConstraintPack):
+def assemble(method: ti.i32, pos: A, mesh: MeshPack, cons: ConstraintPack):
     ti.loop_config(serialize=True)
     for _ in range(1):
         assemble_all(method, mesh.n_faces, pos, mesh, cons)
 
 
 @ti.kernel
-def assemble_g(method: ti.template(), pos: A, mesh: MeshPack, cons: ConstraintPack):
+def assemble_g(method: ti.i32, pos: A, mesh: MeshPack, cons: ConstraintPack):
     """The constraint values only (cons.g) at ``pos``: what the per-frame read-outs (the limits
     watch, metrics.csv) need, a fifth of ``assemble``'s work. A parallel loop: each face
     writes its own row, so the values do not depend on the thread count."""
     for f in range(mesh.n_faces):
-        out = eval_face(method, f, pos, mesh)
-        for c in ti.static(range(out.g.n)):
-            cons.g[f, c] = out.g[c]
+        assemble_face(method, False, f, pos, mesh, cons)
 
 
 # ---- augmented Lagrangian pieces (docs/method.md §4, paper eqs. 25-27) -------------------------
@@ -183,13 +204,11 @@ def pair_grad(grad: T, f, c):
 
 
 @ti.func
-def assemble_values(method: ti.template(), nf, pos: T, mesh: T, cons: T):
+def assemble_values(method, nf, pos: T, mesh: T, cons: T):
     """The values only of every constraint at ``pos`` (a fifth of ``assemble_all``'s cost at
     1.2k faces, mapping: the gradients are not computed)."""
     for f in range(nf):
-        out = eval_face(method, f, pos, mesh)
-        for c in ti.static(range(out.g.n)):
-            cons.g[f, c] = out.g[c]
+        assemble_face(method, False, f, pos, mesh, cons)
 
 
 @ti.func
@@ -466,7 +485,7 @@ def precondition(pc_mode, nv, pc: T, r: T, z: T):
 
 
 @ti.func
-def newton_direction(method: ti.template(), pdas: ti.template(), K, nv, nf, ns, mu, max_cg, rtol, margin, use_twist, c_scale, pc_mode, mesh: T,
+def newton_direction(pdas: ti.template(), K, nv, nf, ns, mu, max_cg, rtol, margin, use_twist, c_scale, pc_mode, mesh: T,
                      metric: T, cons: T, contacts: T, vec: T, pc: T):
     """pcg_direction's matrix and PCG solve at vec.x, with r = -grad L_A already in vec.r
     (and, in a kernel compiled with ``pdas``, the active-set re-solves when params[P_PDAS] is
@@ -719,7 +738,7 @@ def pcg_loop(pdas: ti.template(), flipped, K, nv, nf, mu, max_cg, rtol, rr, pc_m
 
 
 @ti.func
-def pcg_direction(method: ti.template(), pdas: ti.template(), K, nv, nf,
+def pcg_direction(pdas: ti.template(), K, nv, nf,
                   ns, mu, max_cg, rtol, margin, use_twist, c_scale, pc_mode, skip_rr, mesh: T,
                   metric: T, cons: T, contacts: T, vec: T, pc: T):
     """Projected-Newton direction at vec.x: solve H d = -grad L_A (H from ``newton_matrix``)
@@ -732,7 +751,7 @@ def pcg_direction(method: ti.template(), pdas: ti.template(), K, nv, nf,
     rr0 = dot(vec.r, vec.r, nv)
     slope, it = 0.0, 0
     if rr0 > skip_rr:
-        slope, it = newton_direction(method, pdas, K, nv, nf, ns, mu, max_cg, rtol,
+        slope, it = newton_direction(pdas, K, nv, nf, ns, mu, max_cg, rtol,
                                      margin, use_twist, c_scale, pc_mode, mesh, metric, cons,
                                      contacts, vec, pc)
     else:
@@ -803,51 +822,32 @@ def update_multipliers(K, nv, nf, ns, mu, mu_max, c_scale, x: T, mesh: T, cons: 
     return viol, comp
 
 
-@ti.func
-def choose_start(method: ti.template(), from_prev, K, nv, nf, ns, mu, mesh: T, metric: T,
-                 cons: T, contacts: T, vec: T, start: T):
-    """Assemble the constraints at the Newton iteration's start (the caller left only their
-    values at x = x_hat). With ``from_prev``, start at ``start`` instead of at x_hat when its
-    merit is lower: the step's start x_prev = x_hat - h v, each vertex moved on at its last
-    velocity when that is above the settle speed (``begin_solve``). In the implicit step's
-    metric a cloth at rest is a fixed point, so x_prev is then the solution itself (one
-    round, one Newton step), while x_hat lies a whole sag away (12-17 % strain past the band
-    on the soft cloth) and Newton has to travel back across the constraints' curvature.
-    Pinned vertices stay at x_hat (their targets).
-
-    Why moved on: the default solve stops once the limits hold, so its answer lies near its
-    start. A sheet landing on a sphere (its landing vertices stopped by the collision pass,
-    the rest still falling: x_hat stretched, x_prev the lower merit) was held in the air from
-    x_prev, keeping 0.3 % of its kinetic energy through the landing (exact Newton steps keep
-    72 %; docs/speed/motion_error.md). x_hat as the start drapes too, but costs a resting
-    cloth 10x; a start halfway between, chosen by merit, was held like x_prev; running the
-    first round's Newton loop to its end instead of to INNER_RTOL draped 5 of 7 drops."""
-    # One call site each for assemble_all and merit (a ti.func is inlined at every call, and
-    # solve_al's compile time grows with its size): pass 0 evaluates x_hat's merit (from the
-    # values), pass 1 assembles and evaluates x_prev, pass 2 assembles x_hat when it wins
-    # (or without from_prev).
-    L_hat = 0.0
-    take = 0
-    for attempt in range(3):
-        if (from_prev and (attempt < 2 or take == 0)) or (not from_prev and attempt == 2):
-            for n in range(nv):
-                vec.x_trial[n] = vec.x[n]
-                if attempt == 1 and mesh.pinned[n] == 0:
-                    vec.x_trial[n] = start[n]
-            if attempt > 0:
-                assemble_all(method, nf, vec.x_trial, mesh, cons)
-            if attempt < 2:
-                L = merit(K, nv, nf, ns, mu, vec.x_trial, vec.x_hat, metric, cons, contacts)
-                if attempt == 0:
-                    L_hat = L
-                elif L < L_hat:
-                    take = 1
-                    for n in range(nv):
-                        vec.x[n] = vec.x_trial[n]
+# solve_al's start, in phases of its Newton loop (``first``). START_VALUES: the constraint
+# values only at the given x (x_hat, on a projection's first call), by the line search's trial
+# evaluation: they decide whether there is anything to do. Then, with ``from_prev``,
+# START_CANDIDATE: x = the step's start x_prev = x_hat - h v, each vertex moved on at its last
+# velocity when that is above the settle speed (``start_candidate``; pinned vertices stay),
+# assembled, and kept when its merit is below the given x's; else, or without from_prev,
+# START_GIVEN: the given x, assembled. NEWTON: the Newton steps. So the kernel has two
+# constraint assemblies, not three: a ti.func is inlined at every call, and the kernel's
+# compile time grows with its size (the three families at each call since the method is a
+# run-time choice).
+#
+# Why x_prev: in the implicit step's metric a cloth at rest is a fixed point, so x_prev is
+# then the solution itself (one round, one Newton step), while x_hat lies a whole sag away
+# (12-17 % strain past the band on the soft cloth) and Newton has to travel back across the
+# constraints' curvature. Why moved on: the default solve stops once the limits hold, so its
+# answer lies near its start. A sheet landing on a sphere (its landing vertices stopped by the
+# collision pass, the rest still falling: x_hat stretched, x_prev the lower merit) was held in
+# the air from x_prev, keeping 0.3 % of its kinetic energy through the landing (exact Newton
+# steps keep 72 %; docs/speed/motion_error.md). x_hat as the start drapes too, but costs a
+# resting cloth 10x; a start halfway between, chosen by merit, was held like x_prev; running
+# the first round's Newton loop to its end instead of to INNER_RTOL draped 5 of 7 drops.
+NEWTON, START_VALUES, START_CANDIDATE, START_GIVEN = 0, 1, 2, 3
 
 
 @ti.kernel
-def solve_al(method: ti.template(), with_pdas: ti.template(), budget: A,
+def solve_al(method: ti.i32, with_pdas: ti.template(), budget: A,
              mesh: MeshPack, metric: MetricPack, cons: ConstraintPack, contacts: ContactPack,
              vec: VectorPack, pc: PrecondPack, stats: A):
     """The whole AL projection (docs/method.md §4) in one launch (measured: with one launch per
@@ -868,7 +868,7 @@ def solve_al(method: ti.template(), with_pdas: ti.template(), budget: A,
     ti.loop_config(serialize=True)
     for _ in range(1):
         K, nv, nf, ns = cons.n_per_face, mesh.n_verts, mesh.n_faces, contacts.n_stitches
-        use_twist = mesh.params[P_SVD_DELTA] > 0.0 and ti.static(method == SVD)
+        use_twist = mesh.params[P_SVD_DELTA] > 0.0 and method == SVD
         margin = mesh.params[P_MARGIN]
         c_scale = mesh.params[P_CONTACT_SCALE]
         mu_grow, mu_max = budget[B_MU_GROW], budget[B_MU_MAX]
@@ -900,7 +900,8 @@ def solve_al(method: ti.template(), with_pdas: ti.template(), budget: A,
         kkt = 0.0
         for n in range(nv):
             vec.x_trial[n] = vec.x[n]
-        first = 1
+        first = START_VALUES
+        L_hat = 0.0
         # The merit at x, kept from the line search that reached x until the multipliers or
         # the penalty change (saves one merit evaluation per Newton step).
         L_x, L_known = 0.0, 0
@@ -912,89 +913,108 @@ def solve_al(method: ti.template(), with_pdas: ti.template(), budget: A,
             if rounds >= late_round:
                 newton_cap = late_newton
             while inner < newton_cap:
-                slope, cg_it = 0.0, 0
+                slope, cg_it, step = 0.0, 0, 0.0
                 L0 = 0.0
-                if first == 0:
-                    skip = NO_SKIP
-                    if inner > 0:
-                        skip = mesh.params[P_INNER_RTOL] ** 2 * rr_first
-                    slope, cg_it, rr = pcg_direction(method, with_pdas, K, nv, nf, ns, mu,
-                                                     max_cg, rtol, margin, use_twist, c_scale,
-                                                     pc_mode, skip, mesh, metric, cons,
-                                                     contacts, vec, pc)
-                    if inner == 0:
-                        rr_first = rr
-                    cg_total += cg_it
-                    newton += 1
-                    inner += 1
-                    d_max = max_norm(nv, vec.d)
-                    if inner == 1:
-                        kkt = d_max
-                        if proposed == 1 and d_max <= kkt_tol:
-                            converged = CONVERGED   # stationary with these multipliers
-                            break
-                        proposed = 0
-                if first == 0 and not slope < 0.0:
-                    break
-                # The merit's quadratic term along x + a d from W d, computed once (into Ap,
-                # free after the PCG): a trial costs no product with W (17 blocks a vertex
-                # with bending: 40 MB at 64.8k faces). Wdx follows x along accepted steps.
-                quad = ti.Vector([0.0, 0.0, 0.0])
-                if first == 0:
-                    quad = metric_along(nv, vec.x, metric, vec)
-                    if L_known == 1:
-                        L0 = L_x
-                    else:
-                        L0 = quad_at(quad, 0.0) + merit_constraints(K, nv, nf, ns, mu, vec.x,
-                                                                    cons, contacts)
-                # Trials assemble the constraint values only; the gradients and curvature are
-                # assembled once, at the point reached (measured at 64.8k faces: 5 against 20
-                # ms an assembly, and up to 2-3 trials a Newton step there).
-                alpha, step, tries = 1.0, 0.0, 0
-                while tries <= LAST_TRY:
-                    a = alpha
-                    if tries == LAST_TRY or first == 1:
-                        a = 0.0
-                    for n in range(nv):
-                        vec.x_trial[n] = vec.x[n]
-                        if a > 0.0:
-                            vec.x_trial[n] += a * vec.d[n]
-                    if a == 0.0 and first == 0:
-                        break               # no step passed: x stays
-                    # (first == 1: x_hat's values decide whether there is anything to do and,
-                    # with from_prev, where to start; choose_start assembles the start.)
-                    assemble_values(method, nf, vec.x_trial, mesh, cons)
-                    if a == 0.0:
-                        break
-                    trials += 1
-                    L = quad_at(quad, a) + merit_constraints(K, nv, nf, ns, mu, vec.x_trial,
-                                                             cons, contacts)
-                    if L <= L0 + 1e-4 * a * slope:
+                if first == START_CANDIDATE or first == START_GIVEN:
+                    # The start's choice (``START_VALUES``): the candidate, assembled at the
+                    # end of the last pass, is kept when its merit is below the given x's.
+                    if first == START_CANDIDATE and not merit(K, nv, nf, ns, mu, vec.x,
+                                                              vec.x_hat, metric, cons,
+                                                              contacts) < L_hat:
                         for n in range(nv):
-                            step = ti.max(step, (vec.x_trial[n] - vec.x[n]).norm())
-                            vec.x[n] = vec.x_trial[n]
-                            vec.Wdx[n] += a * vec.Ap[n]
-                        L_x, L_known = L, 1
+                            vec.x[n] = vec.x_trial[n]   # the given x (START_VALUES' trial)
+                        first = START_GIVEN         # assembled below
+                    else:
+                        first = NEWTON
+                        metric_gradient(nv, vec.x, metric, vec)
+                        continue
+                else:
+                    if first == NEWTON:
+                        skip = NO_SKIP
+                        if inner > 0:
+                            skip = mesh.params[P_INNER_RTOL] ** 2 * rr_first
+                        slope, cg_it, rr = pcg_direction(with_pdas, K, nv, nf, ns, mu, max_cg,
+                                                         rtol, margin, use_twist, c_scale,
+                                                         pc_mode, skip, mesh, metric, cons,
+                                                         contacts, vec, pc)
+                        if inner == 0:
+                            rr_first = rr
+                        cg_total += cg_it
+                        newton += 1
+                        inner += 1
+                        d_max = max_norm(nv, vec.d)
+                        if inner == 1:
+                            kkt = d_max
+                            if proposed == 1 and d_max <= kkt_tol:
+                                converged = CONVERGED   # stationary with these multipliers
+                                break
+                            proposed = 0
+                    if first == NEWTON and not slope < 0.0:
                         break
-                    alpha *= 0.5
-                    tries += 1
-                if first == 1:
-                    first = 0
-                    viol = ti.max(violation_of(K, nf, mesh.rest_area, cons.g),
-                                  vertex_violation(nv, ns, vec.x, contacts.contact,
-                                                   contacts.stitch, c_scale))
-                    stats[ST_START_VIOL] = viol
-                    if viol < tol:
-                        converged = FEASIBLE_AS_GIVEN
-                        break
-                    choose_start(method, from_prev, K, nv, nf, ns, mu, mesh, metric, cons,
-                                 contacts, vec, vec.Wdx)
-                    metric_gradient(nv, vec.x, metric, vec)
-                    continue
+                    # The merit's quadratic term along x + a d from W d, computed once (into
+                    # Ap, free after the PCG): a trial costs no product with W (17 blocks a
+                    # vertex with bending: 40 MB at 64.8k faces). Wdx follows x along accepted
+                    # steps.
+                    quad = ti.Vector([0.0, 0.0, 0.0])
+                    if first == NEWTON:
+                        quad = metric_along(nv, vec.x, metric, vec)
+                        if L_known == 1:
+                            L0 = L_x
+                        else:
+                            L0 = quad_at(quad, 0.0) + merit_constraints(K, nv, nf, ns, mu,
+                                                                        vec.x, cons, contacts)
+                    # Trials assemble the constraint values only; the gradients and curvature
+                    # are assembled once, at the point reached (measured at 64.8k faces: 5
+                    # against 20 ms an assembly, and up to 2-3 trials a Newton step there).
+                    alpha, tries = 1.0, 0
+                    while tries <= LAST_TRY:
+                        a = alpha
+                        if tries == LAST_TRY or first == START_VALUES:
+                            a = 0.0
+                        for n in range(nv):
+                            vec.x_trial[n] = vec.x[n]
+                            if a > 0.0:
+                                vec.x_trial[n] += a * vec.d[n]
+                        if a == 0.0 and first == NEWTON:
+                            break               # no step passed: x stays
+                        # (START_VALUES: the given x's values decide whether there is anything to
+                        # do and, with from_prev, where to start.)
+                        assemble_values(method, nf, vec.x_trial, mesh, cons)
+                        if a == 0.0:
+                            break
+                        trials += 1
+                        L = quad_at(quad, a) + merit_constraints(K, nv, nf, ns, mu,
+                                                                 vec.x_trial, cons, contacts)
+                        if L <= L0 + 1e-4 * a * slope:
+                            for n in range(nv):
+                                step = ti.max(step, (vec.x_trial[n] - vec.x[n]).norm())
+                                vec.x[n] = vec.x_trial[n]
+                                vec.Wdx[n] += a * vec.Ap[n]
+                            L_x, L_known = L, 1
+                            break
+                        alpha *= 0.5
+                        tries += 1
+                    if first == START_VALUES:
+                        viol = ti.max(violation_of(K, nf, mesh.rest_area, cons.g),
+                                      vertex_violation(nv, ns, vec.x, contacts.contact,
+                                                       contacts.stitch, c_scale))
+                        stats[ST_START_VIOL] = viol
+                        if viol < tol:
+                            converged = FEASIBLE_AS_GIVEN
+                            break
+                        first = START_GIVEN         # assembled below
+                        if from_prev:
+                            L_hat = merit(K, nv, nf, ns, mu, vec.x, vec.x_hat, metric, cons,
+                                          contacts)
+                            for n in range(nv):
+                                if mesh.pinned[n] == 0:
+                                    vec.x[n] = vec.Wdx[n]       # the start candidate
+                            first = START_CANDIDATE     # assembled below
                 # Gradients and curvature at x (the step's end, or x again after a failed
                 # search, whose trials overwrote the values).
                 assemble_all(method, nf, vec.x, mesh, cons)
-                if step < step_tol or (kkt_tol > 0.0 and d_max <= inner_kkt):
+                if first == NEWTON and (step < step_tol or
+                                        (kkt_tol > 0.0 and d_max <= inner_kkt)):
                     break
             if converged != RUNNING:
                 break
@@ -1057,7 +1077,7 @@ def near_obstacle(contacts: ti.template(), n):
 @ti.func
 def start_candidate(n, xp, h, extrapolate, settle, step_start, io: ti.template(),
                     contacts: ti.template()):
-    """choose_start's candidate for vertex n: x_prev = x_hat - h v (``xp``), moved on by
+    """solve_al's start candidate (START_CANDIDATE) for vertex n: x_prev = x_hat - h v (``xp``), moved on by
     h v_last in the vertex's ``moving_share``. With ``step_start``, a vertex near an
     obstacle starts instead, in the share that is not moving, where the substep truly began
     (io.x_step): the obstacle pass between the dynamics and the projection stopped it
@@ -1087,7 +1107,7 @@ def begin_solve(nv: int, h: float, friction: int, clear: int, extrapolate: int,
     """Set up a projection from the model's state (x_in, v_in): x = x_hat = x_start = x_in,
     v = v_in; fric = (anchor, mu_f) per vertex, the anchor where the substep began (x_prev =
     x_hat - h v, or x_step near an obstacle), mu_f = 0 (no friction) unless ``friction``;
-    vec.Wdx = choose_start's candidates (``start_candidate``); with ``clear`` no contact half-spaces. One launch instead of five
+    vec.Wdx = the start candidates (``start_candidate``); with ``clear`` no contact half-spaces. One launch instead of five
     (each costs ~0.1 ms: a tenth of a resting 1.2k-face projection's host time)."""
     ti.loop_config(serialize=True)
     for n in range(nv):
@@ -1099,7 +1119,7 @@ def begin_solve(nv: int, h: float, friction: int, clear: int, extrapolate: int,
         if clear:
             for j in ti.static(range(CONTACT_SLOTS)):
                 contacts.contact[n, j] = ti.Vector([0.0, 0.0, 0.0, NO_CONTACT])
-        # (The start candidates live in Wdx until choose_start, which reads them there.)
+        # (The start candidates live in Wdx until solve_al's start reads them there.)
         vec.Wdx[n] = start_candidate(n, xp, h, extrapolate, settle, step_start, io, contacts)
         # Friction holds the displacement over the substep, so its anchor is where the
         # substep began. Near an obstacle that is, in the share of the vertex that is not

@@ -148,7 +148,7 @@ class Workspace:
         self.kappa = ti.ndarray(float, (F, K))
         self.twist = ti.ndarray(vec9, (F, K))     # extra rank-1 curvature (svd only)
         # Per-vertex vectors: positions (x), unconstrained x_hat, start of the call, line-search
-        # trial, Newton direction and PCG vectors, W (x - x_hat) (before choose_start: the
+        # trial, Newton direction and PCG vectors, W (x - x_hat) (before solve_al's start: the
         # start candidate); Jacobi accumulators; the last projection's velocities.
         names = ("x", "v", "x_hat", "x_start", "x_trial", "b", "d", "r", "z", "p", "Ap",
                  "Wdx", "acc", "force", "v_last")

@@ -17,7 +17,7 @@ import taichi as ti
 from .. import backend
 from . import active_set
 from . import al
-from .al import (SVD, assemble_all, choose_start, merit, metric_gradient,
+from .al import (SVD, assemble_all, merit, metric_gradient,
                  newton_matrix, residual, update_multipliers, vertex_violation, violation_of)
 from .buffers import (LAST_TRY, P_CONTACT_SCALE, P_MARGIN, P_SVD_DELTA,
                       PC_JACOBI, ST_CG, ST_COMP, ST_CONVERGED, ST_ITERS, ST_KKT, ST_NEWTON,
@@ -38,26 +38,7 @@ I_SLOPE, I_STEP, I_VIOL, I_COMP, I_ALPHA, I_MERIT, I_LOOPS = range(7)
 
 
 @ti.kernel
-def start(method: ti.template(), mu: float, from_prev: int, tol: float, mesh: MeshPack,
-          metric: MetricPack, cons: ConstraintPack, contacts: ContactPack, vec: VectorPack,
-          stats: A):
-    """Constraints at x_hat and the start violation; then, as in ``solve_al``, the start
-    point (``choose_start``, its candidate in vec.Wdx) unless x_hat is feasible already."""
-    ti.loop_config(serialize=True)
-    for _ in range(1):
-        K, nv, nf, ns = cons.n_per_face, mesh.n_verts, mesh.n_faces, contacts.n_stitches
-        assemble_all(method, nf, vec.x, mesh, cons)
-        stats[ST_START_VIOL] = ti.max(violation_of(K, nf, mesh.rest_area, cons.g),
-                                      vertex_violation(nv, ns, vec.x, contacts.contact,
-                                                       contacts.stitch,
-                                                       mesh.params[P_CONTACT_SCALE]))
-        if from_prev and stats[ST_START_VIOL] >= tol:
-            choose_start(method, 1, K, nv, nf, ns, mu, mesh, metric, cons, contacts, vec,
-                         vec.Wdx)
-
-
-@ti.kernel
-def newton_system(method: ti.template(), mu: float, mesh: MeshPack, metric: MetricPack,
+def newton_system(method: ti.i32, mu: float, mesh: MeshPack, metric: MetricPack,
                   cons: ConstraintPack, contacts: ContactPack, vec: VectorPack):
     """vec.r = -grad L_A (via vec.Wdx = W (x - x_hat), a work vector) and the projected-Newton
     matrix H (``al.newton_matrix``: the matrix the PCG path's Newton steps solve with, in W's
@@ -67,13 +48,13 @@ def newton_system(method: ti.template(), mu: float, mesh: MeshPack, metric: Metr
         K, nv, nf, ns = cons.n_per_face, mesh.n_verts, mesh.n_faces, contacts.n_stitches
         metric_gradient(nv, vec.x, metric, vec)
         residual(K, nv, nf, ns, mu, vec.x, mesh, cons, contacts, vec)
-        use_twist = mesh.params[P_SVD_DELTA] > 0.0 and ti.static(method == SVD)
+        use_twist = mesh.params[P_SVD_DELTA] > 0.0 and method == SVD
         newton_matrix(K, nv, nf, ns, mu, mesh.params[P_MARGIN], mesh.params[P_CONTACT_SCALE],
                       use_twist, vec.x, mesh, metric, cons, contacts)
 
 
 @ti.kernel
-def line_search(method: ti.template(), mu: float, mesh: MeshPack, metric: MetricPack,
+def line_search(method: ti.i32, mu: float, mesh: MeshPack, metric: MetricPack,
                 cons: ConstraintPack, contacts: ContactPack, vec: VectorPack, info: A):
     """Backtracking (Armijo) along vec.d from vec.x (vec.r = -grad L_A there), as in
     ``solve_al``; leaves the constraints assembled at the new x. info: slope, largest vertex
@@ -188,10 +169,7 @@ def _solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, active_set_model, ma
     info = ws.info
     from_prev = int(metric is lim._system)
     split = split_kernels()
-    if split:
-        start_split(lim, mid, K, mu, from_prev, metric)
-    else:
-        start(mid, mu, from_prev, lim.tol, *packs(lim, metric, K), ws.stats)
+    choose_start(lim, mid, K, mu, from_prev, metric)
     stats = ws.stats.to_numpy()
     if stats[ST_START_VIOL] < lim.tol:
         stats[ST_CONVERGED], stats[ST_VIOL] = 1, stats[ST_START_VIOL]
@@ -357,7 +335,7 @@ def loops_ran(two, info: T):
 
 
 @ti.kernel
-def start_values(method: ti.template(), two: int, mesh: MeshPack, cons: ConstraintPack,
+def start_values(method: ti.i32, two: int, mesh: MeshPack, cons: ConstraintPack,
                  contacts: ContactPack, vec: VectorPack, stats: A, info: A):
     """``start``'s first part: the constraints at x (= x_hat) and the start violation."""
     ti.loop_config(serialize=True)
@@ -387,7 +365,7 @@ def line_start(mu: float, two: int, mesh: MeshPack, metric: MetricPack, cons: Co
 
 
 @ti.kernel
-def trial(method: ti.template(), mu: float, a: float, two: int, what: TrialPack,
+def trial(method: ti.i32, mu: float, a: float, two: int, what: TrialPack,
           mesh: MeshPack, metric: MetricPack, cons: ConstraintPack, contacts: ContactPack,
           vec: VectorPack, info: A):
     """One trial point of ``line_search`` or ``choose_start``: vec.x_trial = x + a d
@@ -438,13 +416,13 @@ def newton_rhs(mu: float, two: int, mesh: MeshPack, metric: MetricPack, cons: Co
 
 
 @ti.kernel
-def newton_lhs(method: ti.template(), mu: float, two: int, mesh: MeshPack, metric: MetricPack,
+def newton_lhs(method: ti.i32, mu: float, two: int, mesh: MeshPack, metric: MetricPack,
                cons: ConstraintPack, contacts: ContactPack, vec: VectorPack, info: A):
     """``newton_system``'s second part: the Newton matrix."""
     ti.loop_config(serialize=True)
     for _ in range(1):
         K, nv, nf, ns = cons.n_per_face, mesh.n_verts, mesh.n_faces, contacts.n_stitches
-        use_twist = mesh.params[P_SVD_DELTA] > 0.0 and ti.static(method == SVD)
+        use_twist = mesh.params[P_SVD_DELTA] > 0.0 and method == SVD
         newton_matrix(K, nv, nf, ns, mu, mesh.params[P_MARGIN], mesh.params[P_CONTACT_SCALE],
                       use_twist, vec.x, mesh, metric, cons, contacts)
         loops_ran(two, info)
@@ -482,9 +460,11 @@ def _accept(lim):
     return out
 
 
-def start_split(lim, mid, K, mu, from_prev, metric):
-    """``start`` in launches (``LOOP_CAP``): ``start_values``, then ``al.choose_start``'s
-    three passes on the host."""
+def choose_start(lim, mid, K, mu, from_prev, metric):
+    """The constraints at x_hat and the start violation (``start_values``); then, unless x_hat
+    is feasible, the start point as ``al.solve_al`` chooses it (al.START_VALUES): with
+    ``from_prev`` the start candidate (in vec.Wdx) when its merit is below x_hat's. A few
+    launches (each ~0.1 ms), against a host loop's factorisations."""
     ws, m = lim._ws, lim.model
     mesh, _met, cons, contacts, vec = packs(lim, metric, K)
     start_values(mid, 2, mesh, cons, contacts, vec, ws.stats, ws.info)

@@ -7,7 +7,7 @@ METHODS = ("svd", "warp-weft", "mapping")
 STRAIN_METHODS = METHODS + ("none",)
 N_CONSTRAINTS = {"svd": 4, "warp-weft": 6, "mapping": 8}
 METHOD_IDS = {"svd": 0, "warp-weft": 1, "mapping": 2}
-# The ids by name, for the kernels' compile-time dispatch (``ti.static(method == SVD)``).
+# The ids by name: the kernels take the method's id at run time (strain/al.py ``assemble_face``).
 SVD, WARP_WEFT, MAPPING = (METHOD_IDS[name] for name in METHODS)
 K_MAX = 8
 
