@@ -20,12 +20,11 @@ such runs). Sections:
 - ``--method-switch``: in a fresh process with an empty cache and the background warmer off,
   the default scene (hanging, mapping) built and stepped one frame, then switched to svd,
   warp-weft and back to mapping, each first frame after the switch timed (what a live switch
-  costs where the window's preparation is off).
-- ``--window``: the window (hanging, under ``xvfb-run``) twice in fresh processes, with the
-  other methods prepared after the first step (the default) and without
-  (``LOOM_PREPARE_METHODS=0``), each from an empty cache (--cache keeps one instead) and the
-  warmer off: the longest window frame (the time the window could not respond) at start, while
-  running and after each switch (to svd, to warp-weft; 20 window frames apart).
+  costs).
+- ``--window``: the window (hanging, under ``xvfb-run``) in a fresh process from an empty cache
+  (--cache keeps one instead), the warmer off: the longest window frame (the time the window
+  could not respond) at start, while running and after each switch (to svd, to warp-weft; 20
+  window frames apart).
 """
 import argparse
 import csv
@@ -125,7 +124,7 @@ def run(name, n):
         app.frame()
     phases[name] = max(app.frame_times[k0:])
 
-run("start", 2 + 2 * len(st.methods_to_prepare()) + 1)
+run("start", 3)
 phases["start_total_s"] = time.perf_counter() - t0
 run("running", {between})
 for m in ("svd", "warp-weft"):
@@ -136,18 +135,18 @@ print("RESULT", json.dumps({{"compile": backend.compile_reason(), "fast": backen
 """
 
 
-def window_run(prepare, cache, between=20):
+def window_run(cache, between=20):
     """One window run under xvfb-run: the longest window frame (ms) per phase."""
     env = dict(os.environ, LOOM_BACKGROUND_COMPILE="0", LOOM_APP_NO_VSYNC="1",
-               LOOM_PREPARE_METHODS="1" if prepare else "0", TI_OFFLINE_CACHE_FILE_PATH=cache)
+               TI_OFFLINE_CACHE_FILE_PATH=cache)
     env.pop("LOOM_FAST_COMPILE", None)
     code = WINDOW_DRIVER.format(root=ROOT, between=between)
     proc = subprocess.run(["xvfb-run", "-a", "-s", "-screen 0 1280x800x24", sys.executable,
                            "-c", code], capture_output=True, text=True, env=env)
     line = next((ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT ")), None)
     if line is None:
-        return {"prepare": prepare, "error": proc.stderr[-1500:]}
-    return {"prepare": prepare, **json.loads(line[len("RESULT "):])}
+        return {"error": proc.stderr[-1500:]}
+    return json.loads(line[len("RESULT "):])
 
 
 # ---- the page ---------------------------------------------------------------------------------
@@ -184,17 +183,15 @@ def page(r, cmd, seconds):
         L += ["## How long the window stops", "",
               "The longest window frame (s), i.e. the longest time the window could not "
               "respond, per phase.", "",
-              "| prepare | compile | start: longest | start: total | running: longest | "
+              "| compile | start: longest | start: total | running: longest | "
               "switch to svd | switch to warp-weft |",
-              "| --- | --- | --- | --- | --- | --- | --- |"]
+              "| --- | --- | --- | --- | --- | --- |"]
         for w in r["window"]:
             if "error" in w:
-                L.append(f"| {'on' if w['prepare'] else 'off'} | failed: "
-                         f"{w['error'][-200:]!r} | | | | | |")
+                L.append(f"| failed: {w['error'][-200:]!r} | | | | | |")
                 continue
             ms = 1e-3
-            L.append(f"| {'on' if w['prepare'] else 'off'} | "
-                     f"{'fast' if w['fast'] else 'optimised'} | {w['start'] * ms:.1f} | "
+            L.append(f"| {'fast' if w['fast'] else 'optimised'} | {w['start'] * ms:.1f} | "
                      f"{w['start_total_s']:.1f} | {w['running'] * ms:.2f} | "
                      f"{w['switch to svd'] * ms:.2f} | {w['switch to warp-weft'] * ms:.2f} |")
         L.append("")
@@ -247,13 +244,11 @@ def main(argv=None):
     if a.window:
         if shutil.which("xvfb-run") is None:
             sys.exit("xvfb-run is not installed (apt-get install xvfb)")
-        r["window"] = []
-        for prepare in (True, False):
-            cache = fresh()
-            try:
-                r["window"].append(window_run(prepare, cache))
-            finally:
-                done(cache)
+        cache = fresh()
+        try:
+            r["window"] = [window_run(cache)]
+        finally:
+            done(cache)
     text = page(r, cmd, time.time() - t0)
     if a.out:
         os.makedirs(a.out, exist_ok=True)

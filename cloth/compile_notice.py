@@ -1,16 +1,17 @@
 """One line on stderr before a kernel compile that takes long, with the time it took last time.
 
 Taichi compiles a kernel at its first call (per template variant) and keeps the result in its
-offline cache. Cold, with full optimisation, the strain solve (strain/al.py ``solve_al``)
-takes about 2 minutes per method on a 2-core machine; without a word the program looks hung.
+offline cache. Cold, with full optimisation, the strain solve (strain/al.py ``solve_al``, one
+kernel for the three methods) takes minutes on a 2-core machine; without a word the program
+looks hung.
 The callers wrap the first call of each big piece of work::
 
-    with compile_notice.first_use("the strain solver for mapping", key, seconds=120):
+    with compile_notice.first_use("the fast strain solver", key, seconds=120):
         limiter.project(h)
 
 and the first time a ``key`` is used in this process, a line such as
 
-    loom: compiling the strain solver for mapping (first use on this machine; last time 118 s)
+    loom: compiling the fast strain solver (first use on this machine; last time 118 s)
 
 is printed before the call, unless this machine's record says the same code was compiled
 already (then Taichi loads it from its cache in a second or two and nothing is printed).

@@ -729,26 +729,21 @@ class Simulator:
         self.frame += 1
         self.frame_ms = 1000.0 * (time.perf_counter() - t0)
 
-    def compile_work(self, stage, method=None):
+    def compile_work(self, stage):
         """(what, key, estimate in s) of the kernels a stage compiles at its first call: the
-        key names the template variant, so a method switch announces its own compile
-        (cloth/compile_notice.py, which keeps the estimates)."""
+        key names the kernel variant (cloth/compile_notice.py, which keeps the estimates).
+        The strain solver is one kernel for the three methods, one per ``strain.solve``: a
+        switch of method compiles nothing, a switch to the exact solve compiles its own."""
         if stage == "strain_limit":
-            method = self.strain.method if method is None else method
-            return (f"the strain solver for {method}", self.strain_solver_key(method),
-                    compile_notice.strain_estimate(self.settings.strain.solve,
-                                                   self.strain.uses_host_loop()))
+            solve = self.settings.strain.solve
+            return (f"the {solve} strain solver", f"strain solver:{solve}",
+                    compile_notice.strain_estimate(solve, self.strain.uses_host_loop()))
         if stage == "dynamics":
             return ("the dynamics step", f"dynamics:{self.settings.sim.linear_solver}",
                     compile_notice.DYNAMICS_COMPILE_S)
         if stage in ("collision", "self_collision"):
             return ("the collision pass", "collision", compile_notice.COLLISION_COMPILE_S)
         return None
-
-    def strain_solver_key(self, method):
-        """The compile key of the strain solver's kernels for ``method`` under this
-        simulator's strain settings (the template variant: cloth/compile_notice.py)."""
-        return f"strain solver:{method}:{self.settings.strain.solve}"
 
     def compile_pending(self):
         """The notice line when the next frame's strain solve will compile its kernels (a

@@ -568,9 +568,7 @@ def test_window_app_runs_under_xvfb(tmp_path, screen):
     with each section of the control column opened in turn and with the teaching plot."""
     full = screen == "1280x800"
     code = WINDOW_DRIVER.format(root=ROOT, out=str(tmp_path), full=full, scene="hanging")
-    # No other method prepared in the background (tests/test_compile_notice.py tests that):
-    # compiling two more strain solvers cold was most of this test's time.
-    proc = run_in_window(code, screen, LOOM_PREPARE_METHODS="0")
+    proc = run_in_window(code, screen)
     fit = [line.split()[1:] for line in proc.stdout.splitlines() if line.startswith("fit ")]
     assert len(fit) == 6, proc.stdout
     width, height = (int(v) for v in screen.split("x"))
@@ -652,9 +650,7 @@ def teach_window(tmp_path_factory):
     """The teaching-view driver's output lines (first word -> the rest), one window run
     shared by the selection and the hover tests."""
     code = TEACH_DRIVER.format(root=ROOT, out=str(tmp_path_factory.mktemp("teach_window")))
-    # One method: the other two strain solvers, prepared in the background, were most of
-    # the run on an empty cache.
-    proc = run_in_window(code, "1280x800", LOOM_PREPARE_METHODS="0")
+    proc = run_in_window(code, "1280x800")
     return dict(line.split(" ", 1) for line in proc.stdout.splitlines() if " " in line)
 
 

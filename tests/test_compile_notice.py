@@ -86,35 +86,23 @@ def test_window_shows_the_notice_before_the_step_that_compiles(monkeypatch):
     assert st.sim.frame == frame + 1 and st.message == ""
 
 
-def test_window_prepares_the_other_methods_without_touching_the_simulation(monkeypatch):
-    """After the first step the window compiles the other methods' strain solvers, one per
-    two window frames (the panel names each before it waits), on a throwaway sheet: the
-    simulation is bit for bit what it was, and a switch afterwards has nothing to compile."""
+def test_a_method_switch_compiles_nothing_and_the_exact_solve_announces_its_own(monkeypatch):
+    """The strain solver is one kernel for the three methods: once one method has run, a
+    switch to another compiles no kernel variant and announces nothing, while the exact
+    solve is a kernel of its own, announced before its first step."""
+    from cloth.strain import al
     from ui.state import AppState
-    monkeypatch.delenv("LOOM_PREPARE_METHODS", raising=False)
     monkeypatch.setattr(cn, "_used", set())     # as in a new process (xdist workers share one)
     st = AppState.from_scene("hanging", [{"cloth": {"resolution": 5}}])
     st.tick()
-    x, frame = st.sim.model.positions().copy(), st.sim.frame
-    announced, calls = [], 0
-    while st.prepare_step():
-        calls += 1
-        name = st.message.split()[1].strip(",") if st.message.startswith("preparing") else None
-        if name and announced[-1:] != [name]:
-            announced.append(name)
-        assert calls < 10
-    assert announced == ["svd", "warp-weft"] and calls == 4
-    assert st.message == "" and st.methods_to_prepare() == []
-    assert st.sim.frame == frame and np.array_equal(st.sim.model.positions(), x)
-    for m in ("svd", "warp-weft"):
-        assert cn.used(st.sim.strain_solver_key(m))
-        assert st.switch_method(m) and st.sim.compile_pending() is None
-    st.tick()
-    assert st.sim.frame == frame + 1 and st.sim.method == "warp-weft"
-
-
-def test_preparing_can_be_turned_off(monkeypatch):
-    from ui.state import AppState
-    monkeypatch.setenv("LOOM_PREPARE_METHODS", "0")
-    st = AppState.from_scene("hanging", [{"cloth": {"resolution": 5}}])
-    assert st.methods_to_prepare() == [] and not st.prepare_step()
+    fast = st.sim.compile_work("strain_limit")[1]
+    assert cn.used(fast)
+    variants = len(al.solve_al._primal.compiled_kernels)
+    for m in ("svd", "warp-weft", "mapping"):
+        assert st.switch_method(m) and st.sim.compile_pending() is None and st.message == ""
+        frame = st.sim.frame
+        st.tick()
+        assert st.sim.frame == frame + 1 and st.sim.method == m
+    assert len(al.solve_al._primal.compiled_kernels) == variants
+    st.sim._change("strain", solve="exact")
+    assert st.sim.compile_work("strain_limit")[1] != fast

@@ -557,9 +557,7 @@ class App:
         ts = time.perf_counter()
         if self.frames_shown == 1 and st.message.startswith("compiling"):
             st.message = ""
-        if self.frames_shown > 1 and st.prepare_step():
-            pass    # the other methods compile now, not at a switch in the middle of a lesson
-        elif self.frames_shown > 0:
+        if self.frames_shown > 0:
             # The first window frame shows the initial state before the first step compiles
             # the kernels (tens of seconds for three simulators in the comparison view).
             st.tick()

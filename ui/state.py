@@ -15,12 +15,11 @@ it keeps no copy of the settings: the controls read and write ``Simulator.settin
     state.begin_drag(0, v); state.drag(point); state.tick(); state.end_drag()
 """
 import copy
-import os
 import traceback
 
 import numpy as np
 
-from cloth import compile_notice, metrics
+from cloth import metrics
 from cloth.simulator import SimulationDiverged, Simulator
 from cloth.strain.families import METHODS
 from cloth.backend import LoopCapError
@@ -78,8 +77,6 @@ class AppState:
         self.message = ""           # last error or notice, shown in the panel
         self.failed = False         # the simulation diverged or a stage raised: reset first
         self._defer_tick = False    # skip one tick: the panel shows a compile notice first
-        self._preparing = None      # the method announced by prepare_step, compiled next
-        self._prepared = set()      # methods prepare_step has compiled (or tried to)
         self.render_ms = 0.0
         self.fps = 0.0
         self.overlays = set()       # the teaching view's "axes" and "plot" (ui/overlays.py)
@@ -301,61 +298,6 @@ class AppState:
                 self.message = line.replace("loom: ", "") + "; the window waits until it is done"
                 self._defer_tick = True
         return ok
-
-    # -- preparing the other methods, so that a live switch does not wait ---------------------
-    def methods_to_prepare(self):
-        """The strain methods a live switch would still wait for (their kernels compile, or
-        load from Taichi's cache, at their first use: 2-5 s each on 2 cores, and the window
-        cannot draw meanwhile because Taichi compiles holding Python's GIL). None in the
-        comparison view (it runs all three) or with LOOM_PREPARE_METHODS=0."""
-        if self.compare or os.environ.get("LOOM_PREPARE_METHODS", "1") == "0":
-            return []
-        sim = self.sim
-        return [m for m in COMPARE_METHODS
-                if m != sim.method and m not in self._prepared
-                and not compile_notice.used(sim.strain_solver_key(m))]
-
-    def prepare_step(self):
-        """One window frame's share of preparing the other methods (the window calls it
-        after the first step, instead of advancing, while it returns True): one call puts
-        the next method in the panel, so the window shows what it waits for; the next
-        compiles that method's strain solver on a throwaway 3 x 3 sheet with this
-        simulator's settings. Taichi keeps one compiled kernel per template variant, so
-        the real switch then only swaps arrays. Returns False once nothing is left."""
-        todo = self.methods_to_prepare()
-        if not todo:
-            if self._preparing is not None and self.message.startswith("preparing"):
-                self.message = ""
-            self._preparing = None
-            return False
-        method = todo[0]
-        if self._preparing != method:
-            self._preparing = method
-            what, key, seconds = self.sim.compile_work("strain_limit", method)
-            line = compile_notice.notice(what, key, seconds)
-            how = (line.replace("loom: compiling ", "compiling ") if line else
-                   f"loading {what} from the cache")
-            self.message = f"preparing {method}, so that a switch to it is quick: {how}"
-            return True
-        self._prepared.add(method)
-        try:
-            self._compile_method(method)
-        except Exception as err:        # the switch itself will show the error, if any
-            print(f"loom: preparing {method} failed ({type(err).__name__}: {err}); "
-                  "switching to it will compile it then", flush=True)
-        return True
-
-    def _compile_method(self, method):
-        import scenes
-        from scenes.common import resolve
-        hanging = scenes.get("hanging")
-        own = self.sim.settings.to_dict()
-        over = {k: own[k] for k in ("sim", "strain", "material") if k in own}
-        over["strain"]["method"] = method
-        over["sim"]["frames"] = 1
-        over["cloth"] = {"resolution": 3}
-        cfg = resolve(hanging.DEFAULTS, [over])
-        Simulator(hanging.build(cfg), cfg).step_frame()
 
     @property
     def method(self):
