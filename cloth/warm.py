@@ -1,8 +1,8 @@
 """Optimised kernels built in the background, for the next run.
 
 Cold, on a 2-core machine, full optimisation compiles the strain solve (strain/al.py
-``solve_al``) in about 2 minutes per method; fast compilation (Taichi's advanced
-optimisation off) in about 20 s, and the solve then runs up to 1.4x slower. So main.py's
+``solve_al``, one kernel for the three methods) in about 8 minutes; fast compilation (Taichi's
+advanced optimisation off) in about 20 s, and the solve then runs up to 1.4x slower. So main.py's
 first run on a machine (no marker below for this code) compiles fast and starts this module
 as a detached, low-priority process:
 
