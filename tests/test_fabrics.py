@@ -543,6 +543,7 @@ def test_a_cusick_skirt_under_a_wovens_tight_bands_falls_from_rest(method):
     assert min(speeds[4:]) > 3e-3                       # m/s: still falling at frames 5-12
 
 
+@pytest.mark.xdist_group("exact_solve")      # the exact and host-loop kernels compile once
 def test_the_cusick_reference_solve_is_the_exact_solve_with_cholesky_newton_steps():
     """``cusick.run(..., solve="reference")``, the drape reading that depends on no PCG
     (docs/fabrics.md): every projection is the exact solve in the host loop, it holds the
