@@ -31,6 +31,7 @@ import csv
 import json
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -41,6 +42,19 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 def load():
     return f"{os.getloadavg()[0]:.2f}"
+
+
+def stop_warmer(cache):
+    """Stop the background warmer a first run started in ``cache`` (a folder about to be
+    removed): left running, it loaded the machine through the later sections (their loads read
+    1.5-2.9) and compiled into a deleted folder."""
+    from cloth import warm
+    pid = warm.running(cache)
+    if pid is not None:
+        try:
+            os.kill(pid, signal.SIGTERM)
+        except OSError:
+            pass
 
 
 def run(args, cache, repo=ROOT, env_extra=(), out=None):
@@ -227,6 +241,7 @@ def main(argv=None):
 
     def done(cache):
         if not a.cache and not a.keep:
+            stop_warmer(cache)
             shutil.rmtree(cache, ignore_errors=True)
 
     cache = fresh()
