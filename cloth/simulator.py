@@ -746,9 +746,9 @@ class Simulator:
         return None
 
     def compile_pending(self):
-        """The notice line when the next frame's strain solve will compile its kernels (a
-        method switched to for the first time on this machine), else None: the window shows
-        it before the step that compiles."""
+        """The notice line when the next frame's strain solve will compile its kernels (its
+        first use on this machine: limiting switched on from "none", or the exact solve), else
+        None: the window shows it before the step that compiles."""
         if self.strain is None or not self.stage("strain_limit").enabled:
             return None
         return compile_notice.notice(*self.compile_work("strain_limit"))

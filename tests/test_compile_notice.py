@@ -2,8 +2,6 @@
 time the last one took on this machine; nothing when the record says it is cached."""
 import io
 
-import numpy as np
-
 import pytest
 
 from cloth import compile_notice as cn

@@ -72,7 +72,9 @@ def assemble_face(method, with_grad: ti.template(), f, pos: T, mesh: T, cons: T)
     """``store_face`` under the family whose id ``method`` is at run time. Why run time: one
     kernel serves the three families, so a switch of method compiles nothing, and a process
     that uses all three (the test suite, the comparison view) compiles the solve once, not
-    three times (a family's constraints are a small part of the solve's code)."""
+    three times. The price: every call site holds the three families, so a kernel with one
+    call compiles longer than one family's did (``solve_al`` keeps two calls:
+    docs/speed/first_run.md)."""
     if method == SVD:
         store_face(SVD, with_grad, f, pos, mesh, cons)
     elif method == WARP_WEFT:
@@ -1077,8 +1079,8 @@ def near_obstacle(contacts: ti.template(), n):
 @ti.func
 def start_candidate(n, xp, h, extrapolate, settle, step_start, io: ti.template(),
                     contacts: ti.template()):
-    """solve_al's start candidate (START_CANDIDATE) for vertex n: x_prev = x_hat - h v (``xp``), moved on by
-    h v_last in the vertex's ``moving_share``. With ``step_start``, a vertex near an
+    """solve_al's start candidate (START_CANDIDATE) for vertex n: x_prev = x_hat - h v
+    (``xp``), moved on by h v_last in the vertex's ``moving_share``. With ``step_start``, a vertex near an
     obstacle starts instead, in the share that is not moving, where the substep truly began
     (io.x_step): the obstacle pass between the dynamics and the projection stopped it
     without the matching change of x, so its x_hat - h v lies where it never was (on the

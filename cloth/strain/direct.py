@@ -337,7 +337,7 @@ def loops_ran(two, info: T):
 @ti.kernel
 def start_values(method: ti.i32, two: int, mesh: MeshPack, cons: ConstraintPack,
                  contacts: ContactPack, vec: VectorPack, stats: A, info: A):
-    """``start``'s first part: the constraints at x (= x_hat) and the start violation."""
+    """``choose_start``'s first part: the constraints at x (= x_hat) and the start violation."""
     ti.loop_config(serialize=True)
     for _ in range(1):
         K, nv, nf, ns = cons.n_per_face, mesh.n_verts, mesh.n_faces, contacts.n_stitches
