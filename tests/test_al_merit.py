@@ -12,35 +12,17 @@ from cloth.strain.buffers import ConstraintPack, ContactPack, MeshPack, MetricPa
 from cloth.strain.constraints import METHOD_IDS, N_CONSTRAINTS
 
 
-@ti.kernel
-def _merit_at(method: ti.i32, mu: float, pos: A, mesh: MeshPack, metric: MetricPack,
-              cons: ConstraintPack, contacts: ContactPack, vec: VectorPack) -> float:
-    total = 0.0
-    ti.loop_config(serialize=True)
-    for _ in range(1):
-        K, nv, nf, ns = cons.n_per_face, mesh.n_verts, mesh.n_faces, contacts.n_stitches
-        al.assemble_all(method, nf, pos, mesh, cons)
-        total = al.merit(K, nv, nf, ns, mu, pos, vec.x_hat, metric, cons, contacts)
-    return total
+MERIT, RESIDUAL, LINE = range(3)
 
 
 @ti.kernel
-def _residual_at(method: ti.i32, mu: float, pos: A, mesh: MeshPack, metric: MetricPack,
-                 cons: ConstraintPack, contacts: ContactPack, vec: VectorPack):
-    ti.loop_config(serialize=True)
-    for _ in range(1):
-        K, nv, nf, ns = cons.n_per_face, mesh.n_verts, mesh.n_faces, contacts.n_stitches
-        al.assemble_all(method, nf, pos, mesh, cons)
-        al.metric_gradient(nv, pos, metric, vec)
-        al.residual(K, nv, nf, ns, mu, pos, mesh, cons, contacts, vec)
-
-
-@ti.kernel
-def _line_merits(method: ti.i32, mu: float, a: float, pos: A, moved: A, mesh: MeshPack,
-                 metric: MetricPack, cons: ConstraintPack, contacts: ContactPack,
-                 vec: VectorPack) -> ti.types.vector(2, float):
-    """The merit at pos + a d (d = vec.d) two ways: directly, and as solve_al's line search
-    forms it (the quadratic from ``metric_along`` at pos, plus the constraint terms)."""
+def _probe(what: ti.i32, method: ti.i32, mu: float, a: float, pos: A, moved: A,
+           mesh: MeshPack, metric: MetricPack, cons: ConstraintPack, contacts: ContactPack,
+           vec: VectorPack) -> ti.types.vector(2, float):
+    """MERIT: (the merit at pos, 0). RESIDUAL: the residual at pos into vec.r. LINE: the merit
+    at pos + a d (d = vec.d) two ways: directly, and as solve_al's line search forms it (the
+    quadratic from ``metric_along`` at pos, plus the constraint terms). (One kernel: each
+    assembly call site compiles the three methods' constraints.)"""
     out = ti.Vector([0.0, 0.0])
     ti.loop_config(serialize=True)
     for _ in range(1):
@@ -48,11 +30,14 @@ def _line_merits(method: ti.i32, mu: float, a: float, pos: A, moved: A, mesh: Me
         al.metric_gradient(nv, pos, metric, vec)
         quad = al.metric_along(nv, pos, metric, vec)
         for n in range(nv):
-            moved[n] = pos[n] + a * vec.d[n]
+            moved[n] = pos[n] + a * vec.d[n] if what == LINE else pos[n]
         al.assemble_all(method, nf, moved, mesh, cons)
-        out[0] = al.merit(K, nv, nf, ns, mu, moved, vec.x_hat, metric, cons, contacts)
-        out[1] = al.quad_at(quad, a) + al.merit_constraints(K, nv, nf, ns, mu, moved, cons,
-                                                            contacts)
+        if what == RESIDUAL:
+            al.residual(K, nv, nf, ns, mu, moved, mesh, cons, contacts, vec)
+        else:
+            out[0] = al.merit(K, nv, nf, ns, mu, moved, vec.x_hat, metric, cons, contacts)
+            out[1] = al.quad_at(quad, a) + al.merit_constraints(K, nv, nf, ns, mu, moved, cons,
+                                                                contacts)
     return out
 
 
@@ -79,10 +64,10 @@ def test_residual_is_minus_the_merit_gradient(method):
 
     def merit_at(xs):
         pos.from_numpy(xs)
-        return _merit_at(mid, mu, pos, *packs)
+        return _probe(MERIT, mid, mu, 0.0, pos, ws.z, *packs)[0]
 
     pos.from_numpy(x0)
-    _residual_at(mid, mu, pos, *packs)
+    _probe(RESIDUAL, mid, mu, 0.0, pos, ws.z, *packs)
     r = ws.r.to_numpy()[:nv]
     for trial in range(3):
         d = np.zeros_like(x0)
@@ -102,7 +87,7 @@ def test_residual_is_minus_the_merit_gradient(method):
     ws.d.from_numpy(d)
     for a in (1.0, 0.37):
         pos.from_numpy(x0)
-        merit, along = _line_merits(mid, mu, a, pos, ws.z, *packs)
+        merit, along = _probe(LINE, mid, mu, a, pos, ws.z, *packs)
         assert abs(merit - along) <= 1e-12 * abs(merit), (a, merit, along)
 
 

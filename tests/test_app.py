@@ -559,47 +559,52 @@ if {full!r}:
 """
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("screen", ["1280x800", "1366x768"])
-def test_window_app_runs_under_xvfb(tmp_path, screen):
-    """The real window (panel, legend, recording, screenshot) in a virtual X server of the
-    README's screen and a laptop's; a separate process, since a window needs its own GGUI
-    context. Every panel fits the window it opens in: inside it, and without a scroll bar,
-    with each section of the control column opened in turn and with the teaching plot."""
-    full = screen == "1280x800"
-    code = WINDOW_DRIVER.format(root=ROOT, out=str(tmp_path), full=full, scene="hanging")
-    proc = run_in_window(code, screen)
-    fit = [line.split()[1:] for line in proc.stdout.splitlines() if line.startswith("fit ")]
-    assert len(fit) == 6, proc.stdout
+def check_fits(stdout, screen):
+    """Every panel the driver measured fits the window, which fits the screen."""
+    fit = [line.split()[1:] for line in stdout.splitlines() if line.startswith("fit ")]
+    assert len(fit) == 6, stdout
     width, height = (int(v) for v in screen.split("x"))
     for what, w, h, n, inside, bars in fit:
         # The window fits the screen, with room for a desktop's bars below.
         assert int(w) <= width and int(h) <= height - 60, (what, w, h)
         assert int(n) >= 2 and inside == "True" and bars == "0", (what, n, inside, bars)
-    if not full:
-        return
+
+
+@pytest.mark.slow
+@pytest.mark.xdist_group("window_1280")     # one worker: the window runs once
+def test_window_app_runs_under_xvfb(window_1280):
+    """The real window (panel, legend, recording, screenshot) in a virtual X server of the
+    README's screen; a separate process, since a window needs its own GGUI context. Every
+    panel fits the window it opens in: inside it, and without a scroll bar, with each section
+    of the control column opened in turn and with the teaching plot."""
+    out, stdout = window_1280
+    check_fits(stdout, "1280x800")
     # The first window frame shows the initial state; each one after it steps.
-    assert "stepped to frame 5" in proc.stdout
-    assert "message screenshot:" in proc.stdout
-    rec = next((tmp_path / "recordings").iterdir())
+    assert "stepped to frame 5" in stdout
+    assert "message screenshot:" in stdout
+    rec = next((out / "recordings").iterdir())
     assert sorted(p.name for p in rec.iterdir()) == ["frame_0000.png", "frame_0001.png",
                                                       "frame_0002.png", "video.mp4"]
-    assert len(list((tmp_path / "screenshots").iterdir())) == 1
+    assert len(list((out / "screenshots").iterdir())) == 1
 
 
+@pytest.mark.slow
+def test_window_fits_a_laptop_screen(tmp_path):
+    """The same layout checks on a laptop's 1366x768 screen (the layout only, paused)."""
+    code = WINDOW_DRIVER.format(root=ROOT, out=str(tmp_path), full=False, scene="hanging")
+    check_fits(run_in_window(code, "1366x768").stdout, "1366x768")
+
+
+# The teaching view's checks continue WINDOW_DRIVER's run in the same window (one process
+# compiles the strain solver once): the scene restarted, the control column as it opens.
 TEACH_DRIVER = """
-import sys
-sys.path.insert(0, {root!r})
-from cloth import backend
-backend.init("cpu", "f64")
-import numpy as np
-from ui.state import AppState
-from ui.app import App
 from ui.overlays import plot_frame, to_window
-st = AppState.from_scene("hanging", [{{"cloth": {{"resolution": 7}}}}])
-st.toggle_overlay("axes"); st.toggle_overlay("plot"); st.color = "binding"
-app = App(st, size=(1280, 800), out_dir={out!r})
-app.reset_view()
+for name in ("dynamics", "fabric", "run", "strain"):
+    if app.left.is_open(name):
+        app.left.toggle(name)
+st.reset(); st.resume()
+st.wireframe, st.color = False, "binding"
+app.toggle_overlay("axes"); app.toggle_overlay("plot")
 for k in range(3):
     app.frame()
 f = 40
@@ -646,16 +651,22 @@ print("hover-off", app.teach.hover)
 
 
 @pytest.fixture(scope="module")
-def teach_window(tmp_path_factory):
-    """The teaching-view driver's output lines (first word -> the rest), one window run
-    shared by the selection and the hover tests."""
-    code = TEACH_DRIVER.format(root=ROOT, out=str(tmp_path_factory.mktemp("teach_window")))
-    proc = run_in_window(code, "1280x800")
-    return dict(line.split(" ", 1) for line in proc.stdout.splitlines() if " " in line)
+def window_1280(tmp_path_factory):
+    """(output folder, stdout) of one window run on the README's screen: the layout and
+    recording driver, then the teaching-view driver in the same window."""
+    out = tmp_path_factory.mktemp("window_1280")
+    code = WINDOW_DRIVER.format(root=ROOT, out=str(out), full=True, scene="hanging")
+    return out, run_in_window(code + TEACH_DRIVER, "1280x800").stdout
+
+
+@pytest.fixture(scope="module")
+def teach_window(window_1280):
+    """The teaching-view driver's output lines (first word -> the rest)."""
+    return dict(line.split(" ", 1) for line in window_1280[1].splitlines() if " " in line)
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group("teach_window")     # one worker: the window runs once
+@pytest.mark.xdist_group("window_1280")     # one worker: the window runs once
 def test_window_teaching_view_selects_a_triangle_in_both_views(teach_window):
     """In the real window (Xvfb): with the axes and the plot on, a click on a cloth face
     selects that face; a click on its point in the plot selects a face at that point (faces
@@ -668,7 +679,7 @@ def test_window_teaching_view_selects_a_triangle_in_both_views(teach_window):
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group("teach_window")     # one worker: the window runs once
+@pytest.mark.xdist_group("window_1280")     # one worker: the window runs once
 def test_window_teaching_view_highlights_the_hovered_triangle(teach_window):
     """The cursor over a cloth face (read each frame, no click) marks that face; over its
     point in the plot, a face at that point; both draw magenta marks (outline and ring)

@@ -21,7 +21,9 @@ def run_main_here(*args):
     """``main.main(args)`` in this test process, reported like ``run_main`` (returncode,
     stdout, stderr), without a display. The strain solver's kernels, compiled once per process
     (ndarray arguments), are then reused from earlier tests; a subprocess compiles them again
-    (10-20 s each on 2 cores). Use ``run_main`` where the entry point itself is under test."""
+    (10-20 s each on 2 cores), and a child process's start alone costs ~1.5 s (Python and
+    Taichi). Use ``run_main`` where the entry point itself is under test (the exit code
+    through ``sys.exit``, argparse's own ``--help``)."""
     import contextlib
     import io
     from types import SimpleNamespace
@@ -68,35 +70,37 @@ def test_f64_on_vulkan_is_refused_with_the_fix(tmp_path):
 
 
 def test_unknown_set_key():
-    assert_clear_error(run_main("hanging", "--set", "material.k_wrap=3", "--headless"),
+    assert_clear_error(run_main_here("hanging", "--set", "material.k_wrap=3", "--headless"),
                        "unknown setting 'material.k_wrap'", "k_warp")
 
 
 def test_malformed_toml(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text("[material\nk_warp = 3\n")
-    assert_clear_error(run_main("hanging", "--config", str(bad), "--headless"), "not valid TOML")
+    assert_clear_error(run_main_here("hanging", "--config", str(bad), "--headless"),
+                       "not valid TOML")
 
 
 @pytest.mark.parametrize("setting", ["sim.fps=-30", "sim.fps=0", "sim.substeps=0"])
 def test_non_positive_time_step(setting):
     # Refused by the schema (scenes/schema.py) before anything is built.
     key = setting.split("=")[0]
-    assert_clear_error(run_main("hanging", "--set", setting, "--headless", "--frames", "1"),
+    assert_clear_error(run_main_here("hanging", "--set", setting, "--headless", "--frames", "1"),
                        key, "must be", f"--set {key}=")
 
 
 def test_degenerate_material_triangles():
     # A zero-width sheet is refused by the schema; degenerate triangles of a mesh file are
     # refused when it is loaded (tests/test_scene_files.py).
-    assert_clear_error(run_main("hanging", "--set", "cloth.width=0", "--headless", "--frames", "1"),
+    assert_clear_error(run_main_here("hanging", "--set", "cloth.width=0", "--headless",
+                                     "--frames", "1"),
                        "cloth.width", "must be > 0 m")
 
 
 def test_list_and_show_config():
-    res = run_main("--list")
+    res = run_main_here("--list")
     assert res.returncode == 0 and "hanging" in res.stdout
-    res = run_main("hanging", "--show-config", "--set", "material.preset=\"cotton\"")
+    res = run_main_here("hanging", "--show-config", "--set", "material.preset=\"cotton\"")
     assert res.returncode == 0
     assert "material.k_warp = 3000.0" in res.stdout and "cloth.resolution = 25" in res.stdout
 
@@ -168,7 +172,7 @@ def test_headless_writes_the_documented_folder(headless_run):
 @pytest.mark.parametrize("frames", ["-3", "0"])
 def test_non_positive_frame_count_is_refused_and_nothing_written(frames, tmp_path):
     out = tmp_path / "run"
-    res = run_main("hanging", "--headless", "--frames", frames, "--out", str(out))
+    res = run_main_here("hanging", "--headless", "--frames", frames, "--out", str(out))
     assert_clear_error(res, "sim.frames must be 1 or more", "--frames N")
     assert not out.exists()
     assert "final check" not in res.stdout
