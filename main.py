@@ -198,19 +198,13 @@ def main(argv=None):
         # frame 30 against 0.637 m in f64).
         from cloth import backend
         try:
-            # A first run compiles fast and builds the optimised kernels in the background
-            # for the next run (cloth/warm.py); it says so in one line.
-            backend.init(args.arch, args.precision, first_run_fast=True)
+            backend.init(args.arch, args.precision)
         except backend.BackendError as err:
             return fail(str(err))
         except Exception as err:  # Taichi could not start this arch (no driver, no device)
             return fail(f"Taichi could not start on --arch {args.arch} ({err}); use --arch cpu")
         for note in backend.start_notes():
             print(note, file=sys.stderr, flush=True)
-        from cloth import warm
-        line = warm.after_init()
-        if line:
-            print(line, file=sys.stderr, flush=True)
     import scenes
     from cloth.config import ConfigError, load_toml, parse_assignment
 

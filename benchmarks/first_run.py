@@ -17,12 +17,11 @@ such runs). Sections:
   load before and after, and the run's ``loom:`` notices. ``--repo DIR`` runs another copy of
   the code (e.g. an exported earlier commit) with the same Python; the run's environment is
   this one's plus ``--env`` pairs, LOOM_FAST_COMPILE removed unless given with ``--env``.
-- ``--method-switch``: in a fresh process with an empty cache and the background warmer off,
-  the default scene (hanging, mapping) built and stepped one frame, then switched to svd,
+- ``--method-switch``: in a fresh process with an empty cache, the default scene (hanging, mapping) built and stepped one frame, then switched to svd,
   warp-weft and back to mapping, each first frame after the switch timed (what a live switch
   costs).
 - ``--window``: the window (hanging, under ``xvfb-run``) in a fresh process from an empty cache
-  (--cache keeps one instead), the warmer off: the longest window frame (the time the window
+  (--cache keeps one instead): the longest window frame (the time the window
   could not respond) at start, while running and after each switch (to svd, to warp-weft; 20
   window frames apart).
 """
@@ -31,7 +30,6 @@ import csv
 import json
 import os
 import shutil
-import signal
 import subprocess
 import sys
 import tempfile
@@ -42,19 +40,6 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 def load():
     return f"{os.getloadavg()[0]:.2f}"
-
-
-def stop_warmer(cache):
-    """Stop the background warmer a first run started in ``cache`` (a folder about to be
-    removed): left running, it loaded the machine through the later sections (their loads read
-    1.5-2.9) and compiled into a deleted folder."""
-    from cloth import warm
-    pid = warm.running(cache)
-    if pid is not None:
-        try:
-            os.kill(pid, signal.SIGTERM)
-        except OSError:
-            pass
 
 
 def run(args, cache, repo=ROOT, env_extra=(), out=None):
@@ -87,16 +72,16 @@ def run(args, cache, repo=ROOT, env_extra=(), out=None):
 
 # ---- a method's first use in a running simulator --------------------------------------------
 def method_switch_child():
-    """In this process (empty cache, warmer off): build the default scene, step a frame, switch
+    """In this process (empty cache): build the default scene, step a frame, switch
     methods; prints one JSON line."""
     from cloth import backend
-    backend.init("cpu", "f64", first_run_fast=True)
+    backend.init("cpu", "f64")
     import scenes
     from cloth.simulator import Simulator
     from scenes.common import resolve
     m = scenes.get("hanging")
     cfg = resolve(m.DEFAULTS, [])
-    r = {"compile": backend.compile_reason(), "fast": backend.fast_compile(), "load0": load()}
+    r = {"fast": backend.fast_compile(), "load0": load()}
     t0 = time.perf_counter()
     sim = Simulator(m.build(cfg), cfg)
     sim.step_frame()
@@ -112,7 +97,7 @@ def method_switch_child():
 
 
 def method_switch(cache):
-    env = dict(os.environ, LOOM_BACKGROUND_COMPILE="0", TI_OFFLINE_CACHE_FILE_PATH=cache)
+    env = dict(os.environ, TI_OFFLINE_CACHE_FILE_PATH=cache)
     p = subprocess.run([sys.executable, "-m", "benchmarks.first_run", "--child-switch"],
                        cwd=ROOT, env=env, capture_output=True, text=True)
     if p.returncode != 0:
@@ -125,7 +110,7 @@ WINDOW_DRIVER = """
 import json, sys, time
 sys.path.insert(0, {root!r})
 from cloth import backend
-backend.init("cpu", "f64", first_run_fast=True)
+backend.init("cpu", "f64")
 from ui.state import AppState
 from ui.app import App
 st = AppState.from_scene("hanging", [])
@@ -144,15 +129,14 @@ run("running", {between})
 for m in ("svd", "warp-weft"):
     st.switch_method(m)
     run("switch to " + m, {between})
-print("RESULT", json.dumps({{"compile": backend.compile_reason(), "fast": backend.fast_compile(),
-                           "sim_frame": st.sim.frame, **phases}}))
+print("RESULT", json.dumps({{"fast": backend.fast_compile(), "sim_frame": st.sim.frame,
+                           **phases}}))
 """
 
 
 def window_run(cache, between=20):
     """One window run under xvfb-run: the longest window frame (ms) per phase."""
-    env = dict(os.environ, LOOM_BACKGROUND_COMPILE="0", LOOM_APP_NO_VSYNC="1",
-               TI_OFFLINE_CACHE_FILE_PATH=cache)
+    env = dict(os.environ, LOOM_APP_NO_VSYNC="1", TI_OFFLINE_CACHE_FILE_PATH=cache)
     env.pop("LOOM_FAST_COMPILE", None)
     code = WINDOW_DRIVER.format(root=ROOT, between=between)
     proc = subprocess.run(["xvfb-run", "-a", "-s", "-screen 0 1280x800x24", sys.executable,
@@ -186,8 +170,8 @@ def page(r, cmd, seconds):
         if "error" in s:
             L += ["The run failed:", "", "```", s["error"], "```", ""]
         else:
-            L += [f"Empty cache, {'fast' if s['fast'] else 'optimised'} compile "
-                  f"({s['compile']}), warmer off; build and first frame (mapping) "
+            L += [f"Empty cache, {'fast' if s['fast'] else 'optimised'} compile; "
+                  f"build and first frame (mapping) "
                   f"{s['build_and_first_frame_s']:.1f} s.", "",
                   "| switch to | first frame after it (s) | load |", "| --- | --- | --- |"]
             L += [f"| {w['method']} | {w['first_frame_s']:.1f} | {w['load']} |"
@@ -241,7 +225,6 @@ def main(argv=None):
 
     def done(cache):
         if not a.cache and not a.keep:
-            stop_warmer(cache)
             shutil.rmtree(cache, ignore_errors=True)
 
     cache = fresh()

@@ -23,8 +23,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def run(res, threads, frames, out, extra_env=None, root=ROOT):
-    env = dict(os.environ, TI_CPU_MAX_NUM_THREADS=str(threads), LOOM_FAST_COMPILE="0",
-               LOOM_BACKGROUND_COMPILE="0")
+    env = dict(os.environ, TI_CPU_MAX_NUM_THREADS=str(threads), LOOM_FAST_COMPILE="0")
     env.update(extra_env or {})
     subprocess.run([sys.executable, os.path.join(root, "main.py"), "hanging", "--headless",
                     "--no-images", "--quiet", "--frames", str(frames), "--resolution",

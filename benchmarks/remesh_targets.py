@@ -4,7 +4,7 @@ target, one run at a time.
     python -m benchmarks.remesh_targets --out docs/remesh [--repeats 3]
 
 Each row is ``python main.py ... --headless --no-images --remesh`` in a subprocess (the
-kernels as the environment asks: optimised unless ``LOOM_FAST_COMPILE`` says otherwise; run
+kernels as the environment asks: fast-compiled unless ``LOOM_FAST_COMPILE=0``; run
 it with the machine otherwise idle), read back from the run's ``metrics.csv`` and its last
 line, ``--repeats`` times in turn: the first run is the command as given, the k-th adds
 ``--nudge k`` (its start moved by 1 nm, seeded), because a landing is chaotic and another

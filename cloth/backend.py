@@ -22,7 +22,7 @@ HOST_LOOP_AL = ("vulkan", "metal")
 # (``start_notes``; docs/speed/gpu_plan.md: what a parallel version would need and give).
 ONE_GPU_THREAD = ("cuda", "amdgpu")
 
-_state = {"arch": None, "precision": None, "fast": None, "reason": None, "requested": None}
+_state = {"arch": None, "precision": None, "fast": None, "requested": None}
 _gpu = {"resolved": None}
 
 
@@ -65,30 +65,19 @@ def check_loop_probe(ran, kernel, mesh, largest):
             "or --arch cpu")
 
 
-# LOOM_FAST_COMPILE=1 switches off Taichi's advanced IR optimisation. Measured on this 2-core
-# VM (hanging, resolution 7, mapping, empty offline cache): building the simulator compiles the
-# one-launch AL solve (strain/al.py solve_al) in 158 s with it and 12 s without (the
-# build took 170 s; 118 s once choose_start had one call site per ti.func); the
-# compiled solve then runs ~1.4x slower per CG iteration (0.28 -> 0.39 ms at 4k triangles).
-# The test suite sets it (tests/conftest.py): its meshes are small and compiles dominate.
+# Taichi's advanced IR optimisation is off (``ti.init(advanced_optimization=False)``): measured
+# on this 2-core VM, it made the strain solve (strain/al.py solve_al) compile in about 8
+# minutes instead of about 20 s on an empty cache, and the kernels it built were no faster
+# (hanging at 1.2k, 4k and 16k triangles, drape, tshirt: within the runs' spread of 10-20 %,
+# docs/speed/first_run.md, "Optimised kernels"). LLVM's own -O3 runs either way.
+# LOOM_FAST_COMPILE=0 switches it on (for a GPU back end, not measured here).
 FAST_COMPILE_ENV = "LOOM_FAST_COMPILE"
 
 
-# LOOM_FAST_COMPILE=1 forces fast compilation and =0 full optimisation. Unset, library
-# callers (benchmarks, tests) get full optimisation, and main.py asks for the first-run choice
-# (``init(..., first_run_fast=True)``): fast while this machine's offline cache has no
-# optimised kernels of this code (cloth/warm.py builds them in the background and leaves a
-# marker), optimised once it has. Measured cold on 2 cores (hanging, mapping): the strain
-# solve compiles in ~2 min optimised against ~12 s fast.
-
-
 def forced_compile_mode():
-    """'fast', 'optimised' or None (LOOM_FAST_COMPILE unset or empty: not forced)."""
+    """'optimised' with LOOM_FAST_COMPILE=0, else 'fast'."""
     import os
-    value = os.environ.get(FAST_COMPILE_ENV, "").strip()
-    if value == "":
-        return None
-    return "optimised" if value == "0" else "fast"
+    return "optimised" if os.environ.get(FAST_COMPILE_ENV, "").strip() == "0" else "fast"
 
 
 def fast_compile():
@@ -107,21 +96,6 @@ def cache_dir():
         return path
     from taichi.lang import impl
     return impl.default_cfg().offline_cache_file_path
-
-
-def choose_compile_mode(arch, precision, first_run_fast):
-    """(fast, reason): reason is 'forced', 'library', 'warmed' (optimised kernels built for
-    this code), 'first run' (none built yet) or 'code changed' (built for other code)."""
-    forced = forced_compile_mode()
-    if forced is not None:
-        return forced == "fast", "forced"
-    if not first_run_fast:
-        return False, "library"
-    from . import warm
-    state = warm.marker_state(cache_dir(), arch, precision)
-    if state == "done":
-        return False, "warmed"
-    return True, ("code changed" if state == "other code" else "first run")
 
 
 # Taichi 1.7's front end formats a source excerpt (the code line re-wrapped by textwrap, with a
@@ -153,8 +127,7 @@ def _use_plain_debug_info():
 
 
 # Taichi's offline cache keeps at most 100 MB by default and then drops its least recently used
-# quarter: a test run's fast-compiled kernels pushed the demo's optimised solver (4-5 MB a
-# method, minutes to compile) out of it. 1 GiB keeps both.
+# quarter: a test run's kernels pushed the demo's strain solver (several MB) out of it.
 CACHE_BYTES = 1 << 30
 
 
@@ -162,11 +135,10 @@ def default_precision(arch):
     return "f32" if arch in F32_ONLY else "f64"
 
 
-def init(arch="cpu", precision=None, debug=False, first_run_fast=False):
+def init(arch="cpu", precision=None, debug=False):
     """Start Taichi once per process. Calling again with the same settings is a no-op;
     with different settings Taichi is reset (all fields are lost). ``precision`` None: f64,
-    or f32 on Vulkan and Metal (``F32_ONLY``). ``first_run_fast``: compile fast while the
-    offline cache has no optimised kernels of this code (``choose_compile_mode``)."""
+    or f32 on Vulkan and Metal (``F32_ONLY``)."""
     if arch not in ARCHES:
         raise BackendError(f"unknown --arch '{arch}': use one of {', '.join(ARCHES)}")
     requested = arch
@@ -191,12 +163,11 @@ def init(arch="cpu", precision=None, debug=False, first_run_fast=False):
         ti.reset()
     fp = ti.f64 if precision == "f64" else ti.f32
     _use_plain_debug_info()
-    fast, reason = choose_compile_mode(arch, precision, first_run_fast)
+    fast = forced_compile_mode() == "fast"
     ti.init(arch=getattr(ti, ARCHES.get(arch, arch)), default_fp=fp, log_level=ti.ERROR,
             debug=debug, offline_cache=True, offline_cache_max_size_of_files=CACHE_BYTES,
             advanced_optimization=not fast)
-    _state.update(arch=arch, precision=precision, fast=fast, reason=reason,
-                  requested=requested)
+    _state.update(arch=arch, precision=precision, fast=fast, requested=requested)
 
 
 def resolve_gpu():
@@ -273,11 +244,6 @@ def precision():
 
 def arch():
     return _state["arch"]
-
-
-def compile_reason():
-    """Why init chose its compile mode (``choose_compile_mode``), None before init."""
-    return _state["reason"]
 
 
 def is_initialised():

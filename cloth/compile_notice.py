@@ -1,9 +1,9 @@
 """One line on stderr before a kernel compile that takes long, with the time it took last time.
 
 Taichi compiles a kernel at its first call (per template variant) and keeps the result in its
-offline cache. Cold, with full optimisation, the strain solve (strain/al.py ``solve_al``, one
-kernel for the three methods) takes minutes on a 2-core machine; without a word the program
-looks hung.
+offline cache. Cold, the strain solve (strain/al.py ``solve_al``, one kernel for the three
+methods) takes about 20 s on a 2-core machine (minutes with LOOM_FAST_COMPILE=0); without a
+word the program looks hung.
 The callers wrap the first call of each big piece of work::
 
     with compile_notice.first_use("the fast strain solver", key, seconds=120):
@@ -14,14 +14,15 @@ and the first time a ``key`` is used in this process, a line such as
     loom: compiling the fast strain solver (first use on this machine; last time 118 s)
 
 is printed before the call, unless this machine's record says the same code was compiled
-already (then Taichi loads it from its cache in a second or two and nothing is printed).
+already (then Taichi loads it from its cache and nothing is printed).
 The record (``loom_compile_times.json``) sits inside Taichi's offline cache directory, so
 emptying the cache empties it too. It maps each key to the fingerprint of what was compiled
 (Taichi version, arch, precision, optimisation, the source of the ``cloth`` package) and the
 seconds the last cold compile took. Later uses of a key in the same process cost one set
 lookup.
 
-Every other kernel compiles in under 2.5 s; a warm strain solve loads in about 2 s
+Every other kernel compiles in under 2.5 s. A cached strain solve still takes about 9 s to
+load: Taichi's CPU cache holds LLVM IR, and LLVM makes the machine code again in every process
 (docs/speed/first_run.md).
 """
 import contextlib
@@ -36,8 +37,8 @@ RECORD_NAME = "loom_compile_times.json"
 # estimate for the next cold compile.
 COMPILED_ABOVE_S = 5.0
 
-# A first compile's estimate per kernel group, cold on 2 cores, in s: (optimised,
-# LOOM_FAST_COMPILE; None: not measured). The strain solve is one kernel for the three
+# A first compile's estimate per kernel group, cold on 2 cores, in s: (with full optimisation,
+# LOOM_FAST_COMPILE=0; the default compile; None: not measured). The strain solve is one kernel for the three
 # methods (docs/speed/first_run.md: fast 494 s optimised for the hanging run, 19 s fast
 # compile); the exact one compiles the active-set re-solves in as well (25 s fast; optimised
 # not measured since, 260 s for one method before, scaled as the fast one's 325 -> 494 s). The
@@ -156,8 +157,8 @@ def notice(what, key, seconds=None):
         est += f"; last time {_duration(entry['seconds'])}"
     elif seconds is not None:
         est += f"; about {_duration(seconds)} on a 2-core machine"
-    if backend.fast_compile():
-        est += ", fast compile"
+    if not backend.fast_compile():
+        est += ", full optimisation"
     return f"loom: compiling {what} ({est})"
 
 
@@ -169,7 +170,7 @@ def _duration(seconds):
 def first_use(what, key, seconds=None, stream=None):
     """Around the call that compiles ``key``'s kernels the first time. ``seconds``: the
     estimate to print while this machine has no record of its own (measured, 2-core CPU),
-    a number or (full optimisation, LOOM_FAST_COMPILE) with None for unknown."""
+    a number or (with LOOM_FAST_COMPILE=0, the default) with None for unknown."""
     if key in _used:
         yield
         return

@@ -85,8 +85,7 @@ def cluster(tmp_path_factory):
     logs = tmp_path_factory.mktemp("dask_logs")
     port = free_port()
     address = f"tcp://127.0.0.1:{port}"
-    env = dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""),
-               LOOM_FAST_COMPILE=os.environ.get("LOOM_FAST_COMPILE", "1"))
+    env = dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""))
     procs = []
 
     def start(name, args):
