@@ -518,7 +518,7 @@ from ui.app import App
 st = AppState.from_scene({scene!r}, [{{"cloth": {{"resolution": 7}}}}])
 app = App(st, out_dir={out!r})       # sized to the screen, as the README's command opens it
 if not {full!r}:
-    st.pause()       # the layout only: no step, no strain solver to compile
+    st.pause()       # the layout only: no step (the start's relaxation still builds the solver)
 
 def fits(what):
     # Every panel inside the window, and none with a scroll bar (its grab is (79, 79, 79),
