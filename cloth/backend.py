@@ -126,6 +126,30 @@ def _use_plain_debug_info():
         ASTTransformerContext.get_pos_info = _plain_pos_info
 
 
+# Taichi 1.7's front end reads a ti.func's source again (``inspect.getsourcelines``, which
+# tokenizes the whole file up to the function) at every call site it inlines: 885 times for
+# the strain solve, 1.0 s of its 6.3 s front end under cProfile (hanging, resolution 7, warm
+# offline cache: the front end runs cached or not, to find the cache key). The source of a
+# function does not change within a process, so it is read once.
+def _remember_sources():
+    try:
+        from taichi.lang import kernel_impl
+    except ImportError:
+        return
+    for name in ("getsourcefile", "getsourcelines"):
+        original = getattr(kernel_impl, name, None)
+        if original is None or getattr(original, "_loom_remembered", False):
+            continue
+        kept = {}
+
+        def remembered(func, original=original, kept=kept):
+            if func not in kept:
+                kept[func] = original(func)
+            return kept[func]
+        remembered._loom_remembered = True
+        setattr(kernel_impl, name, remembered)
+
+
 # Taichi's offline cache keeps at most 100 MB by default and then drops its least recently used
 # quarter: a test run's kernels pushed the demo's strain solver (several MB) out of it.
 CACHE_BYTES = 1 << 30
@@ -163,6 +187,7 @@ def init(arch="cpu", precision=None, debug=False):
         ti.reset()
     fp = ti.f64 if precision == "f64" else ti.f32
     _use_plain_debug_info()
+    _remember_sources()
     fast = forced_compile_mode() == "fast"
     ti.init(arch=getattr(ti, ARCHES.get(arch, arch)), default_fp=fp, log_level=ti.ERROR,
             debug=debug, offline_cache=True, offline_cache_max_size_of_files=CACHE_BYTES,

@@ -1,5 +1,5 @@
 """Taichi start-up (cloth/backend.py): a kernel compile error still says where it is, with the
-plain debug info Loom gives Taichi's front end to compile faster."""
+plain debug info and the remembered sources Loom gives Taichi's front end to compile faster."""
 import pytest
 import taichi as ti
 
@@ -22,6 +22,17 @@ def test_compile_error_names_the_file_line_and_code():
     assert "test_backend.py" in msg and "undefined_name_here" in msg
     line = next(i for i, text in enumerate(open(__file__), 1) if "undefined_name_here *" in text)
     assert f"line {line}" in msg
+
+
+def test_the_front_end_reads_each_functions_source_once():
+    """Taichi's front end gets a function's source through ``kernel_impl.getsourcelines`` at
+    every inlined call: the same lines and first line number as Taichi's own reader, read
+    once per function (a second call returns the same object, not a new reading)."""
+    from taichi.lang import _wrap_inspect, kernel_impl
+    first = kernel_impl.getsourcelines(run_child)
+    assert first == _wrap_inspect.getsourcelines(run_child)
+    assert kernel_impl.getsourcelines(run_child) is first
+    assert kernel_impl.getsourcefile(run_child) == _wrap_inspect.getsourcefile(run_child)
 
 
 def run_child(code):
