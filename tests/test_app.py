@@ -490,6 +490,23 @@ def virtual_display(screen):
             server.wait()
 
 
+def test_the_x_connection_outlives_the_screen_query(monkeypatch):
+    """The window asks the X server for the screen's size, then checks the display, then GLFW
+    connects: one connection, kept open, so that an Xvfb (which resets when its last client
+    leaves) is never caught between clients. Closed after each query, the check failed now
+    and then under load ("cannot connect to the X display ':0'")."""
+    from ui import render
+    with virtual_display("1024x700") as display:
+        monkeypatch.setenv("DISPLAY", display)
+        monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+        monkeypatch.setattr(render, "_x_open", {})
+        assert render.screen_size() == (1024, 700)
+        first = render._x_open["found"][1]
+        render.check_display()
+        assert render.screen_size() == (1024, 700)
+        assert render._x_open["found"][1] == first and first is not None
+
+
 def run_in_window(code, screen, **env):
     """Run a driver script in a fresh process on a virtual screen (a window needs its own
     GGUI context); skip when there is no Vulkan device for a window."""

@@ -20,14 +20,24 @@ class RenderUnavailable(RuntimeError):
     """GGUI could not open a (possibly offscreen) window: no Vulkan device or no display."""
 
 
+# The connection to the X server, once open, stays open for the process: an X server started
+# for one run (Xvfb, xvfb-run) resets when its last client leaves, and a connection opened
+# during the reset fails. Closed after the screen-size query, it made the display check just
+# after it fail now and then under load (the laptop-screen window test: "cannot connect to the
+# X display ':0'", once in a suite run, not alone).
+_x_open = {}
+
+
 def _x_display():
     """(libX11, display pointer, name) for $DISPLAY; None when there is no X display to ask
     (no DISPLAY, Wayland, no libX11); the pointer is None when the server does not answer.
-    The caller closes an open display (``x11.XCloseDisplay``)."""
+    An open display stays open (``_x_open``)."""
     import ctypes
     import ctypes.util
     import os
     name = os.environ.get("DISPLAY")
+    if name and _x_open.get("name") == name:
+        return _x_open["found"]
     path = ctypes.util.find_library("X11")
     if not name or os.environ.get("WAYLAND_DISPLAY") or path is None:
         return None
@@ -37,10 +47,12 @@ def _x_display():
         return None
     x11.XOpenDisplay.restype = ctypes.c_void_p
     x11.XOpenDisplay.argtypes = [ctypes.c_char_p]
-    for fn in (x11.XDefaultScreen, x11.XCloseDisplay):
-        fn.argtypes = [ctypes.c_void_p]
+    x11.XDefaultScreen.argtypes = [ctypes.c_void_p]
     x11.XDisplayWidth.argtypes = x11.XDisplayHeight.argtypes = [ctypes.c_void_p, ctypes.c_int]
-    return x11, x11.XOpenDisplay(name.encode()) or None, name
+    found = x11, x11.XOpenDisplay(name.encode()) or None, name
+    if found[1] is not None:
+        _x_open.update(name=name, found=found)
+    return found
 
 
 def check_display():
@@ -54,7 +66,6 @@ def check_display():
         raise RenderUnavailable(f"cannot connect to the X display '{name}' (is the X server "
                                 "running and may this user connect? check DISPLAY and xhost); "
                                 "without a screen use xvfb-run")
-    x11.XCloseDisplay(dpy)
 
 
 def screen_size():
@@ -65,9 +76,7 @@ def screen_size():
         return None
     x11, dpy, _ = found
     screen = x11.XDefaultScreen(dpy)
-    size = int(x11.XDisplayWidth(dpy, screen)), int(x11.XDisplayHeight(dpy, screen))
-    x11.XCloseDisplay(dpy)
-    return size
+    return int(x11.XDisplayWidth(dpy, screen)), int(x11.XDisplayHeight(dpy, screen))
 
 
 # The window's largest size, and the room left on the screen for a desktop's title bar and
