@@ -17,13 +17,13 @@ such runs). Sections:
   load before and after, and the run's ``loom:`` notices. ``--repo DIR`` runs another copy of
   the code (e.g. an exported earlier commit) with the same Python; the run's environment is
   this one's plus ``--env`` pairs, LOOM_FAST_COMPILE removed unless given with ``--env``.
-- ``--method-switch``: in a fresh process with an empty cache, the default scene (hanging, mapping) built and stepped one frame, then switched to svd,
-  warp-weft and back to mapping, each first frame after the switch timed (what a live switch
-  costs).
+- ``--method-switch``: in a fresh process with an empty cache, the default scene (hanging,
+  mapping) built and stepped one frame, then switched to svd, warp-weft and back to mapping,
+  each first frame after the switch timed (what a live switch costs).
 - ``--window``: the window (hanging, under ``xvfb-run``) in a fresh process from an empty cache
-  (--cache keeps one instead): the longest window frame (the time the window
-  could not respond) at start, while running and after each switch (to svd, to warp-weft; 20
-  window frames apart).
+  (--cache keeps one instead): the longest window frame (the time the window could not
+  respond) at start, while running and after each switch (to svd, to warp-weft; 20 window
+  frames apart).
 """
 import argparse
 import csv

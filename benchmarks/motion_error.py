@@ -244,7 +244,7 @@ def write_report(out, runs, drape, cmd, failed=((), ())):
     rows, drows = summarize(runs), summarize_drape(drape)
     seconds = 60 * _run_minutes(runs, drape)
     write_json(out, "motion_error", {"rows": rows, "drape": drows}, cmd, seconds)
-    mode = backend.forced_compile_mode()
+    mode = backend.compile_mode()
     L = ["# Motion error against exactly solved motion\n",
          header(cmd, seconds) + f" (The seconds: the runs' own, summed; {mode} "
          "kernels.)\n",

@@ -74,8 +74,8 @@ def check_loop_probe(ran, kernel, mesh, largest):
 FAST_COMPILE_ENV = "LOOM_FAST_COMPILE"
 
 
-def forced_compile_mode():
-    """'optimised' with LOOM_FAST_COMPILE=0, else 'fast'."""
+def compile_mode():
+    """This process's compile: 'optimised' with LOOM_FAST_COMPILE=0, else 'fast'."""
     import os
     return "optimised" if os.environ.get(FAST_COMPILE_ENV, "").strip() == "0" else "fast"
 
@@ -84,7 +84,7 @@ def fast_compile():
     """Whether this process compiles fast (after init: what init chose)."""
     if _state.get("fast") is not None:
         return _state["fast"]
-    return forced_compile_mode() == "fast"
+    return compile_mode() == "fast"
 
 
 def cache_dir():
@@ -188,7 +188,7 @@ def init(arch="cpu", precision=None, debug=False):
     fp = ti.f64 if precision == "f64" else ti.f32
     _use_plain_debug_info()
     _remember_sources()
-    fast = forced_compile_mode() == "fast"
+    fast = compile_mode() == "fast"
     ti.init(arch=getattr(ti, ARCHES.get(arch, arch)), default_fp=fp, log_level=ti.ERROR,
             debug=debug, offline_cache=True, offline_cache_max_size_of_files=CACHE_BYTES,
             advanced_optimization=not fast)

@@ -38,9 +38,9 @@ RECORD_NAME = "loom_compile_times.json"
 COMPILED_ABOVE_S = 5.0
 
 # A first compile's estimate per kernel group, cold on 2 cores, in s: (with full optimisation,
-# LOOM_FAST_COMPILE=0; the default compile; None: not measured). The strain solve is one kernel for the three
-# methods (docs/speed/first_run.md: fast 494 s optimised for the hanging run, 19 s fast
-# compile); the exact one compiles the active-set re-solves in as well (25 s fast; optimised
+# LOOM_FAST_COMPILE=0; the default compile; None: not measured). The strain solve is one
+# kernel for the three methods (docs/speed/first_run.md: 494 s optimised for the hanging run,
+# 19 s fast); the exact one compiles the active-set re-solves in as well (25 s fast; optimised
 # not measured since, 260 s for one method before, scaled as the fast one's 325 -> 494 s). The
 # strain solve's host loop (direct.py) has small kernels.
 STRAIN_COMPILE_S = {"fast": (480, 20), "exact": (400, 25)}
