@@ -778,7 +778,10 @@ def test_a_landing_keeps_its_motion_across_the_remesh_that_refines_it():
     projection's last velocities, where the next projection starts) is carried to the new
     vertices, so it keeps its kinetic energy as the unremeshed sheet does. Without the last
     velocities the projection started from where each vertex was a substep ago and held the
-    sheet in the air: 0.089 and 0.027 J at frames 5 and 6 against 0.145 and 0.142."""
+    sheet in the air: 0.089 and 0.027 J at frames 5 and 6 against 0.145 and 0.142.
+    The re-projection after each applied remesh holds the contacts without friction (a
+    remesh's correction is not a substep's motion: ``Simulator._remesh_reproject``); every
+    substep's projection keeps it."""
     from benchmarks.harness import configure
     from cloth.simulator import Simulator
     energy, faces = {}, {}
@@ -786,11 +789,23 @@ def test_a_landing_keeps_its_motion_across_the_remesh_that_refines_it():
         _, cfg, setup = configure("drape", {"cloth": {"resolution": 9}, "remesh": {
             "enabled": remeshed, "size_min": 0.04, "size_max": 0.15}})
         sim = Simulator(setup, cfg)
-        ke = []
+        calls, project = [], sim.strain.project
+
+        def spy(h, contacts=False, warm=True, friction=True):
+            calls.append((contacts, friction))
+            return project(h, contacts=contacts, warm=warm, friction=friction)
+        sim.strain.project = spy
+        ke, reprojected = [], 0
         for _ in range(6):
             sim.step_frame()
             ke.append(sim.metrics_row()["kinetic_energy"])
+            if sim.remesh_stats.get("reprojected"):
+                reprojected += 1
+                assert calls.pop() == (True, False)
+            assert calls and all(c == (True, True) for c in calls), calls
+            calls.clear()
         energy[remeshed], faces[remeshed] = np.array(ke), sim.model.n_faces
+        assert (reprojected > 0) == remeshed
     assert faces[True] > 2 * faces[False]                  # refined as it landed
     assert np.all(energy[True][4:] >= 0.75 * energy[False][4:]), energy
 

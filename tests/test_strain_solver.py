@@ -333,14 +333,16 @@ def test_friction_in_the_projection_follows_coulomb(mu):
     expected = max(slide - mu * push, 0.0)
     np.testing.assert_allclose(x[:, 0] - x_prev[:, 0], expected, atol=atol)
     np.testing.assert_allclose(x[:, 1], x_prev[:, 1], atol=atol)
-    # Without friction (mu = 0) the projection keeps the whole slide.
-    set_positions(model, x_hat)
-    set_velocities(model, (x_hat - x_prev) / H)
-    limiter.on_mesh_changed()
-    limiter.contact_planes.from_numpy(planes)
-    limiter.contact_friction.from_numpy(np.zeros(model.v_cap))
-    limiter.project(H, contacts=True)
-    np.testing.assert_allclose(model.positions()[:, 0] - x_prev[:, 0], slide, atol=1e-8)
+    # Without friction the projection keeps the whole slide: mu = 0, or mu asked not to act
+    # (``friction=False``: a remesh's re-projection).
+    for coefficient, friction in ((0.0, True), (mu, False)):
+        set_positions(model, x_hat)
+        set_velocities(model, (x_hat - x_prev) / H)
+        limiter.on_mesh_changed()
+        limiter.contact_planes.from_numpy(planes)
+        limiter.contact_friction.from_numpy(np.full(model.v_cap, coefficient))
+        limiter.project(H, contacts=True, friction=friction)
+        np.testing.assert_allclose(model.positions()[:, 0] - x_prev[:, 0], slide, atol=1e-8)
 
 
 def test_multipliers_follow_faces_through_a_remesh_scaled_by_area():

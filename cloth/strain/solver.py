@@ -449,11 +449,13 @@ class StrainLimiter:
         self._sync_mesh()
         return self._ws.contact_mu
 
-    def project(self, h, contacts=False, warm=True):
+    def project(self, h, contacts=False, warm=True, friction=True):
         """Project model.state.x (holding x_hat on entry) onto the strain limits in place and
         add the correction to the velocities (v += dx / h; h <= 0 leaves v alone). With
         ``contacts`` the half-spaces in ``contact_planes`` are constraints of the same
-        projection (else they are cleared first).
+        projection (else they are cleared first), with the friction of ``contact_friction``
+        unless ``friction`` is False or h <= 0 (friction holds a displacement over a time
+        step).
 
         ``warm=False`` solves from zero multipliers and then puts the previous ones back: for
         a second projection within a substep (after a contact fix-up), whose x_hat is already
@@ -484,7 +486,7 @@ class StrainLimiter:
         # Friction holds contact vertices against sliding over the substep (from x - h v).
         self._start_args = (float(h), int(self._v_last_valid), float(SETTLE_SPEED),
                             int(m.state.step_start_valid))
-        friction = contacts and h > 0
+        friction = friction and contacts and h > 0
         al.begin_solve(nv, float(h), int(friction),
                        int(not contacts), *self._start_args[1:], ws.step_pack(m.state),
                        ws.vector_pack(), ws.contact_pack(), ws.stats)
