@@ -13,7 +13,8 @@ such runs). Sections:
   ``TI_OFFLINE_CACHE_FILE_PATH`` set to --cache (default: a fresh empty temporary folder,
   removed afterwards unless --keep): the wall time to the first frame (the modification time of
   ``meshes/frame_0001.obj``, written as soon as frame 1 is done), the whole run's wall time,
-  each frame's ``ms_total`` from ``metrics.csv`` (frames 2.. are the warm speed), the machine's
+  each frame's ``ms_total`` from ``metrics.csv`` (the warm speed: the median from frame
+  WARM_FROM on, in a run that long, e.g. ``-- --headless --frames 60 --no-images``), the machine's
   load before and after, and the run's ``loom:`` notices. ``--repo DIR`` runs another copy of
   the code (e.g. an exported earlier commit) with the same Python; the run's environment is
   this one's plus ``--env`` pairs, LOOM_FAST_COMPILE removed unless given with ``--env``.
@@ -36,6 +37,10 @@ import tempfile
 import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+# The warm speed is read from this frame on: the frames before it still compile what their
+# first use needs (a 3-frame default run read 521.6 ms "a frame" from frames 2-3, against
+# about 30 ms warm), so a run needs 2 x WARM_FROM - 1 frames or more to report it.
+WARM_FROM = 11
 
 
 def load():
@@ -154,12 +159,13 @@ def page(r, cmd, seconds):
          "## First frame", "",
          f"`{r['first_run']['cmd']}`, Taichi cache: {r['cache']}. Load (1-minute average) "
          f"{r['first_run']['load0']} before, {r['first_run']['load1']} after.", "",
-         "| first frame (s) | whole run (s) | ms a frame (median of frames 2..) | exit code |",
+         f"| first frame (s) | whole run (s) | ms a frame (median of frames {WARM_FROM}.., "
+         "runs that long) | exit code |",
          "| --- | --- | --- | --- |"]
     f = r["first_run"]
-    warm = sorted(f["ms"][1:])
-    L.append(f"| {f['first']:.1f} | {f['wall']:.1f} | "
-             f"{warm[len(warm) // 2] if warm else float('nan'):.1f} | {f['rc']} |"
+    warm = sorted(f["ms"][WARM_FROM - 1:])
+    warm_ms = f"{warm[len(warm) // 2]:.1f}" if len(warm) >= WARM_FROM else "-"
+    L.append(f"| {f['first']:.1f} | {f['wall']:.1f} | {warm_ms} | {f['rc']} |"
              if f["first"] is not None else f"| - | {f['wall']:.1f} | - | {f['rc']} |")
     L += [""] + [f"    {n}" for n in f["notes"]] + ([""] if f["notes"] else [])
     if f["stderr"]:
