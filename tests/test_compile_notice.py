@@ -50,6 +50,17 @@ def test_a_cache_load_keeps_the_last_compile_time(record, monkeypatch):
     assert entry["fingerprint"] == "other" and entry["seconds"] == seconds
 
 
+def test_a_load_much_quicker_than_the_last_compile_keeps_its_time(record, monkeypatch):
+    """The cloth package changed but not its kernels: the first use is announced (the
+    fingerprint changed) and is a cache load; its time is not the next compile's estimate."""
+    import json
+    monkeypatch.setattr(cn, "COMPILED_ABOVE_S", 0.0)    # judged by the last compile's time alone
+    record.write_text(json.dumps({"k": {"fingerprint": "old", "seconds": 20.0}}))
+    assert "the code changed since the last compile; last time 20 s" in _use("k")
+    entry = json.loads(record.read_text())["k"]
+    assert entry["fingerprint"] == cn.fingerprint() and entry["seconds"] == 20.0
+
+
 def test_progress_bar_starts_at_once_and_a_notice_ends_its_line():
     from ui.progress import Progress
 
