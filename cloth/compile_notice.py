@@ -39,7 +39,8 @@ COMPILED_ABOVE_S = 5.0
 # Nor one shorter than this share of the last compile's time: a change of the cloth package
 # that leaves the kernels as they were is announced (the fingerprint changed), and Taichi then
 # loads the strain solve from its cache in about 9 s, where compiling it takes about 20 s;
-# kept, that 9 s became the next compile's "last time".
+# kept, that 9 s became the next compile's "last time". (A compile that really became that
+# much quicker keeps the older time: the notice's estimate errs long, not short.)
 LOAD_SHARE = 0.6
 
 # A first compile's estimate per kernel group, cold on 2 cores, in s: (with full optimisation,
