@@ -384,14 +384,10 @@ class Simulator:
         they hold at the end of every frame. With obstacles always (contacts are constraints
         of that projection, and a new vertex on a chord may lie inside a curved body), but
         without friction: friction holds a contact vertex near where its substep began, and
-        a remesh's correction is not a substep's motion. With friction the contact
-        multipliers that the limits' pull raises widened the friction bound with them (the
-        capstan of ``StrainLimiter.project``) and some re-projections locked: drape
-        --remesh, 60 frames from six starts 1 nm apart, re-projections of at most 0.4-0.7 s
-        in four runs and 2.1 s and 11.8 s (100 rounds, then solved again without friction)
-        in two; without friction at most 0.4-1.1 s, the runs' total time the same (32.7 and
-        32.8 s on average), the sheets at rest (1e-7 to 2e-6 J) and draped in every run
-        (docs/remesh/drape.md)."""
+        a remesh's correction is not a substep's motion. With friction the limits' pull
+        raised the contact multipliers and the friction bound with them (the capstan of
+        ``StrainLimiter.project``): on drape --remesh two of six runs had a re-projection
+        locked for 2.1 and 11.8 s, none without (docs/remesh/drape.md)."""
         if not self._remeshed:
             return
         self._remeshed = False
