@@ -188,6 +188,11 @@ def main(argv=None):
     if args.tour and (args.scene or args.compare):
         return fail("--tour runs its own scene (hanging, the three methods in turn): give no "
                     "scene and no --compare")
+    if args.compare and not (args.list or args.show_config) and \
+            (args.headless or not has_display()):
+        # Said before Taichi starts: the simulator's first build compiles for a minute.
+        return fail("--compare opens a window: run it on a desktop or under xvfb-run "
+                    "(it has no headless mode)")
     if not (args.list or args.show_config):
         # Taichi starts before any scene or cloth module is imported: their module-level
         # types (``ti.types.matrix(3, 3, float)``, kernel argument types) take the float
@@ -271,7 +276,7 @@ def main(argv=None):
             return fail(str(err))
 
     headless = args.headless or not has_display()
-    if headless and not args.headless and not args.compare:
+    if headless and not args.headless:
         # Said before the simulator is built: building it may compile for minutes.
         print(f"loom: no display found, running '{name}' headless "
               "(use xvfb-run or a desktop for the window)", file=sys.stderr)
@@ -284,9 +289,6 @@ def main(argv=None):
         return fail(str(err))
 
     if args.compare:
-        if headless:
-            return fail("--compare opens a window: run it on a desktop or under xvfb-run "
-                        "(it has no headless mode)")
         from ui.render import RenderUnavailable
         try:
             from ui.app import run_compare

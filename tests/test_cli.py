@@ -51,6 +51,17 @@ def test_unknown_scene():
     assert_clear_error(run_main("hangin", "--headless"), "unknown scene", "did you mean 'hanging'")
 
 
+def test_compare_without_a_window_is_refused_before_taichi_starts(monkeypatch):
+    """--compare has no headless mode: without a display (or with --headless) it says so in
+    one line and names the fix, before Taichi starts (a first build compiles for a minute)."""
+    from cloth import backend
+    started = []
+    monkeypatch.setattr(backend, "init", lambda *a, **k: started.append(a))
+    for args in (("hanging", "--compare"), ("--compare", "--headless")):
+        assert_clear_error(run_main_here(*args), "--compare opens a window", "xvfb-run")
+    assert started == []
+
+
 def test_f64_on_vulkan_is_refused_with_the_fix(tmp_path):
     """Taichi's SPIR-V back ends have no f64 kernels: asking for them names --precision f32
     (exit 2, nothing written) instead of failing inside a kernel compile; without --precision
