@@ -60,7 +60,7 @@ def load(obj, config, sets=()):
     params.validate()
     mesh = MeshArrays(uv=uv, x=x, faces=faces)
     obstacles = setup.obstacles          # at t = 0: the obstacles as they start
-    dist = (lambda p: np.min([o.sdf(p)[0] for o in obstacles], axis=0)) if obstacles \
+    dist = (lambda p: np.min([o.distance(p) for o in obstacles], axis=0)) if obstacles \
         else None
     return mesh, params, dist, float(cfg["collision"]["thickness"])
 

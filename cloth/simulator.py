@@ -452,7 +452,7 @@ class Simulator:
 
     def _obstacle_distance(self, points):
         """Signed distance of world points to the nearest obstacle now (for remeshing)."""
-        return np.min([o.sdf(points, self.time)[0] for o in self.setup.obstacles], axis=0)
+        return np.min([o.distance(points, self.time) for o in self.setup.obstacles], axis=0)
 
     def _rebuild_for(self, mesh):
         """The remeshed cloth outgrew the arrays: build a model with twice the room and new

@@ -513,7 +513,7 @@ def check_final(sim, cfg):
     tol = cfg["collision"]["thickness"]
     want = cfg["check"]
     named = {o["name"]: k for k, o in enumerate(cfg["obstacles"]) if o.get("name")}
-    sdf = [o.sdf(x, sim.time)[0] for o in sim.setup.obstacles]
+    sdf = [o.distance(x, sim.time) for o in sim.setup.obstacles]
 
     def pins():
         m = sim.model

@@ -90,6 +90,10 @@ def test_primitive_sdfs_match_analytic(rng):
         ok = np.abs(np.linalg.norm(fd, axis=1) - 1) < 1e-4    # away from medial surfaces
         assert ok.mean() > 0.95
         np.testing.assert_allclose(grad[ok], fd[ok], atol=1e-5)
+    # The distance alone (the remesher's sizing reads it every frame) is sdf's value.
+    for o in (Plane(point=c, normal=n), Sphere(center=c, radius=0.4), box,
+              Capsule(center=c, length=0.8, radius=0.2, rotation=R)):
+        assert np.array_equal(o.distance(pts), o.sdf(pts)[0]), o.kind
 
 
 def test_obstacle_meshes_lie_on_the_surface():

@@ -7,8 +7,9 @@ import pytest
 from cloth.model import MeshArrays, ModelError, build_edges, signed_material_areas
 import cloth.remesh as remesh_module
 from cloth import metrics
-from cloth.remesh import RemeshParams, _Work, _collapse_phase, _compose, _export, _flip_phase, \
-    _gram, _stretch_error, _stretch_error_np, _sym_eig2, clamp_metric, face_sizing, \
+from cloth.remesh import RemeshParams, _Work, _collapse_phase, _columns, _export, _flip_phase, \
+    _from_eig, _pullback, _square, _stacked, _stretch_error, _stretch_error_np, _sym_eig2, \
+    clamp_metric, face_sizing, \
     pending_operations, remesh, vertex_sizing
 from cloth.sheet import make_sheet
 
@@ -121,21 +122,26 @@ def test_closed_form_eigen_matches_numpy(rng):
     M[2] = np.diag([3.0, 1.0])
     lam, V = _sym_eig2(M)
     assert np.allclose(lam, np.linalg.eigvalsh(M), atol=1e-12)
-    assert np.allclose(_compose(lam, V), M, atol=1e-12)
+    assert np.allclose((V * lam[:, None, :]) @ np.transpose(V, (0, 2, 1)), M, atol=1e-12)
+    cs, sn = V[:, 0, 1], V[:, 1, 1]               # the larger eigenvalue's unit vector
+    assert np.allclose(_stacked(_from_eig(lam[:, 0], lam[:, 1], cs, sn)), M, atol=1e-12)
 
 
 def test_written_out_products_match_numpy(rng):
-    """The sizing's 2x2 products written out equal numpy's stacked matrix products."""
-    G = rng.standard_normal((50, 3, 2))
+    """The sizing's 2x2 products written out on coordinate columns equal numpy's stacked
+    matrix products."""
+    A = rng.standard_normal((50, 2, 2))
+    S = A + np.transpose(A, (0, 2, 1))
+    assert np.allclose(_stacked(_square(_columns(S))), S @ S, rtol=0, atol=1e-13)
     B = rng.standard_normal((50, 2, 2))
     c0, c1 = rng.standard_normal((50, 3)), rng.standard_normal((50, 3))
-    assert np.allclose(_gram(G), np.transpose(G, (0, 2, 1)) @ G, rtol=0, atol=1e-13)
     F = np.stack([c0, c1], axis=2) @ B
+    grams = (np.sum(c0 * c0, 1), np.sum(c0 * c1, 1), np.sum(c1 * c1, 1))
+    entries = (B[:, 0, 0], B[:, 0, 1], B[:, 1, 0], B[:, 1, 1])
+    assert np.allclose(_stacked(_pullback(*grams, entries)), np.transpose(F, (0, 2, 1)) @ F,
+                       rtol=0, atol=1e-12)
     assert np.allclose(metrics.gram_times(c0, c1, B), np.transpose(F, (0, 2, 1)) @ F, rtol=0,
                        atol=1e-12)
-    lam = rng.standard_normal((50, 2))
-    assert np.allclose(_compose(lam, B), (B * lam[:, None, :]) @ np.transpose(B, (0, 2, 1)),
-                       rtol=0, atol=1e-13)
 
 
 @pytest.mark.parametrize("smoothing", [0, 2])
