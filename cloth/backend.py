@@ -188,6 +188,8 @@ def init(arch="cpu", precision=None, debug=False):
     fp = ti.f64 if precision == "f64" else ti.f32
     _use_plain_debug_info()
     _remember_sources()
+    from . import launch
+    launch.install()            # launches that keep their argument context (launch.py)
     fast = compile_mode() == "fast"
     ti.init(arch=getattr(ti, ARCHES.get(arch, arch)), default_fp=fp, log_level=ti.ERROR,
             debug=debug, offline_cache=True, offline_cache_max_size_of_files=CACHE_BYTES,
