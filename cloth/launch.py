@@ -24,9 +24,9 @@ import weakref
 import numpy as np
 
 _KEEP = 8          # recordings kept per kernel (the strain solve alternates two metrics' packs)
-# A kernel whose recordings are not replayed (new arrays at every call: ``ndarrays.get_rows``'
-# output, Taichi's own to_numpy) stops recording after this many first calls in a row.
-_GIVE_UP = 4
+# A kernel none of whose recordings was ever replayed (new arrays at every call:
+# ``ndarrays.get_rows``' output, Taichi's own to_numpy) stops recording after this many.
+_GIVE_UP = 16
 
 _installed = {}
 _runtime = [lambda: None]       # a weak reference to the runtime the recordings belong to
@@ -61,8 +61,9 @@ def _call(kernel, *args, **kwargs):
 
 
 class _Table(dict):
-    """A kernel's recordings by ``_key``, and its first calls since the last replay."""
-    misses = 0
+    """A kernel's recordings by ``_key``; how many first calls it recorded, whether any
+    recording was replayed."""
+    recorded, replayed = 0, False
 
 
 class _Kept:
@@ -93,11 +94,11 @@ def _fast_path(kernel, args):
     if table is None:
         table = kernel.__dict__["_loom_contexts"] = _Table()
         _tables.append(table)
-    if table.misses >= _GIVE_UP:
+    if table.recorded >= _GIVE_UP and not table.replayed:
         return False, None
     kept = table.get(key)
     if kept is not None and all(r() is not None for r in kept.refs):
-        table.misses = 0
+        table.replayed = True
         calls = list(kept.calls)
         for at, pos, cast in kept.scalars:
             name, (index, _) = calls[at]
@@ -112,7 +113,7 @@ def _fast_path(kernel, args):
     compiled_key = kernel.ensure_compiled(*args)
     if kernel.has_print:        # (known once compiled) Taichi's call shows its prints
         return False, None
-    table.misses += 1
+    table.recorded += 1
     kept, result = _first_launch(kernel, args, runtime, compiled_key)
     if kept is not None:
         if len(table) >= _KEEP:
