@@ -23,7 +23,8 @@ import weakref
 
 import numpy as np
 
-_KEEP = 8          # recordings kept per kernel (the strain solve alternates two metrics' packs)
+_KEEP = 16         # recordings kept per kernel (the strain solve alternates two metrics'
+#                    packs; the compare view runs three simulators)
 # A kernel none of whose recordings was ever replayed (new arrays at every call:
 # ``ndarrays.get_rows``' output, Taichi's own to_numpy) stops recording after this many.
 _GIVE_UP = 16
