@@ -173,7 +173,7 @@ def put_rows(arr, values, n_clear=0):
 
 def get_rows(arr, n):
     """The first ``n`` rows of the ndarray ``arr`` (1-D, or 2-D of scalars) as a numpy array
-    (float64 for floats)."""
+    (float64 for floats), a copy the caller owns."""
     import numpy as np
     from taichi.lang.util import to_numpy_type
     dtype = to_numpy_type(arr.dtype)
@@ -183,7 +183,28 @@ def get_rows(arr, n):
         shape, get = (arr.shape[1],), _get_scalars_2d
     else:
         shape, get = (), _get_scalars
-    out = np.zeros((max(int(n), 1),) + shape, dtype)
+    out = _read_buffer(arr, (max(arr.shape[0], 1),) + shape, dtype)
     get(int(n), arr, out)
-    out = out[: int(n)]
-    return out.astype(np.float64) if np.issubdtype(dtype, np.floating) else out
+    return out[: int(n)].astype(np.float64 if np.issubdtype(dtype, np.floating) else dtype)
+
+
+# Each array's read-back buffer (numpy, the array's whole capacity), kept while the array
+# lives: a kernel called again with the same numpy array replays its launch (cloth/launch.py;
+# with a new array at every call each read-back cost Taichi's whole argument walk).
+_read_buffers = {}
+
+
+def _read_buffer(arr, shape, dtype):
+    import weakref
+    import numpy as np
+    key = id(arr)
+    kept = _read_buffers.get(key)
+    if kept is not None and kept[0]() is arr and kept[1].shape == shape:
+        return kept[1]
+
+    def forget(ref, key=key):
+        if _read_buffers.get(key, (None,))[0] is ref:
+            del _read_buffers[key]
+    buffer = np.zeros(shape, dtype)
+    _read_buffers[key] = (weakref.ref(arr, forget), buffer)
+    return buffer

@@ -370,3 +370,9 @@ def test_rows_in_and_out_of_arrays_with_spare_capacity():
         np.testing.assert_array_equal(ndarrays.get_rows(arr, 7), rows)
         np.testing.assert_array_equal(arr.to_numpy()[7:], full[7:])      # spare rows kept
         assert ndarrays.get_rows(arr, 0).shape == (0,) + shape[1:]
+        # Each read is the caller's own copy (the reads share a buffer inside): a later read
+        # of changed rows leaves an earlier one as it was.
+        before = ndarrays.get_rows(arr, 7)
+        ndarrays.put_rows(arr, 2 * rows)
+        np.testing.assert_array_equal(before, rows)
+        np.testing.assert_array_equal(ndarrays.get_rows(arr, 7), 2 * rows)

@@ -23,7 +23,7 @@ Design notes (measured on this 2-core CPU, Taichi 1.7.4, f64):
 import numpy as np
 import taichi as ti
 
-from ..ndarrays import A, T, PackCache  # noqa: F401 (strain kernels import A, T from here)
+from ..ndarrays import A, T, PackCache, get_rows  # noqa: F401 (strain kernels import A, T)
 from .constraints import K_MAX
 
 
@@ -212,6 +212,10 @@ class Workspace:
         return self.pack("pc", PrecondPack, P_inv=self.P_inv, f_ptr=fp.ptr, f_idx=fp.idx,
                          f_val=fp.val, f_perm=fp.perm, f_work=fp.work, mg_int=mg.ints,
                          mg_real=mg.reals, mg_block=mg.blocks)
+
+    def read_stats(self):
+        """The last solve's ``stats`` (ST_*) as numpy."""
+        return get_rows(self.stats, N_STATS)
 
     def step_pack(self, state):
         """The model's ``state`` (x, v and the substep's start x_step) and this projection's

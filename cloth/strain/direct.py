@@ -170,7 +170,7 @@ def _solve(lim, mid, K, metric, chol, mu, mu_max, step_tol, active_set_model, ma
     from_prev = int(metric is lim._system)
     split = split_kernels()
     choose_start(lim, mid, K, mu, from_prev, metric)
-    stats = ws.stats.to_numpy()
+    stats = ws.read_stats()
     if stats[ST_START_VIOL] < lim.tol:
         stats[ST_CONVERGED], stats[ST_VIOL] = 1, stats[ST_START_VIOL]
         ws.stats.from_numpy(stats)
@@ -469,7 +469,7 @@ def choose_start(lim, mid, K, mu, from_prev, metric):
     mesh, _met, cons, contacts, vec = packs(lim, metric, K)
     start_values(mid, 2, mesh, cons, contacts, vec, ws.stats, ws.info)
     check_loops(ws.info.to_numpy(), "start_values", m.n_verts, m.n_faces)
-    if not (from_prev and ws.stats.to_numpy()[ST_START_VIOL] >= lim.tol):
+    if not (from_prev and ws.read_stats()[ST_START_VIOL] >= lim.tol):
         return
     L_hat = _trial(lim, mid, K, mu, metric, 0.0, TRIAL_X, 0, 1)[I_MERIT]
     L = _trial(lim, mid, K, mu, metric, 0.0, TRIAL_START, 1, 1)[I_MERIT]

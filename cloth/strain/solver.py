@@ -550,7 +550,7 @@ class StrainLimiter:
         converged, the stats array)."""
         if self.uses_host_loop():
             rounds, newton, converged = self._solve_direct(mid, K, use_system)
-            return rounds, newton, converged, self._ws.stats.to_numpy()
+            return rounds, newton, converged, self._ws.read_stats()
         # (_solve_al read the stats already: a read-back costs ~0.2 ms.)
         return self._solve_al_with_fallback(mid, K, self._newton_metric(use_system), contacts)
 
@@ -720,7 +720,7 @@ class StrainLimiter:
         al.solve_al(mid, self._kernel_pdas(), ws.budget, ws.mesh_pack(),
                     ws.metric_pack(metric), ws.constraint_pack(K), ws.contact_pack(),
                     ws.vector_pack(), ws.precond_pack(fp, mg), ws.stats)
-        stats = ws.stats.to_numpy()
+        stats = ws.read_stats()
         rounds, newton = int(stats[ST_ITERS]), int(stats[ST_NEWTON])
         self.last_factorizations = int(made_before)
         if pc is not None:
