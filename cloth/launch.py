@@ -47,6 +47,7 @@ def install():
     except ImportError:          # another Taichi: leave its launches alone
         return
     _installed.update(original=kernel_impl.Kernel.__call__, objects=(Ndarray, ArgPack),
+                      from_cpp=kernel_impl.handle_exception_from_cpp,
                       none=AutodiffMode.NONE, template=template,
                       scalar_types=set(primitive_types.real_type_ids)
                       | set(primitive_types.integer_type_ids))
@@ -108,8 +109,11 @@ def _fast_path(kernel, args):
         for name, call_args in calls:
             getattr(ctx, name)(*call_args)
         prog = runtime.prog
-        prog.launch_kernel(prog.compile_kernel(prog.config(), prog.get_device_caps(),
-                                               kept.t_kernel), ctx)
+        try:
+            prog.launch_kernel(prog.compile_kernel(prog.config(), prog.get_device_caps(),
+                                                   kept.t_kernel), ctx)
+        except Exception as e:      # as Taichi's own launch reports a kernel's error
+            raise _installed["from_cpp"](e) from None
         return True, _result(kernel, ctx)
     compiled_key = kernel.ensure_compiled(*args)
     if kernel.has_print:        # (known once compiled) Taichi's call shows its prints
