@@ -13,10 +13,10 @@ same arguments, so the first call's walk is recorded (the launch context's sette
 later calls replay it into a new context, with their own scalar values. (The context itself
 cannot be kept: Taichi's launch leaves it pointing at memory it frees.) What takes this
 path: positional arguments that are ndarrays, argpacks, C-contiguous numpy arrays (Taichi
-passes their data pointer), Python or numpy scalars, and hashable template values, on a
-kernel without autodiff or print. Anything else (other numpy arrays, Taichi matrices and
-structs, fields as templates, keyword arguments, a tape) goes Taichi's own way, as does every
-first call. A recording holds weak references to its arrays and packs and is replayed only
+passes their data pointer), Python or numpy scalars, small matrices and vectors (their values
+are part of the key: an obstacle's pose), and hashable template values, on a kernel without
+autodiff or print. Anything else (other numpy arrays, structs, fields as templates, keyword
+arguments, a tape) goes Taichi's own way, as does every first call. A recording holds weak references to its arrays and packs and is replayed only
 while all of them are alive (so an id cannot be reused under it); all recordings are
 dropped with the Taichi runtime they were made in (``ti.reset``)."""
 import weakref
@@ -43,10 +43,13 @@ def install():
         from taichi.lang._ndarray import Ndarray
         from taichi.lang.argpack import ArgPack
         from taichi.lang.enums import AutodiffMode
-        from taichi.types import primitive_types, template
+        from taichi.lang.matrix import Matrix, MatrixType
+        from taichi.types import ndarray_type, primitive_types, template
     except ImportError:          # another Taichi: leave its launches alone
         return
     _installed.update(original=kernel_impl.Kernel.__call__, objects=(Ndarray, ArgPack),
+                      array_type=ndarray_type.NdarrayType, matrix_type=MatrixType,
+                      matrix=Matrix,
                       from_cpp=kernel_impl.handle_exception_from_cpp,
                       none=AutodiffMode.NONE, template=template,
                       scalar_types=set(primitive_types.real_type_ids)
@@ -139,8 +142,19 @@ def _key(kernel, args):
             key.append(("t", value))
         elif isinstance(value, objects):
             key.append(id(value))
-        elif isinstance(value, np.ndarray) and value.flags.c_contiguous:
+        elif isinstance(arg.annotation, _installed["array_type"]):
+            if not (isinstance(value, np.ndarray) and value.flags.c_contiguous):
+                return None
             key.append(id(value))       # (Taichi passes its data pointer: fixed for its life)
+        elif isinstance(arg.annotation, _installed["matrix_type"]):
+            # A small matrix or vector (an obstacle's pose): its values are part of the key,
+            # and a recording replays them as they were.
+            if isinstance(value, _installed["matrix"]):
+                value = value.to_numpy()
+            try:
+                key.append(("m",) + tuple(np.asarray(value, np.float64).ravel().tolist()))
+            except (TypeError, ValueError):
+                return None
         elif isinstance(value, (int, float, np.integer, np.floating)) and \
                 id(arg.annotation) in _installed["scalar_types"]:
             key.append(type(value))
@@ -157,7 +171,7 @@ class _RecordingContext:
 
     def __getattr__(self, name):
         method = getattr(self.ctx, name)
-        if not name.startswith("set_arg"):
+        if not name.startswith("set_"):       # set_arg_*, set_struct_arg_*
             return method
 
         def noted(*a):
@@ -214,9 +228,10 @@ def _first_launch(kernel, args, runtime, compiled_key):
     for pos, (arg, value) in enumerate(zip(kernel.arguments, args)):
         if isinstance(arg.annotation, template):
             continue
-        if isinstance(value, objects + (np.ndarray,)):
+        if isinstance(value, objects + (np.ndarray,)) and \
+                not isinstance(arg.annotation, _installed["matrix_type"]):
             refs.append(weakref.ref(value))
-        else:
+        elif not isinstance(arg.annotation, _installed["matrix_type"]):
             slot_of[(slot,)] = pos
         slot += 1
     scalars = []

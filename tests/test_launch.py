@@ -17,6 +17,12 @@ def _scaled_copy(s: float, pair: Pair, k: ti.template()):
 
 
 @ti.kernel
+def _moved(a: A, R: ti.types.matrix(3, 3, float), c: ti.types.vector(3, float)):
+    for i in range(a.shape[0]):
+        a[i] = R @ a[i] + c
+
+
+@ti.kernel
 def _sum(n: ti.i32, a: A, weights: A) -> float:
     total = 0.0
     for i in range(n):
@@ -46,6 +52,12 @@ def test_replays_take_each_calls_scalars_templates_arrays_and_return_value():
     other = ti.ndarray(ti.f64, 8)                   # another array: recorded anew
     other.from_numpy(np.full(8, 0.5))
     assert _sum(8, other, np.ones(8)) == 4.0
+    points = ti.Vector.ndarray(3, ti.f64, 2)
+    for c in ((1.0, 2.0, 3.0), (0.0, 0.0, -1.0), (1.0, 2.0, 3.0)):   # a pose's values
+        points.from_numpy(np.eye(3)[:2])
+        R = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+        _moved(points, ti.Matrix(R), ti.Vector(c))
+        assert np.allclose(points.to_numpy(), np.eye(3)[:2] @ R.T + np.array(c))
     for _ in range(3):                              # arrays made and dropped between calls
         fresh_src, fresh_dst = ti.ndarray(ti.f64, 8), ti.ndarray(ti.f64, 8)
         fresh_src.from_numpy(np.full(8, 7.0))
