@@ -131,8 +131,9 @@ def _fast_path(kernel, args):
 
 
 def _key(kernel, args):
-    """What identifies a call's context: the ids of its ndarrays and argpacks, the types of its
-    scalars and the values of its templates; None when an argument is of another kind."""
+    """What identifies a call's recording: the ids of its ndarrays, argpacks and numpy
+    arrays, the types of its scalars, the values of its templates and small matrices; None
+    when an argument is of another kind."""
     objects, template = _installed["objects"], _installed["template"]
     key = []
     for arg, value in zip(kernel.arguments, args):
