@@ -163,4 +163,7 @@ def draped_over_sphere(x, center, radius, margin, sectors=8):
         return True, (f"draped over the sphere (below its equator on {seen.sum() - flat.sum()} "
                       f"of {seen.sum()} sides; on the others folds rest up to "
                       f"{lowest[flat].max():.3f} m above it)")
-    return True, f"draped over the sphere (below its equator on all {seen.sum()} sides)"
+    if not seen.all():
+        return True, (f"draped over the sphere (below its equator on the {seen.sum()} of "
+                      f"{sectors} sides where it reaches past the sphere)")
+    return True, f"draped over the sphere (below its equator on all {sectors} sides)"

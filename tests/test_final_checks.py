@@ -70,6 +70,13 @@ def test_drape_check_passes_a_draped_sheet_and_fails_a_flat_one_on_the_top():
     drape, cfg, c, r, t, late, draped = drape_case()
     ok, msg = drape.check_final(fake(draped, late), cfg)
     assert ok and "draped over the sphere (below its equator on all 8 sides)" in msg, msg
+    # Towards a side where no cloth reaches past the sphere's outline there is nothing to
+    # judge: the message says which sides were.
+    center = np.asarray(c, float)
+    east = np.arctan2(draped[:, 2] - center[2], draped[:, 0] - center[0])
+    one_side_less = draped[~((east >= 0.0) & (east < np.pi / 4) & (draped[:, 1] < center[1]))]
+    ok, msg = checks.draped_over_sphere(one_side_less, c, r, 0.02)
+    assert ok and "on the 7 of 8 sides where it reaches past the sphere" in msg, msg
     # The picture the check must refuse: the sheet lies flat on the sphere's top like a board.
     flat = sheet_over_sphere(c, r, 0.5 * t, flat_from=-1.0)
     ok, msg = drape.check_final(fake(flat, late), cfg)
