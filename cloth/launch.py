@@ -39,7 +39,7 @@ def install():
     if _installed:
         return
     try:
-        from taichi.lang import kernel_impl
+        from taichi.lang import impl, kernel_impl, runtime_ops
         from taichi.lang._ndarray import Ndarray
         from taichi.lang.argpack import ArgPack
         from taichi.lang.enums import AutodiffMode
@@ -51,6 +51,7 @@ def install():
                       array_type=ndarray_type.NdarrayType, matrix_type=MatrixType,
                       matrix=Matrix,
                       from_cpp=kernel_impl.handle_exception_from_cpp,
+                      get_runtime=impl.get_runtime, sync=runtime_ops.sync,
                       none=AutodiffMode.NONE, template=template,
                       scalar_types=set(primitive_types.real_type_ids)
                       | set(primitive_types.integer_type_ids))
@@ -83,8 +84,7 @@ class _Kept:
 def _fast_path(kernel, args):
     """(True, the kernel's result) if this call replayed or recorded its arguments, else
     (False, None): Taichi's own call then runs."""
-    from taichi.lang import impl
-    runtime = impl.get_runtime()
+    runtime = _installed["get_runtime"]()
     if kernel.autodiff_mode != _installed["none"] or runtime.target_tape or \
             runtime.fwd_mode_manager or len(args) != len(kernel.arguments) or kernel.has_print:
         return False, None
@@ -106,11 +106,11 @@ def _fast_path(kernel, args):
         table.replayed = True
         calls = list(kept.calls)
         for at, pos, cast in kept.scalars:
-            name, (index, _) = calls[at]
-            calls[at] = (name, (index, cast(args[pos])))
+            setter, (index, _) = calls[at]
+            calls[at] = (setter, (index, cast(args[pos])))
         ctx = kept.t_kernel.make_launch_context()
-        for name, call_args in calls:
-            getattr(ctx, name)(*call_args)
+        for setter, call_args in calls:
+            setter(ctx, *call_args)
         prog = runtime.prog
         try:
             prog.launch_kernel(prog.compile_kernel(prog.config(), prog.get_device_caps(),
@@ -174,9 +174,10 @@ class _RecordingContext:
         method = getattr(self.ctx, name)
         if not name.startswith("set_"):       # set_arg_*, set_struct_arg_*
             return method
+        unbound = getattr(type(self.ctx), name)
 
         def noted(*a):
-            self.calls.append((name, a))
+            self.calls.append((unbound, a))
             return method(*a)
         return noted
 
@@ -236,10 +237,10 @@ def _first_launch(kernel, args, runtime, compiled_key):
             slot_of[(slot,)] = pos
         slot += 1
     scalars = []
-    for at, (name, call_args) in enumerate(calls):
+    for at, (setter, call_args) in enumerate(calls):
         pos = slot_of.get(tuple(call_args[0]))
         if pos is not None:
-            scalars.append((at, pos, float if name == "set_arg_float" else int))
+            scalars.append((at, pos, float if setter.__name__ == "set_arg_float" else int))
     if len(scalars) != len(slot_of):          # a scalar was not set where expected
         return None, result
     return _Kept(tuple(refs), t_kernel, tuple(calls), tuple(scalars)), result
@@ -247,10 +248,9 @@ def _first_launch(kernel, args, runtime, compiled_key):
 
 def _result(kernel, ctx):
     """The kernel's return value read from the context, as Taichi's ``launch_kernel`` does."""
-    from taichi.lang import runtime_ops
     ret_types = kernel.return_type
     if ret_types is None:
         return None
-    runtime_ops.sync()
+    _installed["sync"]()
     ret = [kernel.construct_kernel_ret(ctx, t, (i,)) for i, t in enumerate(ret_types)]
     return ret[0] if len(ret_types) == 1 else ret
