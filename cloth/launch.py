@@ -16,9 +16,10 @@ path: positional arguments that are ndarrays, argpacks, C-contiguous numpy array
 passes their data pointer), Python or numpy scalars, small matrices and vectors (their values
 are part of the key: an obstacle's pose), and hashable template values, on a kernel without
 autodiff or print. Anything else (other numpy arrays, structs, fields as templates, keyword
-arguments, a tape) goes Taichi's own way, as does every first call. A recording holds weak references to its arrays and packs and is replayed only
-while all of them are alive (so an id cannot be reused under it); all recordings are
-dropped with the Taichi runtime they were made in (``ti.reset``)."""
+arguments, a tape) goes Taichi's own way, as does every first call. A recording holds weak
+references to its arrays and packs and is replayed only while all of them are alive (so an
+id cannot be reused under it); all recordings are dropped with the Taichi runtime they were
+made in (``ti.reset``)."""
 import weakref
 
 import numpy as np
@@ -122,7 +123,7 @@ def _fast_path(kernel, args):
     if kernel.has_print:        # (known once compiled) Taichi's call shows its prints
         return False, None
     table.recorded += 1
-    kept, result = _first_launch(kernel, args, runtime, compiled_key)
+    kept, result = _first_launch(kernel, args, key, runtime, compiled_key)
     if kept is not None:
         if len(table) >= _KEEP:
             table.pop(next(iter(table)))
@@ -212,8 +213,9 @@ class _RecordingProgram:
         return getattr(self._prog, name)
 
 
-def _first_launch(kernel, args, runtime, compiled_key):
-    """Taichi's own launch of this call: (its recording, the result)."""
+def _first_launch(kernel, args, key, runtime, compiled_key):
+    """Taichi's own launch of this call (``key`` its ``_key``): (its recording, the
+    result)."""
     t_kernel = kernel.compiled_kernels[compiled_key]
     prog, recording = runtime.prog, _RecordingKernel(t_kernel)
     runtime.prog = _RecordingProgram(prog)
@@ -224,18 +226,17 @@ def _first_launch(kernel, args, runtime, compiled_key):
     calls = recording.ctx.calls if recording.ctx is not None else None
     if not calls:
         return None, result
-    objects, template = _installed["objects"], _installed["template"]
-    refs, slot_of = [], {}
-    slot = 0
-    for pos, (arg, value) in enumerate(zip(kernel.arguments, args)):
-        if isinstance(arg.annotation, template):
-            continue
-        if isinstance(value, objects + (np.ndarray,)) and \
-                not isinstance(arg.annotation, _installed["matrix_type"]):
+    # The key says each argument's kind: an id (an array or pack), a type (a scalar, set in
+    # the context at its slot among the arguments that are not templates), a tuple (a
+    # template's value, which has no slot, or a matrix's, replayed as recorded).
+    refs, slot_of, slot = [], {}, 0
+    for pos, (part, value) in enumerate(zip(key, args)):
+        if isinstance(part, int):
             refs.append(weakref.ref(value))
-        elif not isinstance(arg.annotation, _installed["matrix_type"]):
+        elif isinstance(part, type):
             slot_of[(slot,)] = pos
-        slot += 1
+        if not (isinstance(part, tuple) and part[0] == "t"):
+            slot += 1
     scalars = []
     for at, (setter, call_args) in enumerate(calls):
         pos = slot_of.get(tuple(call_args[0]))
