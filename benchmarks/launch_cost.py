@@ -193,7 +193,7 @@ def frame_counts(res, frames=20, skip=2):
         for value in vars(owner).values():
             if isinstance(value, (ti.Ndarray, ti.Field)) and hasattr(value, "to_numpy"):
                 nbytes += value.to_numpy().nbytes
-    mg = sim.strain.multigrid()
+    mg = sim.strain.implicit_preconditioner()
     return dict(res=res, faces=sim.model.n_faces, vertices=sim.model.n_verts,
                 array_mb=nbytes / 1e6, multigrid_levels=list(getattr(mg, "levels", []) or []),
                 **med)

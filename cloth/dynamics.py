@@ -61,7 +61,7 @@ from . import backend, ndarrays
 from .model import ClothModel
 from .ndarrays import A, T
 from .settings import COMMON_DEFAULTS
-from .strain import multigrid
+from .strain import factor_precond, multigrid
 
 _SIM = COMMON_DEFAULTS["sim"]
 
@@ -92,9 +92,12 @@ SolvePack = ti.types.argpack(force=A, dv=A, rhs=A, res=A, z=A, p=A, Ap=A, precon
                              scalars=A)
 BlockPack = ti.types.argpack(val=A, diag=A, face_slot=A, edge_slot=A, stitch_slot=A,
                              bend_slot=A)
-#   mg      the aggregation multigrid's level arrays (cloth/strain/multigrid.py), or its stub;
-#           its fine level's diagonal blocks are this step's own (``cg.precond``).
-MultigridPack = ti.types.argpack(mg_int=A, mg_real=A)
+#   pc      the preconditioner of A the strain solve keeps: the aggregation multigrid's level
+#           arrays (cloth/strain/multigrid.py; its fine level's diagonal blocks are this step's
+#           own, ``cg.precond``) and the sparse factor's (cloth/strain/factor_precond.py), each
+#           its one-element stub where not in use.
+PrecondPack = ti.types.argpack(mg_int=A, mg_real=A, f_perm=A, f_ptr=A, f_idx=A, f_val=A,
+                               f_work=A)
 
 # The step's scalars: indices into ``coef``, the float array (numpy) every kernel takes
 # (``ImplicitEuler._coef``) and reads once into a ``Constants`` struct (``constants``). They
@@ -104,15 +107,23 @@ MultigridPack = ti.types.argpack(mg_int=A, mg_real=A)
 # struct argument cost ~95 us more per launch (and ~190 us to make the struct on the host).
 # The counts are exact in a float.
 (C_H, C_G, C_KW, C_KF, C_KS, C_KB, C_ALPHA, C_BETA, C_KST, C_TOL, C_MAX_ITERS, C_NV, C_NF,
- C_NE, C_NST, C_PC) = (0, 1, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17)   # C_G: 3 components
-N_COEF = 18
+ C_NE, C_NST, C_PC, C_PC_ITERS) = (0, 1, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18)
+N_COEF = 19                                                                # C_G: 3 components
 Constants = ti.types.struct(h=float, g=ti.types.vector(3, float), kw=float, kf=float, ks=float,
                             kb=float, alpha=float, beta=float, kst=float, tol=float,
                             max_iters=ti.i32, nv=ti.i32, nf=ti.i32, ne=ti.i32, nst=ti.i32,
-                            pc=ti.i32)
-# CG's preconditioner (``C_PC``): A's 3x3 diagonal blocks, or the aggregation multigrid of A
-# that the strain solve keeps (``ImplicitEuler.set_multigrid``).
-PC_BLOCK_JACOBI, PC_MULTIGRID = 0, 1
+                            pc=ti.i32, pc_iters=ti.i32)
+# CG's preconditioner (``C_PC``): A's 3x3 diagonal blocks, or the aggregation multigrid or
+# the sparse factor of A that the strain solve keeps (``ImplicitEuler.set_preconditioner``).
+PC_BLOCK_JACOBI, PC_MULTIGRID, PC_FACTOR = 0, 1, 2
+# A factor or multigrid made a few steps earlier goes stale when A moves on (the cloth turns,
+# its tension changes): a factor of the hanging sheet's A applied to the same sheet turned a
+# quarter turn left CG unconverged after 500 iterations where block Jacobi took 97. So CG
+# with either gets STALE_SHARE of the last block-Jacobi step's iterations (``C_PC_ITERS``;
+# an iteration with it costs about twice one with block Jacobi); past them it goes on with
+# block Jacobi from where it got to, and block Jacobi runs until it is made again
+# (``ImplicitEuler.step``).
+STALE_SHARE = 0.5
 
 
 @ti.func
@@ -127,7 +138,8 @@ def constants(coef: T):
                      max_iters=ti.cast(coef[C_MAX_ITERS], ti.i32),
                      nv=ti.cast(coef[C_NV], ti.i32), nf=ti.cast(coef[C_NF], ti.i32),
                      ne=ti.cast(coef[C_NE], ti.i32), nst=ti.cast(coef[C_NST], ti.i32),
-                     pc=ti.cast(coef[C_PC], ti.i32))
+                     pc=ti.cast(coef[C_PC], ti.i32),
+                     pc_iters=ti.cast(coef[C_PC_ITERS], ti.i32))
 
 
 @dataclass
@@ -190,8 +202,11 @@ class ImplicitEuler:
         self._cg = SolvePack(force=self.force, dv=self.dv, rhs=self.rhs, res=self.res,
                              z=self.z, p=self.p, Ap=self.Ap, precond=self.precond,
                              scalars=self.scalars)
-        self._multigrid = None          # set_multigrid
+        self._pc = None                 # set_preconditioner
+        self._stale = None              # (pc, its ``made``) that went stale (STALE_SHARE)
+        self._jacobi_iters = None       # the last block-Jacobi step's CG iterations
         self._mg_stub = multigrid.MultigridStub()
+        self._factor_stub = factor_precond.FactorStub()
         self.last_preconditioner = "block Jacobi"
         self.on_mesh_changed()
 
@@ -216,30 +231,34 @@ class ImplicitEuler:
         """Start the next step's CG from ``dv`` (n_verts, 3) instead of zero."""
         ndarrays.put_rows(self.dv, np.asarray(dv, np.float64).reshape(self.model.n_verts, 3))
 
-    def set_multigrid(self, mg):
-        """Precondition CG with ``mg`` (a strain.multigrid.MultigridPreconditioner of this
-        model's implicit matrix A, pins as the identity: the one the strain solve keeps on a
-        large mesh) while it is ready for the current pins; None: block Jacobi. Its
-        hierarchy may lag A by a few steps (it is remade every few solves): CG stays exact,
-        only its iteration count depends on it. Measured offline on A of a hanging sheet at
-        16.2k faces (rtol 1e-4, scipy CG with the kernel's multigrid applied in numpy):
-        92 iterations against block Jacobi's 345 (docs/speed/parallel.md). The one-launch
-        step only; the host loop (Vulkan, Metal) keeps block Jacobi."""
-        self._multigrid = mg
+    def set_preconditioner(self, pc):
+        """Precondition CG with ``pc`` while it is ready for the current pins: the strain
+        solve's multigrid (strain.multigrid.MultigridPreconditioner) or sparse factor
+        (strain.factor_precond.FactorPreconditioner) of this model's implicit matrix A, pins
+        as the identity; None: block Jacobi. Either may lag A by a few steps (it is remade
+        every few solves; STALE_SHARE bounds what a stale one costs): CG stops on the same
+        test, only its iteration count depends on it. The hanging sheet at rest, CG iterations
+        a step: 6 with the factor against 47 (1.2k faces, docs/speed/dynamics_cg.md); 39
+        with the multigrid against 114 (4k faces). The one-launch step only; the host loop
+        (Vulkan, Metal) keeps block Jacobi."""
+        self._pc = pc
 
     def _preconditioner(self):
         """(mode, its arrays' pack) for this step."""
-        mg = self._multigrid
+        pc = self._pc
         n = self.model.n_verts
-        if mg is not None and not self.host_loop and mg.metric.n == n and \
-                mg.usable(self.model.pinned[:n]):
-            arrays = mg
-            mode = PC_MULTIGRID
-        else:
-            arrays, mode = self._mg_stub, PC_BLOCK_JACOBI
-        self.last_preconditioner = "multigrid" if mode == PC_MULTIGRID else "block Jacobi"
-        return mode, self._packs.get("mg", MultigridPack, mg_int=arrays.ints,
-                                     mg_real=arrays.reals)
+        mode = PC_BLOCK_JACOBI
+        if pc is not None and not self.host_loop and pc.metric.n == n and \
+                pc.usable(self.model.pinned[:n]) and self._stale != (pc, pc.made):
+            mode = PC_FACTOR if isinstance(pc, factor_precond.FactorPreconditioner) \
+                else PC_MULTIGRID
+        mg = pc if mode == PC_MULTIGRID else self._mg_stub
+        fp = pc if mode == PC_FACTOR else self._factor_stub
+        self.last_preconditioner = {PC_BLOCK_JACOBI: "block Jacobi", PC_MULTIGRID: "multigrid",
+                                    PC_FACTOR: "factor"}[mode]
+        return mode, self._packs.get("pc", PrecondPack, mg_int=mg.ints, mg_real=mg.reals,
+                                     f_perm=fp.perm, f_ptr=fp.ptr, f_idx=fp.idx, f_val=fp.val,
+                                     f_work=fp.work)
 
     def set_stitches(self, pairs):
         self.stitches_np = np.asarray(pairs, np.int32).reshape(-1, 2)
@@ -271,7 +290,7 @@ class ImplicitEuler:
         self._coef[:] = (h, *s.gravity, mat.k_warp, mat.k_weft, mat.k_shear, mat.bend_scale(),
                          mat.damp_mass, mat.damp_stiff, s.stitch_stiffness, s.cg_tol,
                          s.cg_max_iters, m.n_verts, m.n_faces, self.n_hinges,
-                         self.n_stitches, PC_BLOCK_JACOBI)
+                         self.n_stitches, PC_BLOCK_JACOBI, s.cg_max_iters)
         return self._coef
 
     # -- public API ---------------------------------------------------------------------------
@@ -281,10 +300,16 @@ class ImplicitEuler:
         if self.host_loop:
             return self._step_host_loop(h)
         coef = self._constants(h)
-        coef[C_PC], mg = self._preconditioner()
-        rel, iters = _step(coef, self._mesh(), self._state(), self._elems, self._cg, mg)
+        coef[C_PC], pc = self._preconditioner()
+        if coef[C_PC] != PC_BLOCK_JACOBI and self._jacobi_iters is not None:
+            coef[C_PC_ITERS] = max(1, int(STALE_SHARE * self._jacobi_iters))
+        rel, iters, left = _step(coef, self._mesh(), self._state(), self._elems, self._cg, pc)
         self.last_cg_iters = int(iters)
         self.last_cg_residual = float(rel)
+        if coef[C_PC] == PC_BLOCK_JACOBI:
+            self._jacobi_iters = self.last_cg_iters
+        elif left:
+            self._stale = (self._pc, self._pc.made)
         return self.last_cg_iters
 
     def _step_host_loop(self, h):
@@ -695,16 +720,6 @@ def linearise(c, mesh: T, state: T, elems: T, cg: T):
 
 # The step's phases, shared by the one-launch kernel and the host-loop kernels.
 @ti.func
-def multigrid_on(with_mg: ti.template(), c):
-    """Whether this launch preconditions with the multigrid: compiled in (``with_mg``: the
-    one-launch step; the host-loop kernels keep block Jacobi) and chosen (``c.pc``)."""
-    on = False
-    if ti.static(with_mg):
-        on = c.pc == PC_MULTIGRID
-    return on
-
-
-@ti.func
 def cg_prepare(c, mesh: T, state: T, cg: T):
     """After ``linearise``: prescribe the pinned dv, invert the diagonal blocks, and leave dv
     in p for ``cg_pass``'s first pass (r = b - A dv)."""
@@ -719,12 +734,12 @@ def cg_prepare(c, mesh: T, state: T, cg: T):
 
 
 @ti.func
-def cg_pass(with_mg: ti.template(), first, rz, c, mesh: T, elems: T, cg: T, mg: T):
+def cg_pass(with_pc: ti.template(), mode, first, rz, c, mesh: T, elems: T, cg: T, pc: T):
     """One pass of preconditioned CG on the free vertices. The first (``first`` = 1, after
     ``cg_prepare``) starts CG: r = b - A dv over the free vertices (pinned dv enters through
     the coupling); the others are an iteration: p.A p, then dv and r updated. Both end with
-    z = P r and the next p. ``mg``: the multigrid's arrays where ``with_mg`` (read only when
-    ``c.pc`` chooses it).
+    z = P r and the next p, P by ``mode`` (PC_*) where the launch compiles the multigrid and
+    the factor in (``with_pc``, their arrays in ``pc``), else block Jacobi.
 
     Returns (new r.z, 1 if the iteration stalled on p.A p <= 0 and changed nothing, new
     r.D r, b.D b on the first pass) with D the inverse diagonal blocks (block Jacobi): CG
@@ -751,19 +766,21 @@ def cg_pass(with_mg: ti.template(), first, rz, c, mesh: T, elems: T, cg: T, mg: 
         else:
             stalled = 1.0
     if stalled == 0.0:
-        use_mg = multigrid_on(with_mg, c)
-        if ti.static(with_mg):
-            if use_mg:
+        if ti.static(with_pc):
+            if mode == PC_MULTIGRID:
                 # z = P r. The fine level's damped block Jacobi uses this step's diagonal
                 # blocks (cg.precond, inverted by cg_prepare), not the ones the hierarchy was
                 # made with: made a few steps earlier, they slowed the pull scene's CG (4.8k
                 # faces, the corner dragged: 49-183 iterations a step against block Jacobi's
                 # 119-164; with these, 48-90).
-                multigrid.apply(c.nv, mg.mg_int, mg.mg_real, cg.precond, cg.res, cg.z)
+                multigrid.apply(c.nv, pc.mg_int, pc.mg_real, cg.precond, cg.res, cg.z)
+            elif mode == PC_FACTOR:
+                factor_precond.apply(c.nv, pc.f_perm, pc.f_ptr, pc.f_idx, pc.f_val,
+                                     pc.f_work, cg.res, cg.z)
         rz_new = 0.0
         for i in range(c.nv):
             Dr = cg.precond[i] @ cg.res[i]
-            if not use_mg:
+            if mode == PC_BLOCK_JACOBI or not ti.static(with_pc):
                 cg.z[i] = Dr
             if mesh.vert_pinned[i] != 0:
                 cg.z[i] = ti.Vector([0.0, 0.0, 0.0])
@@ -800,24 +817,28 @@ def relative(rz, bnorm):
 
 @ti.kernel
 def _step(coef: A, mesh: MeshPack, state: StatePack, elems: ElementPack,
-          cg: SolvePack, mg: MultigridPack) -> ti.types.vector(2, float):
-    """(relative residual, CG iterations), also left in scalars[0] and scalars[1]."""
+          cg: SolvePack, pc: PrecondPack) -> ti.types.vector(3, float):
+    """(relative residual, CG iterations, 1 if CG left the chosen preconditioner for block
+    Jacobi after ``c.pc_iters`` iterations), the first two also left in scalars[0] and
+    scalars[1]."""
     # The whole step runs in one serial kernel: on a 2-core CPU, launching a kernel per CG
     # phase costs more than the work below ~50k triangles (docs/method.md §4, cost notes).
     # A parallel CG was built and measured twice and lost on this machine
     # (docs/speed/parallel.md).
-    # Returning both numbers costs less than reading them back (~0.05 vs ~0.17 ms).
+    # Returning the numbers costs less than reading them back (~0.05 vs ~0.17 ms).
     ti.loop_config(serialize=True)
+    left = 0.0
     for _ in range(1):
         c = constants(coef)
         linearise(c, mesh, state, elems, cg)
         cg_prepare(c, mesh, state, cg)
+        mode = c.pc
         first = 1
         rz, bnorm, rel = 0.0, 0.0, 0.0
         iters = 0
         stalled = 0.0
         while True:
-            out = cg_pass(True, first, rz, c, mesh, elems, cg, mg)
+            out = cg_pass(True, mode, first, rz, c, mesh, elems, cg, pc)
             if first == 1:
                 first = 0
                 bnorm = out[3]
@@ -831,10 +852,17 @@ def _step(coef: A, mesh: MeshPack, state: StatePack, elems: ElementPack,
                     iters += 1
             if not (iters < c.max_iters and rel > c.tol and stalled == 0.0):
                 break
+            if mode != PC_BLOCK_JACOBI and iters >= c.pc_iters:
+                # Stale (STALE_SHARE): CG starts again with block Jacobi from this dv.
+                mode = PC_BLOCK_JACOBI
+                left = 1.0
+                first = 1
+                for i in range(c.nv):
+                    cg.p[i] = cg.dv[i]
         cg.scalars[0] = rel
         advance(c, mesh, state, cg)
         cg.scalars[1] = iters
-    return ti.Vector([cg.scalars[0], cg.scalars[1]])
+    return ti.Vector([cg.scalars[0], cg.scalars[1], left])
 
 
 # The same step as three kinds of launch with the CG loop on the host, for Vulkan and Metal
@@ -869,7 +897,7 @@ def _start(two: int, coef: A, mesh: MeshPack, state: StatePack, elems: ElementPa
     for _ in range(1):
         c = constants(coef)
         cg_prepare(c, mesh, state, cg)
-        rb = cg_pass(False, 1, 0.0, c, mesh, elems, cg, cg)
+        rb = cg_pass(False, PC_BLOCK_JACOBI, 1, 0.0, c, mesh, elems, cg, cg)
         out = ti.Vector([rb[0], rb[3], backend.loop_probe(two)])
     return out
 
@@ -881,7 +909,7 @@ def _iteration(two: int, rz: float, coef: A, mesh: MeshPack, elems: ElementPack,
     out = ti.Vector([0.0, 0.0, 0.0])
     for _ in range(1):
         c = constants(coef)
-        it = cg_pass(False, 0, rz, c, mesh, elems, cg, cg)
+        it = cg_pass(False, PC_BLOCK_JACOBI, 0, rz, c, mesh, elems, cg, cg)
         out = ti.Vector([it[0], it[1], backend.loop_probe(two)])
     return out
 

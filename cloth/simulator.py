@@ -251,11 +251,12 @@ class Simulator:
 
     def _dynamics_step(self):
         """The implicit step. Its matrix then becomes the strain projection's metric
-        (cloth/system_matrix.py). Its CG is preconditioned by the multigrid of that matrix
-        where the strain solve keeps one (large meshes without contacts), else by block
-        Jacobi."""
+        (cloth/system_matrix.py). Its CG is preconditioned by the factor or the multigrid of
+        that matrix that the strain solve keeps (``StrainLimiter.implicit_preconditioner``),
+        else (no strain limits, the first substeps on a mesh) by block Jacobi."""
         limits = self.strain is not None and self.stage("strain_limit").enabled
-        self.dynamics.set_multigrid(self.strain.multigrid() if limits else None)
+        self.dynamics.set_preconditioner(self.strain.implicit_preconditioner() if limits
+                                         else None)
         self.dynamics.step(self.h)
         if limits:
             self.dynamics.system_matrix(self.h, self.strain.system_metric())

@@ -14,7 +14,7 @@ from .buffers import (B_FROM_PREV, B_LATE_NEWTON, B_LATE_ROUND, B_MAX_CG, B_MAX_
                       PC_MULTIGRID, RUNNING, ST_CG, ST_COMP, ST_CONVERGED, ST_ITERS, ST_KKT,
                       ST_NEWTON, ST_START_VIOL, ST_TRIALS, ST_VIOL, A, T, ConstraintPack,
                       ContactPack, MeshPack, MetricPack, PrecondPack, StepPack, VectorPack)
-from . import multigrid
+from . import factor_precond, multigrid
 from .constraints import MAPPING_PAIRS_BY_ALIGNMENT, face_constraints
 from .families import MAPPING, SVD, WARP_WEFT
 from .defaults import NEAR_POWER
@@ -452,29 +452,10 @@ def newton_matrix(K, nv, nf, ns, mu, margin, c_scale, use_twist, x: T, mesh: T,
 def precondition(pc_mode, nv, pc: T, r: T, z: T):
     """z = P^-1 r; returns r.z. P by ``pc_mode``: PC_JACOBI, H's 3x3 diagonal blocks (their
     inverses in P_inv); PC_MULTIGRID, the aggregation multigrid of multigrid.py (arrays
-    mg_int, mg_real, mg_block); PC_FACTOR, a sparse Cholesky factor P H~ P^T = L L^T of a matrix like H, in 3x3
-    blocks over a vertex ordering (factor_precond.py): two block triangular solves. f_val
-    holds L's strictly lower blocks by block rows (f_ptr[0..nv]), the same blocks transposed
-    by block columns (f_ptr[nv + 1..2 nv + 1]), then the inverses of the diagonal blocks;
-    f_idx the other block index of each; f_perm[k] the vertex of block row k; f_work a vec3
-    vector."""
+    mg_int, mg_real, mg_block); PC_FACTOR, a sparse Cholesky factor P H~ P^T = L L^T of a
+    matrix like H in 3x3 blocks over a vertex ordering (``factor_precond.apply``)."""
     if pc_mode == PC_FACTOR:
-        for k in range(nv):
-            pc.f_work[k] = r[pc.f_perm[k]]
-        diag = pc.f_ptr[2 * nv + 1]
-        for i in range(nv):                      # L y = P r, by block rows
-            acc = pc.f_work[i]
-            for q in range(pc.f_ptr[i], pc.f_ptr[i + 1]):
-                acc -= pc.f_val[q] @ pc.f_work[pc.f_idx[q]]
-            pc.f_work[i] = pc.f_val[diag + i] @ acc
-        for jj in range(nv):                     # L^T w = y, by block columns of L
-            j = nv - 1 - jj
-            acc = pc.f_work[j]
-            for q in range(pc.f_ptr[nv + 1 + j], pc.f_ptr[nv + 2 + j]):
-                acc -= pc.f_val[q] @ pc.f_work[pc.f_idx[q]]
-            pc.f_work[j] = pc.f_val[diag + j].transpose() @ acc
-        for k in range(nv):
-            z[pc.f_perm[k]] = pc.f_work[k]
+        factor_precond.apply(nv, pc.f_perm, pc.f_ptr, pc.f_idx, pc.f_val, pc.f_work, r, z)
     elif pc_mode == PC_MULTIGRID:
         multigrid.apply(nv, pc.mg_int, pc.mg_real, pc.mg_block, r, z)
     else:

@@ -28,7 +28,7 @@ import taichi as ti
 
 from .. import linalg
 from ..system_matrix import mat3, vec3
-from .buffers import PC_FACTOR
+from .buffers import PC_FACTOR, T
 
 # Refactorise the metric every REFRESH_SOLVES solves (it changes as the cloth deforms). The
 # first factor is made after FIRST_AFTER solves on a mesh: remeshing every frame makes a new
@@ -55,6 +55,7 @@ class RefreshedPreconditioner:
         self.solves_since = 0
         self.solves = 0                         # on this pattern
         self.pinned = None                      # the pinned mask it was made with
+        self.made = 0                           # how many times it was made
         self.first_after = first_after          # 0: made before the pattern's first solve
 
     def before_solve(self, pinned):
@@ -89,6 +90,7 @@ class RefreshedPreconditioner:
         self.refresh(pinned_values(self.metric, pinned), pinned)
         self.pinned = pinned
         self.solves_since = 0
+        self.made += 1
         self.ready = True
 
 
@@ -162,6 +164,31 @@ class FactorPreconditioner(RefreshedPreconditioner):
         self.perm.from_numpy(np.r_[perm, np.zeros(self.perm.shape[0] - n, np.int32)])
         self.blocks = n_fwd + n
         self.ready = True
+
+
+@ti.func
+def apply(nv, perm: T, ptr: T, idx: T, val: T, work: T, r: T, z: T):
+    """z = P^T L^-T L^-1 P r: the factor's two block triangular solves (the arrays of
+    ``FactorPreconditioner``: ``val`` holds L's strictly lower blocks by block rows
+    (``ptr[0..nv]``), the same blocks transposed by block columns (``ptr[nv + 1..2 nv + 1]``),
+    then the inverses of the diagonal blocks; ``idx`` the other block index of each;
+    ``perm[k]`` the vertex of block row k; ``work`` a vec3 vector)."""
+    for k in range(nv):
+        work[k] = r[perm[k]]
+    diag = ptr[2 * nv + 1]
+    for i in range(nv):                      # L y = P r, by block rows
+        acc = work[i]
+        for q in range(ptr[i], ptr[i + 1]):
+            acc -= val[q] @ work[idx[q]]
+        work[i] = val[diag + i] @ acc
+    for jj in range(nv):                     # L^T w = y, by block columns of L
+        j = nv - 1 - jj
+        acc = work[j]
+        for q in range(ptr[nv + 1 + j], ptr[nv + 2 + j]):
+            acc -= val[q] @ work[idx[q]]
+        work[j] = val[diag + j].transpose() @ acc
+    for k in range(nv):
+        z[perm[k]] = work[k]
 
 
 def pinned_values(metric, pinned):

@@ -756,11 +756,15 @@ class StrainLimiter:
             self._spare_pc = None
         return self._pc
 
-    def multigrid(self):
-        """The multigrid of the implicit step's matrix this solve keeps (``_pcg_preconditioner``:
-        above FACTOR_MAX_FACES faces, without contacts, on the CPU), for the dynamics' CG
-        (``ImplicitEuler.set_multigrid``); None where it keeps none."""
-        return self._pc if isinstance(self._pc, MultigridPreconditioner) else None
+    def implicit_preconditioner(self):
+        """The preconditioner of the implicit step's matrix this solve keeps
+        (``_pcg_preconditioner``: the factor up to FACTOR_MAX_FACES faces, the multigrid
+        above; on the CPU, without contacts), for the dynamics' CG
+        (``ImplicitEuler.set_preconditioner``); None where it keeps none. Under contacts none
+        is made for the dynamics alone: on tshirt and the remeshed drape its refreshes (50-55
+        ms each) cost what the dynamics' CG saved (docs/speed/dynamics_cg.md)."""
+        self._sync_mesh()
+        return self._pc if self._pc is not None and self._pc.metric is self._system else None
 
     def constraint_values(self):
         """(n_faces, k) constraint values g / sqrt(a) (strain units, <= 0 satisfied) of the
