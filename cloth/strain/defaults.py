@@ -100,3 +100,11 @@ PDAS_CG_RTOL, PDAS_NEWTON = 1e-2, 10
 # (m/s), not at all below it: from where the vertices were, a landing sheet was held in the air;
 # moved on at every speed, the resting cloth jittered.
 SETTLE_SPEED = 0.1
+
+# Under contacts the projection's PCG is preconditioned by the factor of A (as without them)
+# only while the cloth rests: the root mean square of its vertices' last velocities below this
+# (m/s), and until it rises past twice this (``StrainLimiter._update_resting``). Through a
+# landing the factor's fast answers kept none of the sheet's motion (docs/speed/drape_depth.md);
+# the resting drape's speeds are 0.007-0.013 m/s, its landing's 0.1-1.4, its settling's
+# 0.02-0.1.
+RESTING_SPEED = 0.02

@@ -30,8 +30,8 @@ from .defaults import (ACTIVE_MARGIN, ACTIVE_SET_MU, CG_BUDGET, CG_RTOL,
                        EXACT_FACTOR_MAX_FACES, FACTOR_CG, FACTOR_CG_MAX, FACTOR_CG_WORK,
                        FACTOR_MAX_FACES, FACTOR_NEWTON, INNER_RTOL, KKT_VELOCITY, LATE_ROUND,
                        MAX_NEWTON, MU_GROW, MU_MAX_SCALE, MU_SCALE,
-                       MULTIGRID_CG, MULTIGRID_NEWTON, PDAS_CG_RTOL, PDAS_NEWTON, SETTLE_SPEED,
-                       SOLVES)
+                       MULTIGRID_CG, MULTIGRID_NEWTON, PDAS_CG_RTOL, PDAS_NEWTON, RESTING_SPEED,
+                       SETTLE_SPEED, SOLVES)
 from .factor_precond import FIRST_AFTER, LASTING_SOLVES, FactorPreconditioner, FactorStub
 from .multigrid import HAVE_PYAMG, MAX_COARSE, MultigridPreconditioner, MultigridStub
 from .buffers import (PC_FACTOR, PC_JACOBI, PC_MULTIGRID, ST_CG, ST_CONVERGED, ST_ITERS,
@@ -144,6 +144,7 @@ class StrainLimiter:
         self._spare_pc = None
         self._stubs = None         # placeholder arrays for the preconditioners not in use
         self._last_pc_mode = PC_JACOBI   # the last AL solve's preconditioner (PC_*)
+        self._resting = False      # under contacts: slow enough for the factor (RESTING_SPEED)
         self._v_last_valid = False    # v_last belongs to this mesh's vertices
         self._start_args = (0.0, 0, 0.0, 0)   # (h, extrapolate, settle, step_start)
         self.kkt_length = 0.0          # metres, this projection's stationarity tolerance
@@ -487,6 +488,8 @@ class StrainLimiter:
         self._start_args = (float(h), int(self._v_last_valid), float(SETTLE_SPEED),
                             int(m.state.step_start_valid))
         friction = friction and contacts and h > 0
+        if contacts:
+            self._update_resting()
         al.begin_solve(nv, float(h), int(friction),
                        int(not contacts), *self._start_args[1:], ws.step_pack(m.state),
                        ws.vector_pack(), ws.contact_pack(), ws.stats)
@@ -693,9 +696,11 @@ class StrainLimiter:
         mu, mu_max = self.mu_scale * mean_mass, self.mu_max_scale * mean_mass
         # An inner loop stops once its steps are far below the tolerance (in metres).
         step_tol = 0.01 * self.tol * m.typical_edge()
-        # Solves with contacts use block Jacobi: on drape the factor kept none of the sheet's
-        # kinetic energy through the landing (docs/speed/drape_depth.md).
-        pc = None if contacts else self._pcg_preconditioner(metric)
+        # Solves with contacts use block Jacobi while the cloth moves (RESTING_SPEED), and
+        # where the factor would not be taken (the multigrid under contacts ran the drape's
+        # projections to their round budget, docs/speed/solve_cost.md).
+        pc = self._pcg_preconditioner(metric) if not contacts or (
+            self._resting and self._pcg_kind() == "factor") else None
         made_before = pc is not None and pc.before_solve(m.pinned[: m.n_verts])
         pc_mode = pc.mode if pc is not None and pc.usable(m.pinned[: m.n_verts]) else PC_JACOBI
         self._last_pc_mode = pc_mode
@@ -727,6 +732,27 @@ class StrainLimiter:
             self.last_factorizations += int(pc.after_solve(m.pinned))
         return rounds, newton, bool(stats[ST_CONVERGED] > 0), stats
 
+    def _update_resting(self):
+        """Whether the cloth rests for RESTING_SPEED: the root mean square of the last
+        projection's vertex velocities (the dynamics' own include the substep's fall, which
+        the contacts take back). Leaving rest drops the factor; it is made again when the
+        cloth rests again."""
+        m = self.model
+        was = self._resting
+        self._resting = False
+        if self._v_last_valid and m.n_verts:
+            v = ndarrays.get_rows(self._ws.v_last, m.n_verts)
+            rms = float(np.sqrt((v * v).sum(axis=1).mean()))
+            self._resting = rms < (2.0 if was else 1.0) * RESTING_SPEED
+        if was and not self._resting and self._pc is not None:
+            self._pc.ready = False
+
+    def _pcg_kind(self):
+        """"factor" or "multigrid": the factor up to FACTOR_MAX_FACES faces
+        (EXACT_FACTOR_MAX_FACES under the exact solve) where CHOLMOD is installed."""
+        most = EXACT_FACTOR_MAX_FACES if self._exact() else FACTOR_MAX_FACES
+        return "factor" if self.model.n_faces <= most and linalg.HAVE_CHOLMOD else "multigrid"
+
     def _pcg_preconditioner(self, metric):
         """The preconditioner object of this metric's pattern when the PCG solve uses one
         (the implicit step's metric on a CPU backend, where both run serially in the solve's
@@ -737,10 +763,7 @@ class StrainLimiter:
         unknowns."""
         if not (metric is self._system and backend.arch() == "cpu"):
             return None
-        most = EXACT_FACTOR_MAX_FACES if self._exact() else FACTOR_MAX_FACES
-        kind = "factor" if self.model.n_faces <= most else "multigrid"
-        if kind == "factor" and not linalg.HAVE_CHOLMOD:
-            kind = "multigrid"
+        kind = self._pcg_kind()
         if kind == "multigrid" and not HAVE_PYAMG:
             _note_no_pyamg()
             return None
@@ -755,6 +778,12 @@ class StrainLimiter:
                 else cls(metric, first)
             self._spare_pc = None
         return self._pc
+
+    @property
+    def last_preconditioner(self):
+        """The last AL solve's PCG preconditioner: "block Jacobi", "factor" or "multigrid"."""
+        return {PC_JACOBI: "block Jacobi", PC_FACTOR: "factor",
+                PC_MULTIGRID: "multigrid"}[self._last_pc_mode]
 
     def implicit_preconditioner(self):
         """The preconditioner of the implicit step's matrix this solve keeps
