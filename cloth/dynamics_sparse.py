@@ -73,6 +73,7 @@ class SparseImplicitEuler(ImplicitEuler):
         self.model.mark_step_start()
         m, s = self.model, self.settings
         direct = self.linear_solver in ("llt", "ldlt")
+        self.last_preconditioner = "direct" if direct else self.linear_solver
         T = {}
         t0 = time.perf_counter()
         coef, mesh, state = self._constants(h), self._mesh(), self._state()

@@ -137,7 +137,11 @@ def test_readout_says_what_the_method_limits_and_shows_strains_as_strains(st):
     warp = next(ln for ln in lines if ln.startswith("warp "))
     assert f"{100 * r['strain_max']['warp']:+.2f}" in warp and "-1.0..+1.0" in warp
     assert "violation" not in warp
+    assert any(ln.startswith("SL rounds ") and f"CG {r['cg_iterations']} it (" in ln
+               for ln in lines), text
     assert all(len(ln) <= 40 for ln in lines), lines
+    longest = dict(r, sl_iterations=100, cg_iterations=500, cg_preconditioner="block Jacobi")
+    assert all(len(ln) <= 40 for ln in readout_lines(longest))
     # A violated limit is said so (the same line with the violation over the tolerance).
     bad = dict(r, own_violation=(0.02, 0.01))
     assert any("own limits NOT HELD: max 2.0e-02" in ln for ln in readout_lines(bad))

@@ -50,7 +50,8 @@ def readout_lines(r, width=40):
         mx = r["own_violation"][0]
         lines.append(f"own limits {'held' if mx <= r['tol'] else 'NOT HELD'}: max {mx:.1e} "
                      f"(tol {r['tol']:.0e})")
-    lines.append(f"SL rounds {r['sl_iterations']}  CG iters {r['cg_iterations']}")
+    lines.append(f"SL rounds {r['sl_iterations']}  CG {r['cg_iterations']} it "
+                 f"({r['cg_preconditioner']})")
     lines.append(f"{'strain %':8s}{'min':>6s}{'max':>7s}{'rms':>6s}  band")
     for name in BANDS:
         lo, hi = r["bands"][name]
@@ -490,10 +491,10 @@ class AppState:
         return self._strain_cache[key]
 
     def readouts(self, i=0):
-        """Numbers for the panel: frame, time, faces, stage and render times, iterations, the
-        violation of the method's own constraints (max and area-weighted RMS, strain; None
-        without a method) with what the method bounds, and the warp, weft and bias strains
-        (min, max, area-weighted RMS)."""
+        """Numbers for the panel: frame, time, faces, stage and render times, iterations (and
+        the dynamics' CG preconditioner), the violation of the method's own constraints (max
+        and area-weighted RMS, strain; None without a method) with what the method bounds, and
+        the warp, weft and bias strains (min, max, area-weighted RMS)."""
         s = self.sims[i]
         st = self.strains(i)
         area = s.model.rest_area
@@ -505,7 +506,8 @@ class AppState:
                "render_ms": self.render_ms, "fps": self.fps,
                "sl_iterations": s.strain.last_iterations if s.strain is not None
                and s.stage("strain_limit").enabled else 0,
-               "cg_iterations": s.dynamics.last_cg_iters}
+               "cg_iterations": s.dynamics.last_cg_iters,
+               "cg_preconditioner": s.dynamics.last_preconditioner}
         own = self.own_violation(i)
         out["own_violation"] = None if own is None else metrics.summarize(own, area)
         out["tol"] = s.settings.strain.tol
