@@ -101,7 +101,7 @@ PDAS_CG_RTOL, PDAS_NEWTON = 1e-2, 10
 # moved on at every speed, the resting cloth jittered.
 SETTLE_SPEED = 0.1
 
-# Under contacts the projection's PCG is preconditioned by the factor of A (as without them)
+# Under contacts the fast solve's PCG is preconditioned by the factor of A (as without them)
 # only while the cloth rests: the root mean square of its vertices' last velocities below this
 # (m/s), and until it rises past twice this (``StrainLimiter._update_resting``). Through a
 # landing the factor's fast answers kept none of the sheet's motion (docs/speed/drape_depth.md);
