@@ -144,7 +144,7 @@ class StrainLimiter:
         self._spare_pc = None
         self._stubs = None         # placeholder arrays for the preconditioners not in use
         self._last_pc_mode = PC_JACOBI   # the last AL solve's preconditioner (PC_*)
-        self._resting = False      # under contacts: slow enough for the factor (RESTING_SPEED)
+        self._resting = False      # under contacts: still enough for the factor (RESTING_SPEED)
         self._v_last_valid = False    # v_last belongs to this mesh's vertices
         self._start_args = (0.0, 0, 0.0, 0)   # (h, extrapolate, settle, step_start)
         self.kkt_length = 0.0          # metres, this projection's stationarity tolerance
@@ -791,10 +791,11 @@ class StrainLimiter:
     def implicit_preconditioner(self):
         """The preconditioner of the implicit step's matrix this solve keeps
         (``_pcg_preconditioner``: the factor up to FACTOR_MAX_FACES faces, the multigrid
-        above; on the CPU, without contacts), for the dynamics' CG
-        (``ImplicitEuler.set_preconditioner``); None where it keeps none. Under contacts none
-        is made for the dynamics alone: on tshirt and the remeshed drape its refreshes (50-55
-        ms each) cost what the dynamics' CG saved (docs/speed/dynamics_cg.md)."""
+        above; on the CPU; under contacts only the fast solve's factor while the cloth rests),
+        for the dynamics' CG (``ImplicitEuler.set_preconditioner``); None where it keeps none.
+        None is made for the dynamics alone: under contacts on tshirt and the remeshed drape
+        its refreshes (50-55 ms each) cost what the dynamics' CG saved
+        (docs/speed/dynamics_cg.md)."""
         self._sync_mesh()
         return self._pc if self._pc is not None and self._pc.metric is self._system else None
 
