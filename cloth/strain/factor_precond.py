@@ -1,5 +1,6 @@
 """A sparse Cholesky factor of the implicit step's matrix A (the projection's metric) as the
-PCG preconditioner of the one-kernel strain solve (``al.solve_al``, mode PC_FACTOR).
+PCG preconditioner of the one-kernel strain solve (``al.solve_al``, mode PC_FACTOR), and of
+the dynamics' CG on the same matrix (``dynamics.ImplicitEuler.set_preconditioner``).
 
 Why: at rest most of an exact Newton step's energy lies in the cloth's soft global modes
 (swinging, bending), which block-Jacobi CG barely reaches: on resting substeps at resolution
