@@ -840,4 +840,5 @@ class Simulator:
             np.zeros(m.n_faces) if own_v is None else own_v, area)
         row["bias_strain_max"], row["bias_strain_rms"] = metrics.summarize(st["bias"], area)
         row["cg_iterations"] = self.dynamics.last_cg_iters
+        row["cg_preconditioner"] = self.dynamics.last_preconditioner
         return row

@@ -164,9 +164,12 @@ def test_headless_writes_the_documented_folder(headless_run):
     rows = (out / "metrics.csv").read_text().splitlines()
     header = rows[0].split(",")
     for col in ["frame", "time", "vertices", "faces", "ms_total", "ms_dynamics", "kinetic_energy",
-                "warp_strain_max", "warp_strain_rms", "weft_strain_max", "weft_strain_rms", "nan"]:
+                "warp_strain_max", "warp_strain_rms", "weft_strain_max", "weft_strain_rms", "nan",
+                "cg_iterations", "cg_preconditioner"]:
         assert col in header
     assert len(rows) == 1 + 4
+    last = dict(zip(header, rows[-1].split(",")))
+    assert last["cg_preconditioner"] in ("block Jacobi", "factor", "multigrid")
     for f in range(4):
         path = out / "meshes" / f"frame_{f:04d}.obj"
         mesh = trimesh.load(str(path), process=False, maintain_order=True)
