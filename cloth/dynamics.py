@@ -62,6 +62,7 @@ from .model import ClothModel
 from .ndarrays import A, T
 from .settings import COMMON_DEFAULTS
 from .strain import factor_precond, multigrid
+from .strain.buffers import PC_FACTOR, PC_JACOBI, PC_MULTIGRID, PC_NAMES
 
 _SIM = COMMON_DEFAULTS["sim"]
 
@@ -113,9 +114,9 @@ Constants = ti.types.struct(h=float, g=ti.types.vector(3, float), kw=float, kf=f
                             kb=float, alpha=float, beta=float, kst=float, tol=float,
                             max_iters=ti.i32, nv=ti.i32, nf=ti.i32, ne=ti.i32, nst=ti.i32,
                             pc=ti.i32, pc_iters=ti.i32)
-# CG's preconditioner (``C_PC``): A's 3x3 diagonal blocks, or the aggregation multigrid or
-# the sparse factor of A that the strain solve keeps (``ImplicitEuler.set_preconditioner``).
-PC_BLOCK_JACOBI, PC_MULTIGRID, PC_FACTOR = 0, 1, 2
+# CG's preconditioner (``C_PC``, the strain solve's PC_* numbering): A's 3x3 diagonal blocks,
+# or the aggregation multigrid or the sparse factor of A that the strain solve keeps
+# (``ImplicitEuler.set_preconditioner``; each object's ``mode``).
 # A factor or multigrid made a few steps earlier goes stale when A moves on (the cloth turns,
 # its tension changes): a factor of the hanging sheet's A applied to the same sheet turned a
 # quarter turn left CG unconverged after 500 iterations where block Jacobi took 97. So CG
@@ -247,15 +248,13 @@ class ImplicitEuler:
         """(mode, its arrays' pack) for this step."""
         pc = self._pc
         n = self.model.n_verts
-        mode = PC_BLOCK_JACOBI
+        mode = PC_JACOBI
         if pc is not None and not self.host_loop and pc.metric.n == n and \
                 pc.usable(self.model.pinned[:n]) and self._stale != (pc, pc.made):
-            mode = PC_FACTOR if isinstance(pc, factor_precond.FactorPreconditioner) \
-                else PC_MULTIGRID
+            mode = pc.mode
         mg = pc if mode == PC_MULTIGRID else self._mg_stub
         fp = pc if mode == PC_FACTOR else self._factor_stub
-        self.last_preconditioner = {PC_BLOCK_JACOBI: "block Jacobi", PC_MULTIGRID: "multigrid",
-                                    PC_FACTOR: "factor"}[mode]
+        self.last_preconditioner = PC_NAMES[mode]
         return mode, self._packs.get("pc", PrecondPack, mg_int=mg.ints, mg_real=mg.reals,
                                      f_perm=fp.perm, f_ptr=fp.ptr, f_idx=fp.idx, f_val=fp.val,
                                      f_work=fp.work)
@@ -290,7 +289,7 @@ class ImplicitEuler:
         self._coef[:] = (h, *s.gravity, mat.k_warp, mat.k_weft, mat.k_shear, mat.bend_scale(),
                          mat.damp_mass, mat.damp_stiff, s.stitch_stiffness, s.cg_tol,
                          s.cg_max_iters, m.n_verts, m.n_faces, self.n_hinges,
-                         self.n_stitches, PC_BLOCK_JACOBI, s.cg_max_iters)
+                         self.n_stitches, PC_JACOBI, s.cg_max_iters)
         return self._coef
 
     # -- public API ---------------------------------------------------------------------------
@@ -301,12 +300,12 @@ class ImplicitEuler:
             return self._step_host_loop(h)
         coef = self._constants(h)
         coef[C_PC], pc = self._preconditioner()
-        if coef[C_PC] != PC_BLOCK_JACOBI and self._jacobi_iters is not None:
+        if coef[C_PC] != PC_JACOBI and self._jacobi_iters is not None:
             coef[C_PC_ITERS] = max(1, int(STALE_SHARE * self._jacobi_iters))
         rel, iters, left = _step(coef, self._mesh(), self._state(), self._elems, self._cg, pc)
         self.last_cg_iters = int(iters)
         self.last_cg_residual = float(rel)
-        if coef[C_PC] == PC_BLOCK_JACOBI:
+        if coef[C_PC] == PC_JACOBI:
             self._jacobi_iters = self.last_cg_iters
         elif left:
             self._stale = (self._pc, self._pc.made)
@@ -780,7 +779,7 @@ def cg_pass(with_pc: ti.template(), mode, first, rz, c, mesh: T, elems: T, cg: T
         rz_new = 0.0
         for i in range(c.nv):
             Dr = cg.precond[i] @ cg.res[i]
-            if mode == PC_BLOCK_JACOBI or not ti.static(with_pc):
+            if mode == PC_JACOBI or not ti.static(with_pc):
                 cg.z[i] = Dr
             if mesh.vert_pinned[i] != 0:
                 cg.z[i] = ti.Vector([0.0, 0.0, 0.0])
@@ -852,9 +851,9 @@ def _step(coef: A, mesh: MeshPack, state: StatePack, elems: ElementPack,
                     iters += 1
             if not (iters < c.max_iters and rel > c.tol and stalled == 0.0):
                 break
-            if mode != PC_BLOCK_JACOBI and iters >= c.pc_iters:
+            if mode != PC_JACOBI and iters >= c.pc_iters:
                 # Stale (STALE_SHARE): CG starts again with block Jacobi from this dv.
-                mode = PC_BLOCK_JACOBI
+                mode = PC_JACOBI
                 left = 1.0
                 first = 1
                 for i in range(c.nv):
@@ -897,7 +896,7 @@ def _start(two: int, coef: A, mesh: MeshPack, state: StatePack, elems: ElementPa
     for _ in range(1):
         c = constants(coef)
         cg_prepare(c, mesh, state, cg)
-        rb = cg_pass(False, PC_BLOCK_JACOBI, 1, 0.0, c, mesh, elems, cg, cg)
+        rb = cg_pass(False, PC_JACOBI, 1, 0.0, c, mesh, elems, cg, cg)
         out = ti.Vector([rb[0], rb[3], backend.loop_probe(two)])
     return out
 
@@ -909,7 +908,7 @@ def _iteration(two: int, rz: float, coef: A, mesh: MeshPack, elems: ElementPack,
     out = ti.Vector([0.0, 0.0, 0.0])
     for _ in range(1):
         c = constants(coef)
-        it = cg_pass(False, PC_BLOCK_JACOBI, 0, rz, c, mesh, elems, cg, cg)
+        it = cg_pass(False, PC_JACOBI, 0, rz, c, mesh, elems, cg, cg)
         out = ti.Vector([it[0], it[1], backend.loop_probe(two)])
     return out
 

@@ -46,6 +46,7 @@ NO_SKIP = -1.0
 # factor of the implicit step's matrix (factor_precond.py), its aggregation multigrid
 # (multigrid.py).
 PC_JACOBI, PC_FACTOR, PC_MULTIGRID = 0, 1, 2
+PC_NAMES = {PC_JACOBI: "block Jacobi", PC_FACTOR: "factor", PC_MULTIGRID: "multigrid"}
 # Indices into the ``params`` array.
 P_WARP, P_WEFT, P_SHEAR, P_MARGIN, P_DELTA, P_SVD_DELTA, P_CONTACT_SCALE = 0, 2, 4, 6, 7, 8, 9
 P_ISO = 10

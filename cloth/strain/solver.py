@@ -34,8 +34,8 @@ from .defaults import (ACTIVE_MARGIN, ACTIVE_SET_MU, CG_BUDGET, CG_RTOL,
                        SETTLE_SPEED, SOLVES)
 from .factor_precond import FIRST_AFTER, LASTING_SOLVES, FactorPreconditioner, FactorStub
 from .multigrid import HAVE_PYAMG, MAX_COARSE, MultigridPreconditioner, MultigridStub
-from .buffers import (PC_FACTOR, PC_JACOBI, PC_MULTIGRID, ST_CG, ST_CONVERGED, ST_ITERS,
-                      ST_KKT, ST_NEWTON, ST_START_VIOL, ST_TRIALS, ST_VIOL,
+from .buffers import (PC_FACTOR, PC_JACOBI, PC_MULTIGRID, PC_NAMES, ST_CG, ST_CONVERGED,
+                      ST_ITERS, ST_KKT, ST_NEWTON, ST_START_VIOL, ST_TRIALS, ST_VIOL,
                       Workspace)
 
 _host_loop_noted = False
@@ -488,7 +488,7 @@ class StrainLimiter:
         self._start_args = (float(h), int(self._v_last_valid), float(SETTLE_SPEED),
                             int(m.state.step_start_valid))
         friction = friction and contacts and h > 0
-        if contacts:
+        if contacts and not self._exact():
             self._update_resting()
         al.begin_solve(nv, float(h), int(friction),
                        int(not contacts), *self._start_args[1:], ws.step_pack(m.state),
@@ -785,8 +785,7 @@ class StrainLimiter:
     @property
     def last_preconditioner(self):
         """The last AL solve's PCG preconditioner: "block Jacobi", "factor" or "multigrid"."""
-        return {PC_JACOBI: "block Jacobi", PC_FACTOR: "factor",
-                PC_MULTIGRID: "multigrid"}[self._last_pc_mode]
+        return PC_NAMES[self._last_pc_mode]
 
     def implicit_preconditioner(self):
         """The preconditioner of the implicit step's matrix this solve keeps
